@@ -1,0 +1,88 @@
+//! The engine's one error type.
+
+use thiserror::Error;
+
+/// Everything that can go wrong in the engine, each naming what to fix.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum EngineError {
+    /// A parameter is outside its allowed range (or missing, or not a number).
+    #[error("invalid value for `{key}`: {value} (allowed: {allowed})")]
+    InvalidValue {
+        /// The scene key, as written in a scene file (`section.name`).
+        key: String,
+        /// The offending value as given.
+        value: String,
+        /// The allowed range or set, in words.
+        allowed: String,
+    },
+    /// Two keys that exclude each other were both given, or neither of two alternatives.
+    #[error("conflicting keys: {0}")]
+    Conflict(String),
+    /// The bodies overlap at the start (closer than r_eq).
+    #[error("bodies overlap at start: closest impactor-target pair is {distance_m:.3e} m apart, less than r_eq = {r_eq_m:.3e} m (check `scene.standoff_m`)")]
+    Overlap {
+        /// Closest distance found, m.
+        distance_m: f64,
+        /// The lattice spacing r_eq, m.
+        r_eq_m: f64,
+    },
+    /// The run went numerically unstable; the state up to the previous step is kept.
+    #[error("numerical instability at step {step} (t = {time_s:.4e} s): {reason}")]
+    Unstable {
+        /// Step at which the problem was detected.
+        step: u64,
+        /// Simulated time at detection, s.
+        time_s: f64,
+        /// What was seen.
+        reason: String,
+    },
+}
+
+impl EngineError {
+    /// Shorthand for [`EngineError::InvalidValue`].
+    pub fn invalid(key: &str, value: impl std::fmt::Display, allowed: impl Into<String>) -> Self {
+        EngineError::InvalidValue {
+            key: key.to_string(),
+            value: value.to_string(),
+            allowed: allowed.into(),
+        }
+    }
+}
+
+/// Result type of the engine.
+pub type Result<T> = std::result::Result<T, EngineError>;
+
+/// Checks that `value` is finite and inside `(lo, hi)` / `[lo, hi]` as `open_lo`/`open_hi` say.
+pub(crate) fn check_range(
+    key: &str,
+    value: f64,
+    lo: f64,
+    open_lo: bool,
+    hi: f64,
+    open_hi: bool,
+) -> Result<f64> {
+    let above = if open_lo { value > lo } else { value >= lo };
+    let below = if open_hi { value < hi } else { value <= hi };
+    if value.is_finite() && above && below {
+        return Ok(value);
+    }
+    let lb = if open_lo { "(" } else { "[" };
+    let rb = if open_hi { ")" } else { "]" };
+    let fmt = |x: f64| {
+        if x.is_infinite() {
+            if x > 0.0 { "inf".to_string() } else { "-inf".to_string() }
+        } else {
+            format!("{x:e}")
+        }
+    };
+    Err(EngineError::invalid(
+        key,
+        value,
+        format!("a finite number in {lb}{}, {}{rb}", fmt(lo), fmt(hi)),
+    ))
+}
+
+/// A strictly positive finite number.
+pub(crate) fn check_positive(key: &str, value: f64) -> Result<f64> {
+    check_range(key, value, 0.0, true, f64::INFINITY, true)
+}

@@ -1,0 +1,70 @@
+//! The numbers Watson and Steinhauser (Materials 2017, 10, 379) report, in one place.
+//!
+//! Every test, default and report that needs one of these numbers calls this module; none of
+//! them repeats the literal. Units are SI. The paper states its parameters without units or
+//! the particle diameter they belong to; `../shared/MODEL.md` section 4 reads them as SI at the
+//! calibration resolution, and [`reference_sigma_m`] computes that diameter.
+
+/// Impactor (sphere) diameter D of the calibration shot and of the paper's simulations, m.
+pub const IMPACTOR_DIAMETER_M: f64 = 9.53e-3;
+/// Aluminium density used for impactor and plate, kg/m^3.
+pub const ALUMINIUM_DENSITY_KG_M3: f64 = 2700.0;
+/// Impact velocity of the paper's calibration simulations, m/s.
+pub const CALIBRATION_V0_M_S: f64 = 6700.0;
+/// Plate thickness over impactor diameter of the calibration simulations.
+pub const CALIBRATION_T_OVER_D: f64 = 0.425;
+/// Plate side over impactor diameter. Not given in the paper; MODEL.md section 1 decides 3.
+pub const DEFAULT_WIDTH_OVER_D: f64 = 3.0;
+/// Total particle count of the calibration runs (the reference resolution of eps and kappa).
+pub const CALIBRATION_PARTICLES: f64 = 2.7e5;
+/// Total particle count of the final runs (Figs. 11, 12).
+pub const FINAL_PARTICLES: f64 = 7.4e5;
+/// Best-fit repulsion strength eps at the reference diameter, J.
+pub const BEST_EPS_J: f64 = 0.01;
+/// Best-fit spring stiffness kappa at the reference diameter, N/m.
+pub const BEST_KAPPA_N_M: f64 = 4.56e6;
+/// Best-fit bond break distance, in units of sigma.
+pub const BEST_RCUT_OVER_SIGMA: f64 = 1.5;
+/// Time step of the paper's runs at the reference diameter, s.
+pub const TIME_STEP_S: f64 = 1e-10;
+/// Analysis time after first contact (Figs. 7 and 11), s.
+pub const ANALYSIS_TIME_S: f64 = 32e-6;
+/// Snapshot times of Fig. 12, s.
+pub const FIG12_TIMES_S: [f64; 4] = [0.0, 9.1e-6, 16.1e-6, 32e-6];
+/// Wall time of the paper's 7.4e5-particle run on one processor, s (nine hours).
+pub const PAPER_WALL_SECONDS: f64 = 9.0 * 3600.0;
+
+/// Zero-force distance of the Lennard-Jones repulsion over sigma: r_eq = 2^(1/6) sigma.
+pub fn r_eq_over_sigma() -> f64 {
+    2f64.powf(1.0 / 6.0)
+}
+
+/// Total volume (sphere plus square plate) of a sphere-on-plate scene, m^3.
+pub fn sphere_on_plate_volume_m3(diameter_m: f64, t_over_d: f64, width_over_d: f64) -> f64 {
+    let d = diameter_m;
+    std::f64::consts::PI / 6.0 * d.powi(3) + (width_over_d * d).powi(2) * t_over_d * d
+}
+
+/// The particle diameter sigma at which the paper's eps and kappa apply, m.
+///
+/// Defined by the calibration scene (D = 9.53 mm, t/D = 0.425, W = 3 D) at N = 2.7e5:
+/// one lattice cell r_eq^3 per particle, sigma = r_eq / 2^(1/6). About 0.21 mm.
+pub fn reference_sigma_m() -> f64 {
+    let volume = sphere_on_plate_volume_m3(
+        IMPACTOR_DIAMETER_M,
+        CALIBRATION_T_OVER_D,
+        DEFAULT_WIDTH_OVER_D,
+    );
+    (volume / CALIBRATION_PARTICLES).cbrt() / r_eq_over_sigma()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reference_sigma_is_about_0_21_mm() {
+        let s = reference_sigma_m();
+        assert!((s - 0.2145e-3).abs() < 0.002e-3, "sigma_ref = {s}");
+    }
+}

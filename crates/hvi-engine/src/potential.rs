@@ -1,0 +1,202 @@
+//! The pair interactions of the model (paper eqs. 3 and 4), defined once.
+//!
+//! * Contact repulsion, every pair closer than r_eq = 2^(1/6) sigma:
+//!   `phi_rep(r) = c eps [(sigma/r)^12 - (sigma/r)^6] + c eps / 4`, with `c = 1` for the form
+//!   printed in the paper and `c = 4` for the usual WCA form. The shift `c eps / 4` makes the
+//!   energy zero at r_eq, so energy is continuous there (the printed `+ eps` is not; see
+//!   MODEL.md section 3).
+//! * Cohesive spring, intact bonds stretched past r_eq: `phi_coh(r) = kappa/2 (r - r_eq)^2`.
+//! * A bond breaks for good the first time `r > rcut`.
+//!
+//! All quantities here are SI at the actual particle diameter (after geometric sizing).
+
+use serde::{Deserialize, Serialize};
+
+/// Which prefactor the contact repulsion carries (MODEL.md section 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum ContactForm {
+    /// `eps [(s/r)^12 - (s/r)^6] + eps/4`: the prefactor as printed in eq. (3).
+    #[default]
+    Printed,
+    /// `4 eps [(s/r)^12 - (s/r)^6] + eps`: the Weeks-Chandler-Andersen form.
+    Wca,
+}
+
+impl ContactForm {
+    /// The prefactor c multiplying eps.
+    pub fn prefactor(self) -> f64 {
+        match self {
+            ContactForm::Printed => 1.0,
+            ContactForm::Wca => 4.0,
+        }
+    }
+
+    /// Name used in files and reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            ContactForm::Printed => "printed",
+            ContactForm::Wca => "wca",
+        }
+    }
+}
+
+/// The interaction constants at the actual particle diameter, ready for the kernels.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Interaction {
+    /// Particle diameter sigma, m.
+    pub sigma_m: f64,
+    /// Repulsion strength eps at this sigma, J.
+    pub eps_j: f64,
+    /// Spring stiffness kappa at this sigma, N/m.
+    pub kappa_n_m: f64,
+    /// Bond break distance rcut, m.
+    pub rcut_m: f64,
+    /// Contact prefactor form.
+    pub contact: ContactForm,
+    /// Zero-force distance r_eq = 2^(1/6) sigma, m.
+    pub r_eq_m: f64,
+    // Kernel constants.
+    c_eps: f64,
+    sigma2: f64,
+    r_eq2: f64,
+    rcut2: f64,
+}
+
+impl Interaction {
+    /// Interaction constants for the given diameter and (already sized) eps, kappa, rcut.
+    pub fn new(sigma_m: f64, eps_j: f64, kappa_n_m: f64, rcut_m: f64, contact: ContactForm) -> Self {
+        let r_eq_m = sigma_m * crate::paper::r_eq_over_sigma();
+        Interaction {
+            sigma_m,
+            eps_j,
+            kappa_n_m,
+            rcut_m,
+            contact,
+            r_eq_m,
+            c_eps: contact.prefactor() * eps_j,
+            sigma2: sigma_m * sigma_m,
+            r_eq2: r_eq_m * r_eq_m,
+            rcut2: rcut_m * rcut_m,
+        }
+    }
+
+    /// r_eq^2, m^2: pairs closer than this repel.
+    #[inline(always)]
+    pub fn r_eq2(&self) -> f64 {
+        self.r_eq2
+    }
+
+    /// rcut^2, m^2: bonds longer than this break.
+    #[inline(always)]
+    pub fn rcut2(&self) -> f64 {
+        self.rcut2
+    }
+
+    /// Contact repulsion energy at squared distance `r2` (J); zero for r >= r_eq.
+    #[inline(always)]
+    pub fn contact_energy(&self, r2: f64) -> f64 {
+        if r2 >= self.r_eq2 {
+            return 0.0;
+        }
+        let s6 = (self.sigma2 / r2).powi(3);
+        self.c_eps * (s6 * s6 - s6 + 0.25)
+    }
+
+    /// Contact repulsion force divided by distance, F(r)/r (N/m), valid for r < r_eq.
+    ///
+    /// The force on particle i from j is `(x_i - x_j) * contact_force_over_r(r2)`.
+    /// The caller checks `r2 < r_eq2()`; this function does not.
+    #[inline(always)]
+    pub fn contact_force_over_r(&self, r2: f64) -> f64 {
+        let inv_r2 = 1.0 / r2;
+        let s6 = (self.sigma2 * inv_r2).powi(3);
+        self.c_eps * (12.0 * s6 * s6 - 6.0 * s6) * inv_r2
+    }
+
+    /// Spring energy of an intact bond at distance `r` (J); zero for r <= r_eq.
+    #[inline(always)]
+    pub fn spring_energy(&self, r: f64) -> f64 {
+        if r <= self.r_eq_m {
+            return 0.0;
+        }
+        let stretch = r - self.r_eq_m;
+        0.5 * self.kappa_n_m * stretch * stretch
+    }
+
+    /// Spring force divided by distance (N/m, negative = attractive), valid for r > r_eq.
+    ///
+    /// The force on particle i from its bond partner j is `(x_i - x_j) * spring_force_over_r(r)`.
+    #[inline(always)]
+    pub fn spring_force_over_r(&self, r: f64) -> f64 {
+        -self.kappa_n_m * (r - self.r_eq_m) / r
+    }
+
+    /// Energy one bond holds when it breaks exactly at rcut (J).
+    pub fn break_energy_at_rcut(&self) -> f64 {
+        self.spring_energy(self.rcut_m)
+    }
+
+    /// Stiffness of the contact repulsion at r_eq, d^2 phi / dr^2 (N/m): 18 c eps / r_eq^2.
+    pub fn contact_stiffness_at_r_eq(&self) -> f64 {
+        18.0 * self.c_eps / self.r_eq2
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit(form: ContactForm) -> Interaction {
+        // sigma = 1, eps = 1, kappa = 10, rcut = 1.5 in any consistent units.
+        Interaction::new(1.0, 1.0, 10.0, 1.5, form)
+    }
+
+    #[test]
+    fn contact_energy_hand_values() {
+        let p = unit(ContactForm::Printed);
+        let r_eq = 2f64.powf(1.0 / 6.0);
+        assert!(p.contact_energy(r_eq * r_eq).abs() < 1e-15);
+        // At r = sigma: (1 - 1) + 1/4.
+        assert!((p.contact_energy(1.0) - 0.25).abs() < 1e-15);
+        // At r = 0.9: s6 = 0.9^-6.
+        let s6 = 0.9f64.powi(-6);
+        assert!((p.contact_energy(0.81) - (s6 * s6 - s6 + 0.25)).abs() < 1e-12);
+        let w = unit(ContactForm::Wca);
+        assert!((w.contact_energy(1.0) - 1.0).abs() < 1e-15);
+        assert!((w.contact_energy(0.81) - 4.0 * (s6 * s6 - s6 + 0.25)).abs() < 1e-11);
+        // Beyond r_eq there is no repulsion.
+        assert_eq!(p.contact_energy(1.3), 0.0);
+    }
+
+    #[test]
+    fn contact_force_hand_values_and_derivative() {
+        let p = unit(ContactForm::Printed);
+        // At r = sigma: F = (12 - 6) / r, F/r = 6.
+        assert!((p.contact_force_over_r(1.0) - 6.0).abs() < 1e-14);
+        let w = unit(ContactForm::Wca);
+        assert!((w.contact_force_over_r(1.0) - 24.0).abs() < 1e-13);
+        // Zero force at r_eq.
+        let r_eq2 = 2f64.powf(1.0 / 3.0);
+        assert!(p.contact_force_over_r(r_eq2).abs() < 1e-12);
+        // F = -dphi/dr by central differences.
+        for r in [0.8, 0.9, 1.0, 1.1] {
+            let h = 1e-6;
+            let de = (p.contact_energy((r + h) * (r + h)) - p.contact_energy((r - h) * (r - h)))
+                / (2.0 * h);
+            let f = p.contact_force_over_r(r * r) * r;
+            assert!((f + de).abs() < 1e-6 * f.abs().max(1.0), "r={r} f={f} de={de}");
+        }
+    }
+
+    #[test]
+    fn spring_hand_values() {
+        let p = unit(ContactForm::Printed);
+        let r_eq = 2f64.powf(1.0 / 6.0);
+        assert_eq!(p.spring_energy(r_eq - 0.01), 0.0);
+        assert!((p.spring_energy(r_eq + 0.1) - 0.5 * 10.0 * 0.01).abs() < 1e-14);
+        assert!((p.spring_force_over_r(r_eq + 0.1) * (r_eq + 0.1) + 1.0).abs() < 1e-13);
+        assert!((p.break_energy_at_rcut() - 0.5 * 10.0 * (1.5 - r_eq).powi(2)).abs() < 1e-14);
+        assert!((p.contact_stiffness_at_r_eq() - 18.0 / (r_eq * r_eq)).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,746 @@
+//! Scene description (what a scene file says) and its validation into a ready-to-run setup.
+//!
+//! The spec types mirror the TOML scene files one to one (`[scene]`, `[resolution]`,
+//! `[material]`, `[run]`); their keys are the keys `hvi-study run --set` accepts.
+//! [`SceneSpec::build`] validates every value (naming the key and the allowed range on error)
+//! and lays out the particles: simple cubic lattice at r_eq, nearest-neighbour bonds inside each
+//! body, mass m = M/N per body (eq. 20), seeded Maxwell-Boltzmann thermal velocities.
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{check_positive, check_range, EngineError, Result};
+use crate::paper;
+use crate::potential::{ContactForm, Interaction};
+use crate::rng;
+use crate::state::{Body, Particles, BONDS_PER_PARTICLE, NO_BOND};
+
+/// A whole scene: geometry, resolution, material and run settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSpec {
+    /// The bodies and how they meet.
+    pub scene: Geometry,
+    /// How finely they are discretised.
+    pub resolution: Resolution,
+    /// The model's material parameters.
+    pub material: Material,
+    /// Time integration and safety settings.
+    #[serde(default)]
+    pub run: RunSettings,
+}
+
+fn default_density() -> f64 {
+    paper::ALUMINIUM_DENSITY_KG_M3
+}
+fn default_width_over_d() -> f64 {
+    paper::DEFAULT_WIDTH_OVER_D
+}
+
+/// The bodies of a scene. All lengths in m, velocities in m/s.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Geometry {
+    /// A sphere of diameter D striking a square plate of thickness t and side W at normal incidence.
+    SphereOnPlate {
+        /// Sphere diameter D, m.
+        diameter_m: f64,
+        /// Plate thickness over sphere diameter, t/D.
+        t_over_d: f64,
+        /// Plate side over sphere diameter, W/D (MODEL.md decision: 3).
+        #[serde(default = "default_width_over_d")]
+        width_over_d: f64,
+        /// Impact velocity v0, m/s.
+        v0_m_s: f64,
+        /// Density of both bodies, kg/m^3.
+        #[serde(default = "default_density")]
+        density_kg_m3: f64,
+        /// Extra gap between the bodies at t = 0, m (0: first contact at t = 0).
+        #[serde(default)]
+        standoff_m: f64,
+    },
+    /// A flyer plate striking a target plate of the same width (the sizing test, Fig. 4).
+    FlyerPlate {
+        /// Flyer thickness, m.
+        flyer_thickness_m: f64,
+        /// Target thickness, m.
+        target_thickness_m: f64,
+        /// Side of both square plates, m.
+        width_m: f64,
+        /// Flyer velocity v0, m/s.
+        v0_m_s: f64,
+        /// Density of both bodies, kg/m^3.
+        #[serde(default = "default_density")]
+        density_kg_m3: f64,
+        /// Extra gap between the plates at t = 0, m.
+        #[serde(default)]
+        standoff_m: f64,
+    },
+}
+
+impl Geometry {
+    /// Impact velocity v0, m/s.
+    pub fn v0_m_s(&self) -> f64 {
+        match self {
+            Geometry::SphereOnPlate { v0_m_s, .. } | Geometry::FlyerPlate { v0_m_s, .. } => *v0_m_s,
+        }
+    }
+
+    /// Total volume of both bodies, m^3.
+    pub fn volume_m3(&self) -> f64 {
+        match *self {
+            Geometry::SphereOnPlate { diameter_m, t_over_d, width_over_d, .. } => {
+                paper::sphere_on_plate_volume_m3(diameter_m, t_over_d, width_over_d)
+            }
+            Geometry::FlyerPlate { flyer_thickness_m, target_thickness_m, width_m, .. } => {
+                width_m * width_m * (flyer_thickness_m + target_thickness_m)
+            }
+        }
+    }
+}
+
+/// Resolution: a target total particle count, or particles across the sphere diameter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct Resolution {
+    /// Target total particle count (the actual count differs by lattice rounding).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub particles: Option<f64>,
+    /// Lattice sites across the sphere diameter D (sphere-on-plate only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub particles_across_d: Option<f64>,
+}
+
+fn default_rcut() -> f64 {
+    paper::BEST_RCUT_OVER_SIGMA
+}
+fn default_true() -> bool {
+    true
+}
+
+/// Material parameters. Give (eps, kappa) at the reference diameter of MODEL.md section 4, or
+/// the size-invariant (gamma, lambda) with eps = gamma sigma^3 and kappa = lambda sigma (eq. 12).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Material {
+    /// Contact prefactor form: "printed" (eq. 3 as printed) or "wca".
+    #[serde(default)]
+    pub contact: ContactForm,
+    /// Repulsion strength eps at the reference sigma, J.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eps_j: Option<f64>,
+    /// Spring stiffness kappa at the reference sigma, N/m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kappa_n_m: Option<f64>,
+    /// Size-invariant repulsion strength gamma = eps / sigma^3, Pa.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gamma_pa: Option<f64>,
+    /// Size-invariant stiffness lambda = kappa / sigma, Pa.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lambda_pa: Option<f64>,
+    /// Bond break distance over sigma (must exceed r_eq/sigma = 2^(1/6)).
+    #[serde(default = "default_rcut")]
+    pub rcut_over_sigma: f64,
+    /// Geometric sizing (eqs. 5-20): scale eps and kappa from the reference sigma to the actual
+    /// one. Off only to show what goes wrong without it (Fig. 4, top).
+    #[serde(default = "default_true")]
+    pub sizing: bool,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material {
+            contact: ContactForm::Printed,
+            eps_j: Some(paper::BEST_EPS_J),
+            kappa_n_m: Some(paper::BEST_KAPPA_N_M),
+            gamma_pa: None,
+            lambda_pa: None,
+            rcut_over_sigma: paper::BEST_RCUT_OVER_SIGMA,
+            sizing: true,
+        }
+    }
+}
+
+/// The time step: "auto" or a number of seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum TimeStep {
+    /// A fixed step, s.
+    Fixed(f64),
+    /// The keyword "auto".
+    Keyword(AutoKeyword),
+}
+
+/// The only keyword a time step accepts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AutoKeyword {
+    /// The paper's step scaled with sigma, times `run.dt_factor`.
+    Auto,
+}
+
+impl Default for TimeStep {
+    fn default() -> Self {
+        TimeStep::Keyword(AutoKeyword::Auto)
+    }
+}
+
+/// Time integration and safety settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RunSettings {
+    /// Simulated time from first contact to the end of the run, s.
+    pub end_time_s: f64,
+    /// Time step, s, or "auto": the paper's 1e-10 s at sigma_ref, scaled with sigma.
+    pub dt_s: TimeStep,
+    /// Multiplier on the automatic step.
+    pub dt_factor: f64,
+    /// Seed of the thermal velocities.
+    pub seed: u64,
+    /// Per-component standard deviation of the thermal velocities, as a fraction of v0.
+    pub thermal_ratio: f64,
+    /// Neighbour-list skin over sigma.
+    pub skin_over_sigma: f64,
+    /// Steps between energy-ledger samples.
+    pub energy_every: u64,
+    /// Abort when |E_total - E_0| / E_0 exceeds this (a blow-up guard, not the accuracy bound).
+    pub max_energy_drift: f64,
+    /// Abort when two particles come closer than this times sigma.
+    pub min_distance_over_sigma: f64,
+}
+
+impl Default for RunSettings {
+    fn default() -> Self {
+        RunSettings {
+            end_time_s: paper::ANALYSIS_TIME_S,
+            dt_s: TimeStep::default(),
+            dt_factor: 1.0,
+            seed: 1,
+            thermal_ratio: 1e-3,
+            skin_over_sigma: 0.3,
+            energy_every: 200,
+            max_energy_drift: 0.05,
+            min_distance_over_sigma: 0.35,
+        }
+    }
+}
+
+/// Numbers derived from a scene that every run prints (and the summary records).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Derived {
+    /// Particle diameter sigma at this resolution, m.
+    pub sigma_m: f64,
+    /// Reference diameter at which eps and kappa are given, m.
+    pub sigma_ref_m: f64,
+    /// Lattice spacing r_eq, m.
+    pub r_eq_m: f64,
+    /// gamma = eps / sigma^3, Pa.
+    pub gamma_pa: f64,
+    /// lambda = kappa / sigma, Pa.
+    pub lambda_pa: f64,
+    /// eps at this sigma, J.
+    pub eps_j: f64,
+    /// kappa at this sigma, N/m.
+    pub kappa_n_m: f64,
+    /// rcut, m.
+    pub rcut_m: f64,
+    /// Particle mass of the impactor (flyer), kg.
+    pub mass_impactor_kg: f64,
+    /// Particle mass of the target plate, kg.
+    pub mass_target_kg: f64,
+    /// Time step, s.
+    pub dt_s: f64,
+    /// Largest step the validation accepts, s.
+    pub dt_max_s: f64,
+    /// Impact velocity, m/s.
+    pub v0_m_s: f64,
+    /// z of the target plate's rear face at t = 0, m (the debris cloud lies beyond it).
+    pub plate_rear_z_m: f64,
+    /// z of the target plate's front face at t = 0, m.
+    pub plate_front_z_m: f64,
+    /// Time of first contact, s (tau = t - this).
+    pub contact_time_s: f64,
+    /// Number of steps to reach the end time.
+    pub steps: u64,
+}
+
+/// A validated scene, laid out and ready to run.
+#[derive(Debug, Clone)]
+pub struct Setup {
+    /// The spec it came from.
+    pub spec: SceneSpec,
+    /// Derived numbers.
+    pub derived: Derived,
+    /// Interaction constants at this sigma.
+    pub interaction: Interaction,
+    /// Particles and bonds at t = 0.
+    pub particles: Particles,
+    /// Particles of the target that lie on its lateral rim at t = 0 (by id): the residual
+    /// plate is the fragment that holds them (MODEL.md section 5).
+    pub rim_ids: Vec<u32>,
+}
+
+/// Stability bound on the time step (documented in the README): a particle at v0 moves at most
+/// this fraction of sigma per step, ...
+pub const MAX_STEP_DISPLACEMENT_OVER_SIGMA: f64 = 0.05;
+/// ... and the step is at most this fraction of sqrt(m / k) for the stiffest of kappa and the
+/// contact stiffness at r_eq (velocity Verlet is unstable beyond 2/omega_max = sqrt(m/k) on a
+/// chain).
+pub const MAX_STEP_OVER_SQRT_M_K: f64 = 0.5;
+
+fn require(key: &str, value: Option<f64>) -> Result<f64> {
+    value.ok_or_else(|| EngineError::invalid(key, "missing", "a finite number > 0"))
+}
+
+impl SceneSpec {
+    /// Validates the spec and lays out the scene.
+    pub fn build(&self) -> Result<Setup> {
+        let geometry = &self.scene;
+        let v0 = check_range("scene.v0_m_s", geometry.v0_m_s(), 0.0, true, 1e5, false)?;
+        let (density, standoff) = match *geometry {
+            Geometry::SphereOnPlate { density_kg_m3, standoff_m, .. }
+            | Geometry::FlyerPlate { density_kg_m3, standoff_m, .. } => (density_kg_m3, standoff_m),
+        };
+        check_positive("scene.density_kg_m3", density)?;
+        if !standoff.is_finite() {
+            return Err(EngineError::invalid("scene.standoff_m", standoff, "a finite number >= 0"));
+        }
+        match *geometry {
+            Geometry::SphereOnPlate { diameter_m, t_over_d, width_over_d, .. } => {
+                check_positive("scene.diameter_m", diameter_m)?;
+                check_positive("scene.t_over_d", t_over_d)?;
+                check_range("scene.width_over_d", width_over_d, 1.0, false, 1e3, false)?;
+            }
+            Geometry::FlyerPlate { flyer_thickness_m, target_thickness_m, width_m, .. } => {
+                check_positive("scene.flyer_thickness_m", flyer_thickness_m)?;
+                check_positive("scene.target_thickness_m", target_thickness_m)?;
+                check_positive("scene.width_m", width_m)?;
+            }
+        }
+
+        // Resolution -> lattice spacing.
+        let r_eq = match (self.resolution.particles, self.resolution.particles_across_d) {
+            (Some(n), None) => {
+                check_range("resolution.particles", n, 8.0, false, 5e8, false)?;
+                (geometry.volume_m3() / n).cbrt()
+            }
+            (None, Some(k)) => {
+                check_range("resolution.particles_across_d", k, 2.0, false, 2000.0, false)?;
+                match *geometry {
+                    Geometry::SphereOnPlate { diameter_m, .. } => diameter_m / k,
+                    Geometry::FlyerPlate { .. } => {
+                        return Err(EngineError::invalid(
+                            "resolution.particles_across_d",
+                            k,
+                            "only for kind = \"sphere_on_plate\"; use resolution.particles",
+                        ))
+                    }
+                }
+            }
+            (Some(_), Some(_)) => {
+                return Err(EngineError::Conflict(
+                    "give either resolution.particles or resolution.particles_across_d, not both"
+                        .into(),
+                ))
+            }
+            (None, None) => {
+                return Err(EngineError::Conflict(
+                    "give resolution.particles or resolution.particles_across_d".into(),
+                ))
+            }
+        };
+        let sigma = r_eq / paper::r_eq_over_sigma();
+        let sigma_ref = paper::reference_sigma_m();
+
+        // Material, with geometric sizing (eq. 12: eps = gamma sigma^3, kappa = lambda sigma).
+        let m = &self.material;
+        let rcut_over_sigma = check_range(
+            "material.rcut_over_sigma",
+            m.rcut_over_sigma,
+            paper::r_eq_over_sigma(),
+            true,
+            10.0,
+            false,
+        )?;
+        let (gamma, lambda) = match (m.eps_j, m.kappa_n_m, m.gamma_pa, m.lambda_pa) {
+            (eps, kappa, None, None) => {
+                let eps = check_positive("material.eps_j", require("material.eps_j", eps)?)?;
+                let kappa =
+                    check_positive("material.kappa_n_m", require("material.kappa_n_m", kappa)?)?;
+                (eps / sigma_ref.powi(3), kappa / sigma_ref)
+            }
+            (None, None, gamma, lambda) => {
+                let gamma = check_positive("material.gamma_pa", require("material.gamma_pa", gamma)?)?;
+                let lambda =
+                    check_positive("material.lambda_pa", require("material.lambda_pa", lambda)?)?;
+                (gamma, lambda)
+            }
+            _ => {
+                return Err(EngineError::Conflict(
+                    "give material.eps_j and material.kappa_n_m, or material.gamma_pa and \
+                     material.lambda_pa, not a mix"
+                        .into(),
+                ))
+            }
+        };
+        let (eps, kappa) = if m.sizing {
+            (gamma * sigma.powi(3), lambda * sigma)
+        } else {
+            // Without sizing the reference values are used at any sigma (Fig. 4, top panel).
+            (gamma * sigma_ref.powi(3), lambda * sigma_ref)
+        };
+        let interaction = Interaction::new(sigma, eps, kappa, rcut_over_sigma * sigma, m.contact);
+
+        // Lay out the bodies.
+        let mut layout = lay_out(geometry, r_eq)?;
+        let n_imp = layout.count(Body::Impactor);
+        let n_tgt = layout.count(Body::Target);
+        let (vol_imp, vol_tgt) = match *geometry {
+            Geometry::SphereOnPlate { diameter_m, t_over_d, width_over_d, .. } => (
+                std::f64::consts::PI / 6.0 * diameter_m.powi(3),
+                (width_over_d * diameter_m).powi(2) * t_over_d * diameter_m,
+            ),
+            Geometry::FlyerPlate { flyer_thickness_m, target_thickness_m, width_m, .. } => {
+                (width_m * width_m * flyer_thickness_m, width_m * width_m * target_thickness_m)
+            }
+        };
+        let mass_imp = density * vol_imp / n_imp as f64;
+        let mass_tgt = density * vol_tgt / n_tgt as f64;
+
+        // Time step and its stability bound.
+        let run = &self.run;
+        check_positive("run.end_time_s", run.end_time_s)?;
+        check_range("run.dt_factor", run.dt_factor, 0.0, true, 1e3, false)?;
+        check_range("run.thermal_ratio", run.thermal_ratio, 0.0, false, 0.1, false)?;
+        check_range("run.skin_over_sigma", run.skin_over_sigma, 0.0, true, 2.0, false)?;
+        if run.energy_every == 0 {
+            return Err(EngineError::invalid("run.energy_every", 0, "an integer >= 1"));
+        }
+        check_range("run.max_energy_drift", run.max_energy_drift, 0.0, true, f64::INFINITY, false)?;
+        check_range("run.min_distance_over_sigma", run.min_distance_over_sigma, 0.0, false, 1.0, true)?;
+        let stiffness = kappa.max(interaction.contact_stiffness_at_r_eq());
+        let dt_max = (MAX_STEP_DISPLACEMENT_OVER_SIGMA * sigma / v0)
+            .min(MAX_STEP_OVER_SQRT_M_K * (mass_imp.min(mass_tgt) / stiffness).sqrt());
+        let dt = match run.dt_s {
+            TimeStep::Keyword(AutoKeyword::Auto) => {
+                paper::TIME_STEP_S * (sigma / sigma_ref) * run.dt_factor
+            }
+            TimeStep::Fixed(dt) => {
+                check_positive("run.dt_s", dt)?;
+                dt
+            }
+        };
+        if dt > dt_max {
+            let key = match run.dt_s {
+                TimeStep::Fixed(_) => "run.dt_s",
+                TimeStep::Keyword(_) => "run.dt_factor",
+            };
+            let value = match run.dt_s {
+                TimeStep::Fixed(dt) => format!("{dt:e} s"),
+                TimeStep::Keyword(_) => format!("{} (dt = {dt:.3e} s)", run.dt_factor),
+            };
+            return Err(EngineError::invalid(
+                key,
+                value,
+                format!(
+                    "a step of at most {dt_max:.3e} s at sigma = {sigma:.3e} m: \
+                     v0 dt <= {MAX_STEP_DISPLACEMENT_OVER_SIGMA} sigma and \
+                     dt <= {MAX_STEP_OVER_SQRT_M_K} sqrt(m / k)"
+                ),
+            ));
+        }
+
+        // Standoff shifts the impactor back; first contact happens at standoff / v0.
+        if standoff < 0.0 {
+            // Check the actual closest distance: a negative standoff overlaps the bodies.
+            layout.shift_impactor(-standoff);
+            let d = layout.closest_impactor_target_distance();
+            return Err(EngineError::Overlap { distance_m: d, r_eq_m: r_eq });
+        }
+        layout.shift_impactor(-standoff);
+        let closest = layout.closest_impactor_target_distance();
+        if closest < r_eq * (1.0 - 1e-9) {
+            return Err(EngineError::Overlap { distance_m: closest, r_eq_m: r_eq });
+        }
+
+        let steps = ((run.end_time_s + standoff / v0) / dt).ceil() as u64;
+        let derived = Derived {
+            sigma_m: sigma,
+            sigma_ref_m: sigma_ref,
+            r_eq_m: r_eq,
+            gamma_pa: gamma,
+            lambda_pa: lambda,
+            eps_j: eps,
+            kappa_n_m: kappa,
+            rcut_m: interaction.rcut_m,
+            mass_impactor_kg: mass_imp,
+            mass_target_kg: mass_tgt,
+            dt_s: dt,
+            dt_max_s: dt_max,
+            v0_m_s: v0,
+            plate_rear_z_m: layout.plate_rear_z,
+            plate_front_z_m: 0.0,
+            contact_time_s: standoff / v0,
+            steps,
+        };
+        let particles = layout.into_particles(mass_imp, mass_tgt, v0, run.thermal_ratio, run.seed);
+        let rim_ids = rim_ids(&particles, r_eq);
+        Ok(Setup { spec: self.clone(), derived, interaction, particles, rim_ids })
+    }
+}
+
+/// Lattice sites of both bodies with integer coordinates, before masses and velocities.
+struct Layout {
+    /// Integer lattice coordinates of each site.
+    sites: Vec<[i32; 3]>,
+    body: Vec<Body>,
+    r_eq: f64,
+    /// Lateral offset (0 or 1/2 r_eq) so that the lattice is symmetric about the impact axis.
+    lateral_offset: f64,
+    /// z shift of the impactor sites, m.
+    impactor_z_shift: f64,
+    plate_rear_z: f64,
+}
+
+impl Layout {
+    fn count(&self, b: Body) -> usize {
+        self.body.iter().filter(|&&x| x == b).count()
+    }
+
+    fn position(&self, k: usize) -> DVec3 {
+        let [i, j, l] = self.sites[k];
+        let mut p = DVec3::new(
+            (i as f64 + self.lateral_offset) * self.r_eq,
+            (j as f64 + self.lateral_offset) * self.r_eq,
+            (l as f64 + 0.5) * self.r_eq,
+        );
+        if self.body[k] == Body::Impactor {
+            p.z += self.impactor_z_shift;
+        }
+        p
+    }
+
+    fn shift_impactor(&mut self, dz: f64) {
+        self.impactor_z_shift -= dz;
+    }
+
+    /// Closest distance between an impactor and a target site (the impactor's leading layer
+    /// against the target's front layer; both lattices are aligned laterally).
+    fn closest_impactor_target_distance(&self) -> f64 {
+        let lead = (0..self.sites.len())
+            .filter(|&k| self.body[k] == Body::Impactor)
+            .map(|k| self.position(k).z)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let front = (0..self.sites.len())
+            .filter(|&k| self.body[k] == Body::Target)
+            .map(|k| self.position(k).z)
+            .fold(f64::INFINITY, f64::min);
+        front - lead
+    }
+
+    fn into_particles(self, mass_imp: f64, mass_tgt: f64, v0: f64, thermal: f64, seed: u64) -> Particles {
+        let n = self.sites.len();
+        let pos: Vec<DVec3> = (0..n).map(|k| self.position(k)).collect();
+        // Bonds: lattice nearest neighbours of the same body, found through a dense index grid.
+        let lo = self.sites.iter().fold([i32::MAX; 3], |a, s| [a[0].min(s[0]), a[1].min(s[1]), a[2].min(s[2])]);
+        let hi = self.sites.iter().fold([i32::MIN; 3], |a, s| [a[0].max(s[0]), a[1].max(s[1]), a[2].max(s[2])]);
+        let dim = [(hi[0] - lo[0] + 1) as usize, (hi[1] - lo[1] + 1) as usize, (hi[2] - lo[2] + 1) as usize];
+        let cell = |s: [i32; 3]| -> Option<usize> {
+            if (0..3).any(|a| s[a] < lo[a] || s[a] > hi[a]) {
+                return None;
+            }
+            Some(((s[2] - lo[2]) as usize * dim[1] + (s[1] - lo[1]) as usize) * dim[0] + (s[0] - lo[0]) as usize)
+        };
+        let mut grid = vec![NO_BOND; dim[0] * dim[1] * dim[2]];
+        for (k, &s) in self.sites.iter().enumerate() {
+            if let Some(c) = cell(s) {
+                grid[c] = k as u32;
+            }
+        }
+        const DIRS: [[i32; 3]; BONDS_PER_PARTICLE] =
+            [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]];
+        let mut bonds = vec![NO_BOND; n * BONDS_PER_PARTICLE];
+        for (k, &s) in self.sites.iter().enumerate() {
+            for (slot, d) in DIRS.iter().enumerate() {
+                let t = [s[0] + d[0], s[1] + d[1], s[2] + d[2]];
+                if let Some(c) = cell(t) {
+                    let other = grid[c];
+                    if other != NO_BOND && self.body[other as usize] == self.body[k] {
+                        bonds[k * BONDS_PER_PARTICLE + slot] = other;
+                    }
+                }
+            }
+        }
+        // Thermal velocities: Gaussian per component, counter-based on (seed, particle, axis),
+        // with each body's mean removed so the impactor moves at exactly v0.
+        let sd = thermal * v0;
+        let mut vel: Vec<DVec3> = (0..n)
+            .map(|k| {
+                DVec3::new(
+                    rng::normal(seed, k as u64, 0),
+                    rng::normal(seed, k as u64, 1),
+                    rng::normal(seed, k as u64, 2),
+                ) * sd
+            })
+            .collect();
+        for b in [Body::Impactor, Body::Target] {
+            let members: Vec<usize> = (0..n).filter(|&k| self.body[k] == b).collect();
+            if members.is_empty() {
+                continue;
+            }
+            let mean = members.iter().fold(DVec3::ZERO, |a, &k| a + vel[k]) / members.len() as f64;
+            let drift = if b == Body::Impactor { DVec3::new(0.0, 0.0, v0) } else { DVec3::ZERO };
+            for &k in &members {
+                vel[k] = vel[k] - mean + drift;
+            }
+        }
+        let mass: Vec<f64> = self
+            .body
+            .iter()
+            .map(|b| if *b == Body::Impactor { mass_imp } else { mass_tgt })
+            .collect();
+        Particles::new(pos, vel, mass, self.body, bonds)
+    }
+}
+
+fn lay_out(geometry: &Geometry, r_eq: f64) -> Result<Layout> {
+    let mut sites = Vec::new();
+    let mut body = Vec::new();
+    match *geometry {
+        Geometry::SphereOnPlate { diameter_m, t_over_d, width_over_d, .. } => {
+            let t = t_over_d * diameter_m;
+            let nz = (t / r_eq).round() as i64;
+            if nz < 1 {
+                return Err(EngineError::invalid(
+                    "scene.t_over_d",
+                    t_over_d,
+                    format!(
+                        "a plate at least one particle thick: t/D >= {:.4} at this resolution \
+                         (r_eq = {r_eq:.3e} m); raise the resolution or t/D",
+                        0.5 * r_eq / diameter_m
+                    ),
+                ));
+            }
+            let nxy = ((width_over_d * diameter_m / r_eq).round() as i64).max(1);
+            let nsphere = diameter_m / r_eq;
+            if nsphere < 1.0 {
+                return Err(EngineError::invalid(
+                    "resolution",
+                    format!("r_eq = {r_eq:.3e} m"),
+                    "at least one particle across the sphere diameter",
+                ));
+            }
+            check_range("resolution (total sites)", (nxy * nxy * nz) as f64, 1.0, false, 5e8, false)?;
+            // Symmetric about the axis: sites at integer (nxy odd) or half-integer (even) offsets.
+            let lateral_offset = if nxy % 2 == 1 { 0.0 } else { 0.5 };
+            let half = nxy / 2;
+            let (ilo, ihi) = if nxy % 2 == 1 { (-half, half) } else { (-half, half - 1) };
+            for k in 0..nz {
+                for j in ilo..=ihi {
+                    for i in ilo..=ihi {
+                        sites.push([i as i32, j as i32, k as i32]);
+                        body.push(Body::Target);
+                    }
+                }
+            }
+            // Sphere sites on the plate's lattice, symmetric about the sphere's centre in all
+            // three directions, then shifted by whole lattice steps to touch the plate.
+            let radius = 0.5 * diameter_m;
+            let m = (radius / r_eq).ceil() as i64 + 1;
+            let mut sphere = Vec::new();
+            for l in -m..=m {
+                for j in -m..=m {
+                    for i in -m..=m {
+                        let x = (i as f64 + lateral_offset) * r_eq;
+                        let y = (j as f64 + lateral_offset) * r_eq;
+                        let z = (l as f64 + lateral_offset) * r_eq;
+                        if x * x + y * y + z * z <= radius * radius {
+                            sphere.push([i as i32, j as i32, l as i32]);
+                        }
+                    }
+                }
+            }
+            if sphere.is_empty() {
+                return Err(EngineError::invalid(
+                    "resolution",
+                    format!("r_eq = {r_eq:.3e} m"),
+                    "a resolution that puts at least one site inside the sphere",
+                ));
+            }
+            // Shift the sphere's integer z so that its leading layer sits at l = -1 (one lattice
+            // spacing in front of the plate's first layer at l = 0): contact starts at t = 0.
+            let lead = sphere.iter().map(|s| s[2]).max().unwrap_or(0);
+            for s in &mut sphere {
+                s[2] -= lead + 1;
+            }
+            for s in sphere {
+                sites.push(s);
+                body.push(Body::Impactor);
+            }
+            Ok(Layout {
+                sites,
+                body,
+                r_eq,
+                lateral_offset,
+                impactor_z_shift: 0.0,
+                plate_rear_z: nz as f64 * r_eq,
+            })
+        }
+        Geometry::FlyerPlate { flyer_thickness_m, target_thickness_m, width_m, .. } => {
+            let nt = (target_thickness_m / r_eq).round() as i64;
+            let nf = (flyer_thickness_m / r_eq).round() as i64;
+            if nt < 1 {
+                return Err(EngineError::invalid(
+                    "scene.target_thickness_m",
+                    target_thickness_m,
+                    format!(">= {:.3e} m (one particle at r_eq = {r_eq:.3e} m)", 0.5 * r_eq),
+                ));
+            }
+            if nf < 1 {
+                return Err(EngineError::invalid(
+                    "scene.flyer_thickness_m",
+                    flyer_thickness_m,
+                    format!(">= {:.3e} m (one particle at r_eq = {r_eq:.3e} m)", 0.5 * r_eq),
+                ));
+            }
+            let nxy = ((width_m / r_eq).round() as i64).max(1);
+            check_range("resolution (total sites)", (nxy * nxy * (nt + nf)) as f64, 1.0, false, 5e8, false)?;
+            let lateral_offset = if nxy % 2 == 1 { 0.0 } else { 0.5 };
+            let half = nxy / 2;
+            let (ilo, ihi) = if nxy % 2 == 1 { (-half, half) } else { (-half, half - 1) };
+            for k in -nf..nt {
+                for j in ilo..=ihi {
+                    for i in ilo..=ihi {
+                        sites.push([i as i32, j as i32, k as i32]);
+                        body.push(if k < 0 { Body::Impactor } else { Body::Target });
+                    }
+                }
+            }
+            Ok(Layout {
+                sites,
+                body,
+                r_eq,
+                lateral_offset,
+                impactor_z_shift: 0.0,
+                plate_rear_z: nt as f64 * r_eq,
+            })
+        }
+    }
+}
+
+/// Ids of target particles on the plate's lateral rim (outermost lattice ring) at t = 0.
+fn rim_ids(p: &Particles, r_eq: f64) -> Vec<u32> {
+    let mut max_x: f64 = 0.0;
+    for k in 0..p.len() {
+        if p.body[k] == Body::Target {
+            max_x = max_x.max(p.pos[k].x.abs()).max(p.pos[k].y.abs());
+        }
+    }
+    (0..p.len())
+        .filter(|&k| {
+            p.body[k] == Body::Target
+                && (p.pos[k].x.abs().max(p.pos[k].y.abs()) > max_x - 0.5 * r_eq)
+        })
+        .map(|k| p.id[k])
+        .collect()
+}

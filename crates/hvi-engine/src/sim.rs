@@ -1,0 +1,396 @@
+//! The time loop: velocity Verlet (eq. 1) with the contact and bond kernels, the energy
+//! ledger, momentum, blow-up detection and a per-phase timing breakdown.
+//!
+//! Every kernel gathers per particle (full neighbour list, each bond seen from both ends), so a
+//! particle's force is summed in the same order whatever the thread count. Sums over particles
+//! (energies, momentum, broken-bond energy) are taken over fixed chunks of `CHUNK` particles and
+//! the chunk results added in chunk order: results are bit-identical at any thread count.
+
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{EngineError, Result};
+use crate::neighbour::NeighbourList;
+use crate::potential::Interaction;
+use crate::scene::{Derived, Setup};
+use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND};
+
+/// Particles per work unit and per partial sum.
+pub const CHUNK: usize = 1024;
+
+/// The energy ledger (MODEL.md section 3): kinetic + contact + bond + broken is conserved.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Energy {
+    /// Kinetic energy, J.
+    pub kinetic_j: f64,
+    /// Contact (repulsion) energy, J.
+    pub contact_j: f64,
+    /// Energy stored in intact stretched bonds, J.
+    pub bond_j: f64,
+    /// Energy carried away by broken bonds (booked once, when they break), J.
+    pub broken_j: f64,
+}
+
+impl Energy {
+    /// The conserved sum, J.
+    pub fn total_j(&self) -> f64 {
+        self.kinetic_j + self.contact_j + self.bond_j + self.broken_j
+    }
+}
+
+/// Wall time spent per phase, like LAMMPS's breakdown.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct Timing {
+    /// Contact repulsion over the neighbour list.
+    pub contact: Duration,
+    /// Bond springs and bond breaking.
+    pub bonds: Duration,
+    /// Neighbour-list builds (including re-sorting the particles).
+    pub neighbour: Duration,
+    /// Velocity Verlet updates and the rebuild check.
+    pub integrate: Duration,
+    /// Energy-ledger samples.
+    pub energy: Duration,
+}
+
+/// Per-chunk results of the bond kernel.
+#[derive(Debug, Clone, Copy, Default)]
+struct BondPartial {
+    broken: u64,
+    broken_energy: f64,
+    min_r2: f64,
+}
+
+/// A running simulation.
+pub struct Simulation {
+    /// Particle state (reordered along the cell grid at each neighbour build).
+    pub particles: Particles,
+    /// Interaction constants.
+    pub interaction: Interaction,
+    /// Derived scene numbers.
+    pub derived: Derived,
+    neighbours: NeighbourList,
+    skin_m: f64,
+    min_distance2: f64,
+    max_energy_drift: f64,
+    /// Current step number.
+    pub step: u64,
+    /// Time step, s.
+    pub dt: f64,
+    /// Bonds at t = 0.
+    pub bonds_initial: u64,
+    /// Bonds broken so far.
+    pub bonds_broken: u64,
+    broken_energy: f64,
+    /// Energy at t = 0.
+    pub energy_initial: Energy,
+    /// Momentum at t = 0, kg m/s.
+    pub momentum_initial: DVec3,
+    /// Time per phase.
+    pub timing: Timing,
+    bond_partials: Vec<BondPartial>,
+    contact_min_r2: Vec<f64>,
+    disp_partials: Vec<f64>,
+}
+
+impl Simulation {
+    /// Prepares a run: first neighbour build, forces, initial ledger.
+    pub fn new(setup: Setup) -> Result<Self> {
+        let Setup { spec, derived, interaction, particles, .. } = setup;
+        let n = particles.len();
+        let bonds_initial = particles.intact_bonds() as u64;
+        let nchunks = n.div_ceil(CHUNK);
+        let mut sim = Simulation {
+            particles,
+            interaction,
+            derived,
+            neighbours: NeighbourList::default(),
+            skin_m: spec.run.skin_over_sigma * derived.sigma_m,
+            min_distance2: (spec.run.min_distance_over_sigma * derived.sigma_m).powi(2),
+            max_energy_drift: spec.run.max_energy_drift,
+            step: 0,
+            dt: derived.dt_s,
+            bonds_initial,
+            bonds_broken: 0,
+            broken_energy: 0.0,
+            energy_initial: Energy::default(),
+            momentum_initial: DVec3::ZERO,
+            timing: Timing::default(),
+            bond_partials: vec![BondPartial::default(); nchunks],
+            contact_min_r2: vec![f64::INFINITY; nchunks],
+            disp_partials: vec![0.0; nchunks],
+        };
+        sim.rebuild();
+        sim.compute_forces()?;
+        sim.energy_initial = sim.energy();
+        sim.momentum_initial = sim.momentum();
+        Ok(sim)
+    }
+
+    /// Simulated time since t = 0, s.
+    pub fn time_s(&self) -> f64 {
+        self.step as f64 * self.dt
+    }
+
+    /// Time since first contact, tau, s.
+    pub fn tau_s(&self) -> f64 {
+        self.time_s() - self.derived.contact_time_s
+    }
+
+    /// Number of neighbour-list builds so far.
+    pub fn neighbour_builds(&self) -> u64 {
+        self.neighbours.builds
+    }
+
+    fn rebuild(&mut self) {
+        let t = Instant::now();
+        let radius = self.interaction.r_eq_m + self.skin_m;
+        self.neighbours.build(&mut self.particles, radius);
+        self.timing.neighbour += t.elapsed();
+    }
+
+    /// Contact then bond forces into `particles.force`; books bonds that break.
+    fn compute_forces(&mut self) -> Result<()> {
+        let t0 = Instant::now();
+        let ia = self.interaction;
+        let r_eq2 = ia.r_eq2();
+        let p = &mut self.particles;
+        let pos = &p.pos;
+        let nl = &self.neighbours;
+        p.force
+            .par_chunks_mut(CHUNK)
+            .zip(self.contact_min_r2.par_iter_mut())
+            .enumerate()
+            .for_each(|(c, (force, min_out))| {
+                let base = c * CHUNK;
+                let mut min_r2 = f64::INFINITY;
+                for (k, f_out) in force.iter_mut().enumerate() {
+                    let i = base + k;
+                    let pi = pos[i];
+                    let mut f = DVec3::ZERO;
+                    for &j in nl.of(i) {
+                        let d = pi - pos[j as usize];
+                        let r2 = d.length_squared();
+                        if r2 < r_eq2 {
+                            f += d * ia.contact_force_over_r(r2);
+                            min_r2 = min_r2.min(r2);
+                        }
+                    }
+                    *f_out = f;
+                }
+                *min_out = min_r2;
+            });
+        let t1 = Instant::now();
+        self.timing.contact += t1 - t0;
+
+        let rcut2 = ia.rcut2();
+        p.force
+            .par_chunks_mut(CHUNK)
+            .zip(p.bonds.par_chunks_mut(CHUNK * BONDS_PER_PARTICLE))
+            .zip(self.bond_partials.par_iter_mut())
+            .enumerate()
+            .for_each(|(c, ((force, bonds), out))| {
+                let base = c * CHUNK;
+                let mut part = BondPartial { min_r2: f64::INFINITY, ..Default::default() };
+                for (k, f_out) in force.iter_mut().enumerate() {
+                    let i = base + k;
+                    let pi = pos[i];
+                    let mut f = DVec3::ZERO;
+                    for slot in &mut bonds[k * BONDS_PER_PARTICLE..(k + 1) * BONDS_PER_PARTICLE] {
+                        let s = *slot;
+                        if s == NO_BOND {
+                            continue;
+                        }
+                        let j = (s & INDEX_MASK) as usize;
+                        let d = pi - pos[j];
+                        let r2 = d.length_squared();
+                        if r2 < r_eq2 {
+                            // Compressed (bond intact or just broken): contact repulsion.
+                            f += d * ia.contact_force_over_r(r2);
+                            part.min_r2 = part.min_r2.min(r2);
+                        } else if s & BROKEN_FLAG == 0 {
+                            let r = r2.sqrt();
+                            if r2 > rcut2 {
+                                // Breaks now, for good; both ends see the same r2 and flag it.
+                                *slot = s | BROKEN_FLAG;
+                                if i < j {
+                                    part.broken += 1;
+                                    part.broken_energy += ia.spring_energy(r);
+                                }
+                            } else {
+                                f += d * ia.spring_force_over_r(r);
+                            }
+                        }
+                    }
+                    *f_out += f;
+                }
+                *out = part;
+            });
+        let mut min_r2 = f64::INFINITY;
+        for (b, &c) in self.bond_partials.iter().zip(&self.contact_min_r2) {
+            self.bonds_broken += b.broken;
+            self.broken_energy += b.broken_energy;
+            min_r2 = min_r2.min(b.min_r2).min(c);
+        }
+        self.timing.bonds += t1.elapsed();
+        if min_r2 < self.min_distance2 {
+            return Err(self.unstable(format!(
+                "two particles {:.3} sigma apart (limit run.min_distance_over_sigma = {:.3}); \
+                 the time step is too large for this impact",
+                min_r2.sqrt() / self.derived.sigma_m,
+                self.min_distance2.sqrt() / self.derived.sigma_m
+            )));
+        }
+        Ok(())
+    }
+
+    fn unstable(&self, reason: String) -> EngineError {
+        EngineError::Unstable { step: self.step, time_s: self.time_s(), reason }
+    }
+
+    /// Advances one velocity-Verlet step.
+    pub fn step_once(&mut self) -> Result<()> {
+        let t0 = Instant::now();
+        let dt = self.dt;
+        let half = 0.5 * dt;
+        let p = &mut self.particles;
+        let built = &self.neighbours.pos_at_build;
+        p.pos
+            .par_chunks_mut(CHUNK)
+            .zip(p.vel.par_chunks_mut(CHUNK))
+            .zip(self.disp_partials.par_iter_mut())
+            .enumerate()
+            .for_each(|(c, ((pos, vel), out))| {
+                let base = c * CHUNK;
+                let mut max_d2: f64 = 0.0;
+                for k in 0..pos.len() {
+                    let i = base + k;
+                    let v = vel[k] + p.force[i] * (half * p.inv_mass[i]);
+                    vel[k] = v;
+                    let x = pos[k] + v * dt;
+                    pos[k] = x;
+                    let d2 = (x - built[i]).length_squared();
+                    // NaN fails every comparison: make it win the max so it is caught below.
+                    max_d2 = if d2 <= max_d2 { max_d2 } else if d2.is_nan() { f64::INFINITY } else { d2 };
+                }
+                *out = max_d2;
+            });
+        let max_d2 = self.disp_partials.iter().fold(0.0f64, |a, &b| a.max(b));
+        self.timing.integrate += t0.elapsed();
+        self.step += 1;
+        if !max_d2.is_finite() {
+            return Err(self.unstable("non-finite or runaway particle position".into()));
+        }
+        let half_skin = 0.5 * self.skin_m;
+        if max_d2 > half_skin * half_skin {
+            self.rebuild();
+            if self.neighbours.out_of_range > 0 {
+                return Err(self.unstable(format!(
+                    "{} particles left the representable grid (|x| > ~2^20 cells)",
+                    self.neighbours.out_of_range
+                )));
+            }
+        }
+        self.compute_forces()?;
+        let t1 = Instant::now();
+        let p = &mut self.particles;
+        p.vel
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(c, vel)| {
+                let base = c * CHUNK;
+                for (k, v) in vel.iter_mut().enumerate() {
+                    let i = base + k;
+                    *v += p.force[i] * (half * p.inv_mass[i]);
+                }
+            });
+        self.timing.integrate += t1.elapsed();
+        Ok(())
+    }
+
+    /// Advances `n` steps, sampling nothing.
+    pub fn advance(&mut self, n: u64) -> Result<()> {
+        for _ in 0..n {
+            self.step_once()?;
+        }
+        Ok(())
+    }
+
+    /// The energy ledger now (a full pass over pairs and bonds).
+    pub fn energy(&mut self) -> Energy {
+        let t = Instant::now();
+        let ia = self.interaction;
+        let r_eq2 = ia.r_eq2();
+        let p = &self.particles;
+        let nl = &self.neighbours;
+        let n = p.len();
+        let partials: Vec<[f64; 3]> = (0..n.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                let mut kin = 0.0;
+                let mut contact = 0.0;
+                let mut bond = 0.0;
+                for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                    kin += 0.5 * p.mass[i] * p.vel[i].length_squared();
+                    let pi = p.pos[i];
+                    for &j in nl.of(i) {
+                        contact += 0.5 * ia.contact_energy((pi - p.pos[j as usize]).length_squared());
+                    }
+                    for &s in &p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE] {
+                        if s == NO_BOND {
+                            continue;
+                        }
+                        let r2 = (pi - p.pos[(s & INDEX_MASK) as usize]).length_squared();
+                        if r2 < r_eq2 {
+                            contact += 0.5 * ia.contact_energy(r2);
+                        } else if s & BROKEN_FLAG == 0 {
+                            bond += 0.5 * ia.spring_energy(r2.sqrt());
+                        }
+                    }
+                }
+                [kin, contact, bond]
+            })
+            .collect();
+        let mut e = Energy { broken_j: self.broken_energy, ..Default::default() };
+        for [k, c, b] in partials {
+            e.kinetic_j += k;
+            e.contact_j += c;
+            e.bond_j += b;
+        }
+        self.timing.energy += t.elapsed();
+        e
+    }
+
+    /// Checks the ledger against its initial value; an error when it drifted past the guard.
+    pub fn check_energy(&self, e: &Energy) -> Result<f64> {
+        let e0 = self.energy_initial.total_j();
+        let drift = (e.total_j() - e0) / e0.abs().max(f64::MIN_POSITIVE);
+        if !drift.is_finite() || drift.abs() > self.max_energy_drift {
+            return Err(self.unstable(format!(
+                "energy ledger drifted by {:.3e} (limit run.max_energy_drift = {:.3e})",
+                drift, self.max_energy_drift
+            )));
+        }
+        Ok(drift)
+    }
+
+    /// Total momentum, kg m/s.
+    pub fn momentum(&self) -> DVec3 {
+        let p = &self.particles;
+        let n = p.len();
+        let partials: Vec<DVec3> = (0..n.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                let mut m = DVec3::ZERO;
+                for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                    m += p.vel[i] * p.mass[i];
+                }
+                m
+            })
+            .collect();
+        partials.into_iter().fold(DVec3::ZERO, |a, b| a + b)
+    }
+}

@@ -1,0 +1,135 @@
+//! Particle state as a structure of arrays, and bonds as fixed slots per particle.
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+/// Bond slots per particle: a simple cubic lattice site has six nearest neighbours.
+pub const BONDS_PER_PARTICLE: usize = 6;
+/// An empty bond slot.
+pub const NO_BOND: u32 = u32::MAX;
+/// Flag bit of a slot whose bond broke since the last neighbour-list build. The pair still
+/// repels through the slot until the next build puts it on the ordinary pair list.
+pub const BROKEN_FLAG: u32 = 1 << 31;
+/// Mask of the partner index in a slot.
+pub const INDEX_MASK: u32 = !BROKEN_FLAG;
+
+/// Which body a particle belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[repr(u8)]
+pub enum Body {
+    /// The sphere (or flyer plate).
+    Impactor = 0,
+    /// The target plate.
+    Target = 1,
+}
+
+/// All particles. Index `i` is the particle's current storage slot; particles are re-sorted
+/// along the cell grid at every neighbour-list build, so `id[i]` is the stable identity
+/// (its index at t = 0).
+#[derive(Debug, Clone)]
+pub struct Particles {
+    /// Positions, m.
+    pub pos: Vec<DVec3>,
+    /// Velocities, m/s.
+    pub vel: Vec<DVec3>,
+    /// Forces, N.
+    pub force: Vec<DVec3>,
+    /// Masses, kg.
+    pub mass: Vec<f64>,
+    /// Inverse masses, 1/kg.
+    pub inv_mass: Vec<f64>,
+    /// Body of each particle.
+    pub body: Vec<Body>,
+    /// Stable identity (index at t = 0).
+    pub id: Vec<u32>,
+    /// `BONDS_PER_PARTICLE` slots per particle: the partner's current index, `NO_BOND`, or a
+    /// partner index with `BROKEN_FLAG` set.
+    pub bonds: Vec<u32>,
+}
+
+impl Particles {
+    /// Particles in their initial order (id = index).
+    pub fn new(pos: Vec<DVec3>, vel: Vec<DVec3>, mass: Vec<f64>, body: Vec<Body>, bonds: Vec<u32>) -> Self {
+        let n = pos.len();
+        assert_eq!(vel.len(), n);
+        assert_eq!(mass.len(), n);
+        assert_eq!(body.len(), n);
+        assert_eq!(bonds.len(), n * BONDS_PER_PARTICLE);
+        let inv_mass = mass.iter().map(|m| 1.0 / m).collect();
+        Particles {
+            pos,
+            vel,
+            force: vec![DVec3::ZERO; n],
+            mass,
+            inv_mass,
+            body,
+            id: (0..n as u32).collect(),
+            bonds,
+        }
+    }
+
+    /// Number of particles.
+    pub fn len(&self) -> usize {
+        self.pos.len()
+    }
+
+    /// True when there are no particles.
+    pub fn is_empty(&self) -> bool {
+        self.pos.is_empty()
+    }
+
+    /// Number of intact bonds (each counted once).
+    pub fn intact_bonds(&self) -> usize {
+        self.bonds
+            .iter()
+            .enumerate()
+            .filter(|&(s, &b)| b & BROKEN_FLAG == 0 && b != NO_BOND && (b as usize) > s / BONDS_PER_PARTICLE)
+            .count()
+    }
+
+    /// Intact bond partners of particle `i` (current indices).
+    pub fn intact_partners(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+        self.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE]
+            .iter()
+            .filter(|&&b| b != NO_BOND && b & BROKEN_FLAG == 0)
+            .map(|&b| b as usize)
+    }
+
+    /// Index of each id: `index_of_id()[id] = i`.
+    pub fn index_of_id(&self) -> Vec<u32> {
+        let mut inv = vec![0u32; self.len()];
+        for (i, &id) in self.id.iter().enumerate() {
+            inv[id as usize] = i as u32;
+        }
+        inv
+    }
+
+    /// Reorders all arrays so that new index `k` holds old particle `perm[k]`, remapping bonds.
+    pub(crate) fn permute(&mut self, perm: &[u32]) {
+        let n = self.len();
+        let mut inv = vec![0u32; n];
+        for (k, &old) in perm.iter().enumerate() {
+            inv[old as usize] = k as u32;
+        }
+        fn gather<T: Copy>(v: &mut Vec<T>, perm: &[u32]) {
+            let out: Vec<T> = perm.iter().map(|&o| v[o as usize]).collect();
+            *v = out;
+        }
+        gather(&mut self.pos, perm);
+        gather(&mut self.vel, perm);
+        gather(&mut self.force, perm);
+        gather(&mut self.mass, perm);
+        gather(&mut self.inv_mass, perm);
+        gather(&mut self.body, perm);
+        gather(&mut self.id, perm);
+        let mut bonds = vec![NO_BOND; n * BONDS_PER_PARTICLE];
+        for (k, &old) in perm.iter().enumerate() {
+            let src = &self.bonds[old as usize * BONDS_PER_PARTICLE..(old as usize + 1) * BONDS_PER_PARTICLE];
+            let dst = &mut bonds[k * BONDS_PER_PARTICLE..(k + 1) * BONDS_PER_PARTICLE];
+            for (d, &s) in dst.iter_mut().zip(src) {
+                *d = if s == NO_BOND { NO_BOND } else { inv[(s & INDEX_MASK) as usize] | (s & BROKEN_FLAG) };
+            }
+        }
+        self.bonds = bonds;
+    }
+}
