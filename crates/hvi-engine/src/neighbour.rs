@@ -15,7 +15,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, NO_BOND};
+use crate::state::{Particles, BONDS_PER_PARTICLE};
 
 const COORD_BITS: u32 = 21;
 const COORD_OFFSET: i64 = 1 << (COORD_BITS - 1);
@@ -62,11 +62,7 @@ impl NeighbourList {
         self.radius = radius;
         self.builds += 1;
         let n = p.len();
-        for b in p.bonds.iter_mut() {
-            if *b != NO_BOND && *b & BROKEN_FLAG != 0 {
-                *b = NO_BOND;
-            }
-        }
+        p.clear_broken_slots();
         let inv_h = 1.0 / radius;
         let keyed: Vec<(u64, bool)> = p.pos.par_iter().map(|&x| cell_key(x, inv_h)).collect();
         self.out_of_range = keyed.iter().filter(|k| !k.1).count();

@@ -132,6 +132,25 @@ impl Interaction {
         -self.kappa_n_m * (r - self.r_eq_m) / r
     }
 
+    /// Spring force divided by distance from the squared distance (one sqrt, one division).
+    #[inline(always)]
+    pub fn spring_force_over_r2(&self, r2: f64) -> f64 {
+        self.kappa_n_m * (self.r_eq_m / r2.sqrt() - 1.0)
+    }
+
+    /// Both F/r of the contact repulsion and of the spring at squared distance `r2`, with one
+    /// square root and one division (the bond kernel needs both to stay branch-free).
+    #[inline(always)]
+    pub fn contact_and_spring_force_over_r(&self, r2: f64) -> (f64, f64) {
+        let inv_r = 1.0 / r2.sqrt();
+        let inv_r2 = inv_r * inv_r;
+        let s6 = (self.sigma2 * inv_r2).powi(3);
+        (
+            self.c_eps * (12.0 * s6 * s6 - 6.0 * s6) * inv_r2,
+            self.kappa_n_m * (self.r_eq_m * inv_r - 1.0),
+        )
+    }
+
     /// Energy one bond holds when it breaks exactly at rcut (J).
     pub fn break_energy_at_rcut(&self) -> f64 {
         self.spring_energy(self.rcut_m)

@@ -16,10 +16,12 @@ use crate::error::{EngineError, Result};
 use crate::neighbour::NeighbourList;
 use crate::potential::Interaction;
 use crate::scene::{Derived, Setup};
-use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND};
+use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND, OWNED_BONDS};
 
 /// Particles per work unit and per partial sum.
 pub const CHUNK: usize = 1024;
+/// Owned bonds per vectorised block of the bond kernel.
+const BLOCK_BONDS: usize = 192;
 
 /// The energy ledger (MODEL.md section 3): kinetic + contact + bond + broken is conserved.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
@@ -91,6 +93,7 @@ pub struct Simulation {
     pub momentum_initial: DVec3,
     /// Time per phase.
     pub timing: Timing,
+    bond_force: Vec<DVec3>,
     bond_partials: Vec<BondPartial>,
     contact_min_r2: Vec<f64>,
     disp_partials: Vec<f64>,
@@ -119,6 +122,7 @@ impl Simulation {
             energy_initial: Energy::default(),
             momentum_initial: DVec3::ZERO,
             timing: Timing::default(),
+            bond_force: vec![DVec3::ZERO; n * OWNED_BONDS],
             bond_partials: vec![BondPartial::default(); nchunks],
             contact_min_r2: vec![f64::INFINITY; nchunks],
             disp_partials: vec![0.0; nchunks],
@@ -152,14 +156,80 @@ impl Simulation {
         self.timing.neighbour += t.elapsed();
     }
 
-    /// Contact then bond forces into `particles.force`; books bonds that break.
+    /// Forces into `particles.force`: first every owned bond once (spring, or repulsion when
+    /// compressed; breaks booked here), then per particle the contact repulsion over the
+    /// neighbour list plus the bond forces gathered from its owned and mirror slots.
     fn compute_forces(&mut self) -> Result<()> {
         let t0 = Instant::now();
         let ia = self.interaction;
         let r_eq2 = ia.r_eq2();
+        let rcut2 = ia.rcut2();
         let p = &mut self.particles;
         let pos = &p.pos;
+        self.bond_force
+            .par_chunks_mut(CHUNK * OWNED_BONDS)
+            .zip(p.bonds.par_chunks_mut(CHUNK * BONDS_PER_PARTICLE))
+            .zip(self.bond_partials.par_iter_mut())
+            .enumerate()
+            .for_each(|(c, ((bf, bonds), out))| {
+                let mut part = BondPartial { min_r2: f64::INFINITY, ..Default::default() };
+                let nb_total = bf.len();
+                let mut b0 = 0;
+                while b0 < nb_total {
+                    let nb = (nb_total - b0).min(BLOCK_BONDS);
+                    // Stage 1 (scalar gathers): separation, squared distance and which law
+                    // applies. Breaks are booked here (rare, so the branch predicts well).
+                    let mut dx = [0.0f64; BLOCK_BONDS];
+                    let mut dy = [0.0f64; BLOCK_BONDS];
+                    let mut dz = [0.0f64; BLOCK_BONDS];
+                    let mut r2s = [r_eq2; BLOCK_BONDS];
+                    let mut w_contact = [0.0f64; BLOCK_BONDS];
+                    let mut w_spring = [0.0f64; BLOCK_BONDS];
+                    for b in 0..nb {
+                        let owned = b0 + b;
+                        let (k, m) = (owned / OWNED_BONDS, owned % OWNED_BONDS);
+                        let slot = &mut bonds[k * BONDS_PER_PARTICLE + 2 * m];
+                        let s = *slot;
+                        if s == NO_BOND {
+                            continue;
+                        }
+                        let d = pos[c * CHUNK + k] - pos[(s & INDEX_MASK) as usize];
+                        let r2 = d.length_squared();
+                        let intact = s & BROKEN_FLAG == 0;
+                        if intact && r2 > rcut2 {
+                            *slot = s | BROKEN_FLAG;
+                            part.broken += 1;
+                            part.broken_energy += ia.spring_energy(r2.sqrt());
+                            continue;
+                        }
+                        // Compressed (intact or just broken): contact repulsion; stretched and
+                        // intact: spring; stretched and broken: nothing.
+                        let compressed = f64::from(u8::from(r2 < r_eq2));
+                        (dx[b], dy[b], dz[b], r2s[b]) = (d.x, d.y, d.z, r2);
+                        w_contact[b] = compressed;
+                        w_spring[b] = (1.0 - compressed) * f64::from(u8::from(intact));
+                        part.min_r2 = part.min_r2.min(r2);
+                    }
+                    // Stage 2 (vectorised): both laws for every bond, blended by weight. A
+                    // branch here would be mispredicted half the time in a hot lattice.
+                    let mut fr = [0.0f64; BLOCK_BONDS];
+                    for b in 0..BLOCK_BONDS {
+                        let (fc, fs) = ia.contact_and_spring_force_over_r(r2s[b]);
+                        fr[b] = w_contact[b] * fc + w_spring[b] * fs;
+                    }
+                    for b in 0..nb {
+                        bf[b0 + b] = DVec3::new(dx[b] * fr[b], dy[b] * fr[b], dz[b] * fr[b]);
+                    }
+                    b0 += nb;
+                }
+                *out = part;
+            });
+        let t1 = Instant::now();
+        self.timing.bonds += t1 - t0;
+
         let nl = &self.neighbours;
+        let bf = &self.bond_force;
+        let bonds = &p.bonds;
         p.force
             .par_chunks_mut(CHUNK)
             .zip(self.contact_min_r2.par_iter_mut())
@@ -174,60 +244,22 @@ impl Simulation {
                     for &j in nl.of(i) {
                         let d = pi - pos[j as usize];
                         let r2 = d.length_squared();
-                        if r2 < r_eq2 {
-                            f += d * ia.contact_force_over_r(r2);
-                            min_r2 = min_r2.min(r2);
+                        // Branch-free for the same reason as above.
+                        let fr = ia.contact_force_over_r(r2);
+                        f += d * (fr * f64::from(u8::from(r2 < r_eq2)));
+                        min_r2 = min_r2.min(r2);
+                    }
+                    let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
+                    for m in 0..OWNED_BONDS {
+                        f += bf[i * OWNED_BONDS + m];
+                        let mirror = slots[2 * m + 1];
+                        if mirror != NO_BOND {
+                            f -= bf[mirror as usize * OWNED_BONDS + m];
                         }
                     }
                     *f_out = f;
                 }
                 *min_out = min_r2;
-            });
-        let t1 = Instant::now();
-        self.timing.contact += t1 - t0;
-
-        let rcut2 = ia.rcut2();
-        p.force
-            .par_chunks_mut(CHUNK)
-            .zip(p.bonds.par_chunks_mut(CHUNK * BONDS_PER_PARTICLE))
-            .zip(self.bond_partials.par_iter_mut())
-            .enumerate()
-            .for_each(|(c, ((force, bonds), out))| {
-                let base = c * CHUNK;
-                let mut part = BondPartial { min_r2: f64::INFINITY, ..Default::default() };
-                for (k, f_out) in force.iter_mut().enumerate() {
-                    let i = base + k;
-                    let pi = pos[i];
-                    let mut f = DVec3::ZERO;
-                    for slot in &mut bonds[k * BONDS_PER_PARTICLE..(k + 1) * BONDS_PER_PARTICLE] {
-                        let s = *slot;
-                        if s == NO_BOND {
-                            continue;
-                        }
-                        let j = (s & INDEX_MASK) as usize;
-                        let d = pi - pos[j];
-                        let r2 = d.length_squared();
-                        if r2 < r_eq2 {
-                            // Compressed (bond intact or just broken): contact repulsion.
-                            f += d * ia.contact_force_over_r(r2);
-                            part.min_r2 = part.min_r2.min(r2);
-                        } else if s & BROKEN_FLAG == 0 {
-                            let r = r2.sqrt();
-                            if r2 > rcut2 {
-                                // Breaks now, for good; both ends see the same r2 and flag it.
-                                *slot = s | BROKEN_FLAG;
-                                if i < j {
-                                    part.broken += 1;
-                                    part.broken_energy += ia.spring_energy(r);
-                                }
-                            } else {
-                                f += d * ia.spring_force_over_r(r);
-                            }
-                        }
-                    }
-                    *f_out += f;
-                }
-                *out = part;
             });
         let mut min_r2 = f64::INFINITY;
         for (b, &c) in self.bond_partials.iter().zip(&self.contact_min_r2) {
@@ -235,7 +267,7 @@ impl Simulation {
             self.broken_energy += b.broken_energy;
             min_r2 = min_r2.min(b.min_r2).min(c);
         }
-        self.timing.bonds += t1.elapsed();
+        self.timing.contact += t1.elapsed();
         if min_r2 < self.min_distance2 {
             return Err(self.unstable(format!(
                 "two particles {:.3} sigma apart (limit run.min_distance_over_sigma = {:.3}); \
@@ -339,15 +371,16 @@ impl Simulation {
                     for &j in nl.of(i) {
                         contact += 0.5 * ia.contact_energy((pi - p.pos[j as usize]).length_squared());
                     }
-                    for &s in &p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE] {
+                    for m in 0..OWNED_BONDS {
+                        let s = p.bonds[i * BONDS_PER_PARTICLE + 2 * m];
                         if s == NO_BOND {
                             continue;
                         }
                         let r2 = (pi - p.pos[(s & INDEX_MASK) as usize]).length_squared();
                         if r2 < r_eq2 {
-                            contact += 0.5 * ia.contact_energy(r2);
+                            contact += ia.contact_energy(r2);
                         } else if s & BROKEN_FLAG == 0 {
-                            bond += 0.5 * ia.spring_energy(r2.sqrt());
+                            bond += ia.spring_energy(r2.sqrt());
                         }
                     }
                 }

@@ -3,12 +3,18 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-/// Bond slots per particle: a simple cubic lattice site has six nearest neighbours.
+/// Bond slots per particle: a simple cubic lattice site has six nearest neighbours. Slot
+/// `2m` (m = 0, 1, 2 for x, y, z) is the bond towards +m, which this particle *owns*: the force
+/// and the break of that bond are computed once, by its owner. Slot `2m + 1` is the mirror:
+/// the partner towards -m, whose slot `2m` owns the bond.
 pub const BONDS_PER_PARTICLE: usize = 6;
+/// Owned bonds per particle (+x, +y, +z).
+pub const OWNED_BONDS: usize = 3;
 /// An empty bond slot.
 pub const NO_BOND: u32 = u32::MAX;
-/// Flag bit of a slot whose bond broke since the last neighbour-list build. The pair still
-/// repels through the slot until the next build puts it on the ordinary pair list.
+/// Flag bit of an owned slot whose bond broke since the last neighbour-list build. The pair
+/// still repels through the slot until the next build puts it on the ordinary pair list (then
+/// both the owned and the mirror slot are cleared).
 pub const BROKEN_FLAG: u32 = 1 << 31;
 /// Mask of the partner index in a slot.
 pub const INDEX_MASK: u32 = !BROKEN_FLAG;
@@ -80,19 +86,32 @@ impl Particles {
 
     /// Number of intact bonds (each counted once).
     pub fn intact_bonds(&self) -> usize {
-        self.bonds
-            .iter()
-            .enumerate()
-            .filter(|&(s, &b)| b & BROKEN_FLAG == 0 && b != NO_BOND && (b as usize) > s / BONDS_PER_PARTICLE)
-            .count()
+        self.intact_bond_pairs().count()
     }
 
-    /// Intact bond partners of particle `i` (current indices).
-    pub fn intact_partners(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
-        self.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE]
-            .iter()
-            .filter(|&&b| b != NO_BOND && b & BROKEN_FLAG == 0)
-            .map(|&b| b as usize)
+    /// Every intact bond once, as (owner, partner) in current indices.
+    pub fn intact_bond_pairs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        (0..self.len()).flat_map(move |i| {
+            (0..OWNED_BONDS).filter_map(move |m| {
+                let s = self.bonds[i * BONDS_PER_PARTICLE + 2 * m];
+                (s != NO_BOND && s & BROKEN_FLAG == 0).then_some((i, s as usize))
+            })
+        })
+    }
+
+    /// Clears the owned and mirror slots of bonds that broke since the last call.
+    pub(crate) fn clear_broken_slots(&mut self) {
+        for i in 0..self.len() {
+            for m in 0..OWNED_BONDS {
+                let s = self.bonds[i * BONDS_PER_PARTICLE + 2 * m];
+                if s != NO_BOND && s & BROKEN_FLAG != 0 {
+                    let j = (s & INDEX_MASK) as usize;
+                    self.bonds[i * BONDS_PER_PARTICLE + 2 * m] = NO_BOND;
+                    debug_assert_eq!(self.bonds[j * BONDS_PER_PARTICLE + 2 * m + 1], i as u32);
+                    self.bonds[j * BONDS_PER_PARTICLE + 2 * m + 1] = NO_BOND;
+                }
+            }
+        }
     }
 
     /// Index of each id: `index_of_id()[id] = i`.

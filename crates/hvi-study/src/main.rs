@@ -1,1 +1,78 @@
-fn main() {}
+//! The `hvi-study` command.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use hvi_study::run::{run_scene, RunOptions};
+use hvi_study::scene_file::load_scene;
+
+/// Hypervelocity impact with the discrete element method (Watson & Steinhauser 2017).
+#[derive(Parser, Debug)]
+#[command(name = "hvi-study", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Run one scene and write summary.json and energy.csv into --out.
+    Run {
+        /// Scene file (TOML), e.g. studies/scenes/default.toml.
+        scene: PathBuf,
+        /// Output directory.
+        #[arg(long, default_value = "runs/last")]
+        out: PathBuf,
+        /// Override a scene key: section.key=value (e.g. scene.v0_m_s=6500, run.dt_s=auto).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
+        /// Worker threads (default: all cores). Results are identical for any count.
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Write an extended XYZ snapshot every K steps (OVITO, ASE).
+        #[arg(long, value_name = "K")]
+        dump_every: Option<u64>,
+        /// Write the initial state as a LAMMPS data file (units si, atom_style bond).
+        #[arg(long, value_name = "FILE")]
+        lammps_data: Option<PathBuf>,
+        /// No progress output.
+        #[arg(long)]
+        quiet: bool,
+    },
+}
+
+fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    if threads == Some(0) {
+        anyhow::bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
+    }
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.unwrap_or(0))
+        .build()
+        .context("cannot start worker threads")
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run { scene, out, sets, threads, dump_every, lammps_data, quiet } => (|| {
+            if dump_every == Some(0) {
+                anyhow::bail!("invalid value for `--dump-every`: 0 (allowed: an integer >= 1)");
+            }
+            let spec = load_scene(&scene, &sets)?;
+            let pool = thread_pool(threads)?;
+            let opts = RunOptions { out_dir: out.clone(), dump_every, lammps_data, progress: !quiet };
+            pool.install(|| run_scene(&spec, &opts))?;
+            println!("{}", out.join("summary.json").display());
+            Ok(())
+        })(),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,400 @@
+//! One run of one scene: the engine stepped to the end time, with the energy ledger sampled,
+//! optional snapshots, progress, and `summary.json` + `energy.csv` written atomically.
+
+use std::fmt::Write as _;
+use std::io::{IsTerminal, Write as _};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use hvi_engine::scene::{Derived, SceneSpec};
+use hvi_engine::sim::{Energy, Simulation, Timing};
+use hvi_engine::EngineError;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Serialize;
+
+use crate::output::{write_atomic, write_atomic_bytes, write_lammps_data, write_xyz};
+
+/// How to run and what to write besides the summary.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Output directory (created if missing).
+    pub out_dir: PathBuf,
+    /// Write an extended XYZ snapshot every this many steps (and at the end).
+    pub dump_every: Option<u64>,
+    /// Write the initial state as a LAMMPS data file here.
+    pub lammps_data: Option<PathBuf>,
+    /// Show a progress bar and thermo lines on stderr.
+    pub progress: bool,
+}
+
+/// One row of `energy.csv`.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct EnergyRow {
+    /// Simulated time since t = 0, s.
+    pub time_s: f64,
+    /// Time since first contact, s.
+    pub tau_s: f64,
+    /// Kinetic energy, J.
+    pub kinetic_j: f64,
+    /// Contact energy, J.
+    pub contact_j: f64,
+    /// Bond energy, J.
+    pub bond_j: f64,
+    /// Broken-bond energy, J.
+    pub broken_j: f64,
+    /// Sum of the four, J.
+    pub total_j: f64,
+    /// Bonds broken so far.
+    pub bonds_broken: u64,
+}
+
+/// The energy block of `summary.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct EnergySummary {
+    /// Final kinetic energy, J.
+    pub kinetic_j: f64,
+    /// Final contact energy, J.
+    pub contact_j: f64,
+    /// Final bond energy, J.
+    pub bond_j: f64,
+    /// Final broken-bond energy, J.
+    pub broken_j: f64,
+    /// Ledger total at t = 0, J.
+    pub total_initial_j: f64,
+    /// Ledger total at the end, J.
+    pub total_final_j: f64,
+    /// (final - initial) / initial.
+    pub relative_drift: f64,
+    /// Largest |drift| over all samples.
+    pub max_abs_relative_drift: f64,
+}
+
+/// The momentum block of `summary.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct MomentumSummary {
+    /// Total momentum at t = 0, kg m/s.
+    pub initial_kg_m_s: [f64; 3],
+    /// Total momentum at the end, kg m/s.
+    pub final_kg_m_s: [f64; 3],
+    /// |final - initial| / (M v0), the round-off measure.
+    pub relative_change: f64,
+}
+
+/// Seconds per phase.
+#[derive(Debug, Clone, Serialize)]
+pub struct TimingSummary {
+    /// Contact repulsion.
+    pub contact_s: f64,
+    /// Bonds.
+    pub bonds_s: f64,
+    /// Neighbour-list builds.
+    pub neighbour_s: f64,
+    /// Integration.
+    pub integrate_s: f64,
+    /// Energy samples.
+    pub energy_s: f64,
+    /// Files and progress.
+    pub output_s: f64,
+    /// Everything else (set-up).
+    pub other_s: f64,
+}
+
+/// `summary.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// "completed" or "unstable".
+    pub status: String,
+    /// The diagnostic when not completed.
+    pub error: Option<String>,
+    /// hvi-study version.
+    pub engine_version: String,
+    /// Particles.
+    pub particles: usize,
+    /// Impactor particles.
+    pub particles_impactor: usize,
+    /// Target particles.
+    pub particles_target: usize,
+    /// Intact bonds at t = 0.
+    pub bonds_initial: u64,
+    /// Bonds broken by the end.
+    pub bonds_broken: u64,
+    /// Steps taken.
+    pub steps: u64,
+    /// Time step, s.
+    pub dt_s: f64,
+    /// Simulated time reached, s.
+    pub time_s: f64,
+    /// Time since first contact reached, s.
+    pub tau_s: f64,
+    /// Particle diameter, m.
+    pub sigma_m: f64,
+    /// Wall time of the whole run, s.
+    pub wall_seconds: f64,
+    /// Particles times steps over the stepping wall time.
+    pub particle_steps_per_second: f64,
+    /// Threads used.
+    pub threads: usize,
+    /// Neighbour-list builds.
+    pub neighbour_builds: u64,
+    /// Energy ledger.
+    pub energy: EnergySummary,
+    /// Momentum.
+    pub momentum: MomentumSummary,
+    /// Derived numbers (sigma, sigma_ref, gamma, lambda, masses, dt...).
+    pub derived: Derived,
+    /// Time per phase.
+    pub timing: TimingSummary,
+    /// The scene as run (after overrides).
+    pub scene: SceneSpec,
+}
+
+/// What a run returns: its summary, and the error if it stopped early.
+pub struct RunOutcome {
+    /// The written summary.
+    pub summary: Summary,
+    /// The energy series.
+    pub energy: Vec<EnergyRow>,
+    /// Final state (for analysis by the caller).
+    pub sim: Simulation,
+}
+
+fn row(sim: &Simulation, e: &Energy) -> EnergyRow {
+    EnergyRow {
+        time_s: sim.time_s(),
+        tau_s: sim.tau_s(),
+        kinetic_j: e.kinetic_j,
+        contact_j: e.contact_j,
+        bond_j: e.bond_j,
+        broken_j: e.broken_j,
+        total_j: e.total_j(),
+        bonds_broken: sim.bonds_broken,
+    }
+}
+
+/// The lines every run prints about its resolution and parameters.
+pub fn describe(d: &Derived, particles: usize, bonds: u64) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "particles {particles}, bonds {bonds}, steps {}", d.steps);
+    let _ = writeln!(
+        s,
+        "sigma = {:.4e} m (sigma_ref = {:.4e} m, r_eq = {:.4e} m), m = {:.4e} kg (impactor) / {:.4e} kg (target)",
+        d.sigma_m, d.sigma_ref_m, d.r_eq_m, d.mass_impactor_kg, d.mass_target_kg
+    );
+    let _ = writeln!(
+        s,
+        "eps = {:.4e} J, kappa = {:.4e} N/m at this sigma; gamma = {:.4e} Pa, lambda = {:.4e} Pa; rcut = {:.4e} m",
+        d.eps_j, d.kappa_n_m, d.gamma_pa, d.lambda_pa, d.rcut_m
+    );
+    let _ = write!(s, "dt = {:.4e} s (stability bound {:.4e} s), v0 = {} m/s", d.dt_s, d.dt_max_s, d.v0_m_s);
+    s
+}
+
+fn timing_table(t: &Timing, output: Duration, total: Duration) -> (TimingSummary, String) {
+    let secs = |d: Duration| d.as_secs_f64();
+    let accounted = t.contact + t.bonds + t.neighbour + t.integrate + t.energy + output;
+    let other = total.saturating_sub(accounted);
+    let ts = TimingSummary {
+        contact_s: secs(t.contact),
+        bonds_s: secs(t.bonds),
+        neighbour_s: secs(t.neighbour),
+        integrate_s: secs(t.integrate),
+        energy_s: secs(t.energy),
+        output_s: secs(output),
+        other_s: secs(other),
+    };
+    let mut s = String::from("Section   |  time (s)  | %total\n----------+------------+-------\n");
+    let tot = secs(total).max(1e-12);
+    for (name, v) in [
+        ("Contact", ts.contact_s),
+        ("Bond", ts.bonds_s),
+        ("Neigh", ts.neighbour_s),
+        ("Integrate", ts.integrate_s),
+        ("Energy", ts.energy_s),
+        ("Output", ts.output_s),
+        ("Other", ts.other_s),
+    ] {
+        let _ = writeln!(s, "{name:<9} | {v:10.3} | {:5.1}", 100.0 * v / tot);
+    }
+    (ts, s)
+}
+
+/// Runs a scene to its end time, writing `summary.json` and `energy.csv` (also when it stops
+/// early on an instability: the error comes back after the files are written).
+pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
+    let wall0 = Instant::now();
+    std::fs::create_dir_all(&opts.out_dir)
+        .with_context(|| format!("cannot create output directory {}", opts.out_dir.display()))?;
+    let setup = spec.build()?;
+    let n = setup.particles.len();
+    let n_imp = setup.particles.body.iter().filter(|b| **b == hvi_engine::state::Body::Impactor).count();
+    let mut sim = Simulation::new(setup)?;
+    let d = sim.derived;
+    if opts.progress {
+        eprintln!("{}", describe(&d, n, sim.bonds_initial));
+        eprintln!("threads {}", rayon::current_num_threads());
+    }
+    let mut output_time = Duration::ZERO;
+    if let Some(path) = &opts.lammps_data {
+        let t = Instant::now();
+        write_lammps_data(path, &sim)?;
+        output_time += t.elapsed();
+    }
+    let mut rows = vec![row(&sim, &sim.energy_initial)];
+    let mut max_drift: f64 = 0.0;
+    let e0 = sim.energy_initial.total_j();
+
+    let bar = if opts.progress && std::io::stderr().is_terminal() {
+        let b = ProgressBar::with_draw_target(Some(d.steps), ProgressDrawTarget::stderr());
+        b.set_style(
+            ProgressStyle::with_template("{bar:30} {pos}/{len} steps  {msg}  ETA {eta}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        Some(b)
+    } else {
+        None
+    };
+    let thermo_every = (d.steps / 20).max(1);
+    let dump_every = opts.dump_every.unwrap_or(0);
+    let energy_every = spec.run.energy_every;
+    let step_wall0 = Instant::now();
+    let mut failure: Option<EngineError> = None;
+    if dump_every > 0 {
+        let t = Instant::now();
+        write_xyz(&opts.out_dir.join(format!("dump_{:09}.xyz", 0)), &sim)?;
+        output_time += t.elapsed();
+    }
+    while sim.step < d.steps {
+        if let Err(e) = sim.step_once() {
+            failure = Some(e);
+            break;
+        }
+        let s = sim.step;
+        if s % energy_every == 0 || s == d.steps {
+            let e = sim.energy();
+            rows.push(row(&sim, &e));
+            match sim.check_energy(&e) {
+                Ok(drift) => max_drift = max_drift.max(drift.abs()),
+                Err(err) => {
+                    max_drift = max_drift.max(((e.total_j() - e0) / e0).abs());
+                    failure = Some(err);
+                    break;
+                }
+            }
+        }
+        if dump_every > 0 && (s % dump_every == 0 || s == d.steps) {
+            let t = Instant::now();
+            write_xyz(&opts.out_dir.join(format!("dump_{s:09}.xyz")), &sim)?;
+            output_time += t.elapsed();
+        }
+        if opts.progress && (s % thermo_every == 0 || s == d.steps) {
+            let t = Instant::now();
+            let el = step_wall0.elapsed().as_secs_f64();
+            let rate = n as f64 * s as f64 / el.max(1e-9);
+            let eta = (d.steps - s) as f64 * n as f64 / rate.max(1e-9);
+            let msg = format!(
+                "tau {:7.3} us  {:6.2} M particle-steps/s  bonds broken {}  ",
+                sim.tau_s() * 1e6,
+                rate / 1e6,
+                sim.bonds_broken
+            );
+            match &bar {
+                Some(b) => {
+                    b.set_position(s);
+                    b.set_message(msg);
+                }
+                None => eprintln!("step {s:>9}/{}  {msg} ETA {eta:.0} s", d.steps),
+            }
+            output_time += t.elapsed();
+        }
+    }
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let step_wall = step_wall0.elapsed().as_secs_f64();
+    let final_energy = match rows.last() {
+        Some(r) if (r.time_s - sim.time_s()).abs() < 0.5 * d.dt_s => *r,
+        _ => {
+            let e = sim.energy();
+            let r = row(&sim, &e);
+            rows.push(r);
+            r
+        }
+    };
+    let momentum = sim.momentum();
+    let total_mass: f64 = sim.particles.mass.iter().sum();
+    let scale = (total_mass * d.v0_m_s).max(f64::MIN_POSITIVE);
+    let t = Instant::now();
+    write_atomic(&opts.out_dir.join("energy.csv"), |w| {
+        let mut csv = csv::Writer::from_writer(w);
+        for r in &rows {
+            csv.serialize(r)?;
+        }
+        csv.flush()?;
+        Ok(())
+    })?;
+    output_time += t.elapsed();
+    let total = wall0.elapsed();
+    let (timing, table) = timing_table(&sim.timing, output_time, total);
+    let summary = Summary {
+        status: if failure.is_some() { "unstable".into() } else { "completed".into() },
+        error: failure.as_ref().map(|e| e.to_string()),
+        engine_version: env!("CARGO_PKG_VERSION").into(),
+        particles: n,
+        particles_impactor: n_imp,
+        particles_target: n - n_imp,
+        bonds_initial: sim.bonds_initial,
+        bonds_broken: sim.bonds_broken,
+        steps: sim.step,
+        dt_s: d.dt_s,
+        time_s: sim.time_s(),
+        tau_s: sim.tau_s(),
+        sigma_m: d.sigma_m,
+        wall_seconds: total.as_secs_f64(),
+        particle_steps_per_second: n as f64 * sim.step as f64 / step_wall.max(1e-12),
+        threads: rayon::current_num_threads(),
+        neighbour_builds: sim.neighbour_builds(),
+        energy: EnergySummary {
+            kinetic_j: final_energy.kinetic_j,
+            contact_j: final_energy.contact_j,
+            bond_j: final_energy.bond_j,
+            broken_j: final_energy.broken_j,
+            total_initial_j: e0,
+            total_final_j: final_energy.total_j,
+            relative_drift: (final_energy.total_j - e0) / e0,
+            max_abs_relative_drift: max_drift,
+        },
+        momentum: MomentumSummary {
+            initial_kg_m_s: sim.momentum_initial.to_array(),
+            final_kg_m_s: momentum.to_array(),
+            relative_change: (momentum - sim.momentum_initial).length() / scale,
+        },
+        derived: d,
+        timing,
+        scene: spec.clone(),
+    };
+    write_atomic_bytes(&opts.out_dir.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    if opts.progress {
+        let mut err = std::io::stderr().lock();
+        let _ = writeln!(
+            err,
+            "{} steps, {} particles in {:.2} s: {:.3e} particle-steps/s; bonds broken {} of {}; energy drift {:.2e}; {} neighbour builds",
+            sim.step,
+            n,
+            summary.wall_seconds,
+            summary.particle_steps_per_second,
+            sim.bonds_broken,
+            sim.bonds_initial,
+            summary.energy.relative_drift,
+            summary.neighbour_builds
+        );
+        let _ = write!(err, "{table}");
+    }
+    if let Some(e) = failure {
+        return Err(anyhow::Error::new(e).context(format!(
+            "run stopped early; what it had is in {}",
+            Path::new(&opts.out_dir).display()
+        )));
+    }
+    Ok(RunOutcome { summary, energy: rows, sim })
+}
