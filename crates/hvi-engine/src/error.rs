@@ -70,7 +70,11 @@ pub(crate) fn check_range(
     let rb = if open_hi { ")" } else { "]" };
     let fmt = |x: f64| {
         if x.is_infinite() {
-            if x > 0.0 { "inf".to_string() } else { "-inf".to_string() }
+            if x > 0.0 {
+                "inf".to_string()
+            } else {
+                "-inf".to_string()
+            }
         } else {
             format!("{x:e}")
         }

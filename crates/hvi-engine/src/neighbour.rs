@@ -46,13 +46,20 @@ fn cell_key(p: DVec3, inv_h: f64) -> (u64, bool) {
     let mut c = [0i64; 3];
     for (a, v) in [p.x, p.y, p.z].into_iter().enumerate() {
         let q = (v * inv_h).floor();
-        let q = if q.is_finite() { q as i64 + COORD_OFFSET } else { -1 };
+        let q = if q.is_finite() {
+            q as i64 + COORD_OFFSET
+        } else {
+            -1
+        };
         if !(1..=COORD_MAX).contains(&q) {
             ok = false;
         }
         c[a] = q.clamp(1, COORD_MAX);
     }
-    (((c[2] as u64) << (2 * COORD_BITS)) | ((c[1] as u64) << COORD_BITS) | c[0] as u64, ok)
+    (
+        ((c[2] as u64) << (2 * COORD_BITS)) | ((c[1] as u64) << COORD_BITS) | c[0] as u64,
+        ok,
+    )
 }
 
 impl NeighbourList {
@@ -68,7 +75,11 @@ impl NeighbourList {
         self.out_of_range = keyed.iter().filter(|k| !k.1).count();
         // Sort by (key, index); the input is nearly sorted from the previous build. Elements are
         // distinct, so the result does not depend on the algorithm or the thread count.
-        let mut order: Vec<(u64, u32)> = keyed.iter().enumerate().map(|(i, k)| (k.0, i as u32)).collect();
+        let mut order: Vec<(u64, u32)> = keyed
+            .iter()
+            .enumerate()
+            .map(|(i, k)| (k.0, i as u32))
+            .collect();
         order.par_sort_unstable();
         let perm: Vec<u32> = order.iter().map(|o| o.1).collect();
         let is_identity = perm.iter().enumerate().all(|(k, &o)| k as u32 == o);

@@ -65,7 +65,13 @@ pub struct Interaction {
 
 impl Interaction {
     /// Interaction constants for the given diameter and (already sized) eps, kappa, rcut.
-    pub fn new(sigma_m: f64, eps_j: f64, kappa_n_m: f64, rcut_m: f64, contact: ContactForm) -> Self {
+    pub fn new(
+        sigma_m: f64,
+        eps_j: f64,
+        kappa_n_m: f64,
+        rcut_m: f64,
+        contact: ContactForm,
+    ) -> Self {
         let r_eq_m = sigma_m * crate::paper::r_eq_over_sigma();
         Interaction {
             sigma_m,
@@ -204,7 +210,10 @@ mod tests {
             let de = (p.contact_energy((r + h) * (r + h)) - p.contact_energy((r - h) * (r - h)))
                 / (2.0 * h);
             let f = p.contact_force_over_r(r * r) * r;
-            assert!((f + de).abs() < 1e-6 * f.abs().max(1.0), "r={r} f={f} de={de}");
+            assert!(
+                (f + de).abs() < 1e-6 * f.abs().max(1.0),
+                "r={r} f={f} de={de}"
+            );
         }
     }
 

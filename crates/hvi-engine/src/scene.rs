@@ -89,12 +89,18 @@ impl Geometry {
     /// Total volume of both bodies, m^3.
     pub fn volume_m3(&self) -> f64 {
         match *self {
-            Geometry::SphereOnPlate { diameter_m, t_over_d, width_over_d, .. } => {
-                paper::sphere_on_plate_volume_m3(diameter_m, t_over_d, width_over_d)
-            }
-            Geometry::FlyerPlate { flyer_thickness_m, target_thickness_m, width_m, .. } => {
-                width_m * width_m * (flyer_thickness_m + target_thickness_m)
-            }
+            Geometry::SphereOnPlate {
+                diameter_m,
+                t_over_d,
+                width_over_d,
+                ..
+            } => paper::sphere_on_plate_volume_m3(diameter_m, t_over_d, width_over_d),
+            Geometry::FlyerPlate {
+                flyer_thickness_m,
+                target_thickness_m,
+                width_m,
+                ..
+            } => width_m * width_m * (flyer_thickness_m + target_thickness_m),
         }
     }
 }
@@ -162,28 +168,55 @@ impl Default for Material {
 }
 
 /// The time step: "auto" or a number of seconds.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(untagged)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum TimeStep {
     /// A fixed step, s.
     Fixed(f64),
-    /// The keyword "auto".
-    Keyword(AutoKeyword),
-}
-
-/// The only keyword a time step accepts.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum AutoKeyword {
     /// The paper's step scaled with sigma, times `run.dt_factor`.
+    #[default]
     Auto,
 }
 
-impl Default for TimeStep {
-    fn default() -> Self {
-        TimeStep::Keyword(AutoKeyword::Auto)
+impl Serialize for TimeStep {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        match self {
+            TimeStep::Fixed(dt) => s.serialize_f64(*dt),
+            TimeStep::Auto => s.serialize_str("auto"),
+        }
     }
 }
+
+impl<'de> Deserialize<'de> for TimeStep {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl serde::de::Visitor<'_> for V {
+            type Value = TimeStep;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("run.dt_s: a step in seconds (e.g. 1e-10) or \"auto\"")
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> std::result::Result<TimeStep, E> {
+                Ok(TimeStep::Fixed(v))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> std::result::Result<TimeStep, E> {
+                Ok(TimeStep::Fixed(v as f64))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> std::result::Result<TimeStep, E> {
+                Ok(TimeStep::Fixed(v as f64))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> std::result::Result<TimeStep, E> {
+                if v == "auto" {
+                    Ok(TimeStep::Auto)
+                } else {
+                    Err(E::custom(format!(
+                        "invalid value for `run.dt_s`: \"{v}\" (allowed: a step in seconds or \"auto\")"
+                    )))
+                }
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
 
 /// Time integration and safety settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -264,6 +297,32 @@ pub struct Derived {
     pub steps: u64,
 }
 
+impl Derived {
+    /// Derived numbers for a hand-made particle set (tests and tools): the interaction's
+    /// constants, the given step, and zeros for the scene geometry.
+    pub fn for_interaction(ia: &Interaction, dt_s: f64, mass_kg: f64, steps: u64) -> Derived {
+        Derived {
+            sigma_m: ia.sigma_m,
+            sigma_ref_m: paper::reference_sigma_m(),
+            r_eq_m: ia.r_eq_m,
+            gamma_pa: ia.eps_j / ia.sigma_m.powi(3),
+            lambda_pa: ia.kappa_n_m / ia.sigma_m,
+            eps_j: ia.eps_j,
+            kappa_n_m: ia.kappa_n_m,
+            rcut_m: ia.rcut_m,
+            mass_impactor_kg: mass_kg,
+            mass_target_kg: mass_kg,
+            dt_s,
+            dt_max_s: f64::INFINITY,
+            v0_m_s: 0.0,
+            plate_rear_z_m: 0.0,
+            plate_front_z_m: 0.0,
+            contact_time_s: 0.0,
+            steps,
+        }
+    }
+}
+
 /// A validated scene, laid out and ready to run.
 #[derive(Debug, Clone)]
 pub struct Setup {
@@ -298,20 +357,42 @@ impl SceneSpec {
         let geometry = &self.scene;
         let v0 = check_range("scene.v0_m_s", geometry.v0_m_s(), 0.0, true, 1e5, false)?;
         let (density, standoff) = match *geometry {
-            Geometry::SphereOnPlate { density_kg_m3, standoff_m, .. }
-            | Geometry::FlyerPlate { density_kg_m3, standoff_m, .. } => (density_kg_m3, standoff_m),
+            Geometry::SphereOnPlate {
+                density_kg_m3,
+                standoff_m,
+                ..
+            }
+            | Geometry::FlyerPlate {
+                density_kg_m3,
+                standoff_m,
+                ..
+            } => (density_kg_m3, standoff_m),
         };
         check_positive("scene.density_kg_m3", density)?;
         if !standoff.is_finite() {
-            return Err(EngineError::invalid("scene.standoff_m", standoff, "a finite number >= 0"));
+            return Err(EngineError::invalid(
+                "scene.standoff_m",
+                standoff,
+                "a finite number >= 0",
+            ));
         }
         match *geometry {
-            Geometry::SphereOnPlate { diameter_m, t_over_d, width_over_d, .. } => {
+            Geometry::SphereOnPlate {
+                diameter_m,
+                t_over_d,
+                width_over_d,
+                ..
+            } => {
                 check_positive("scene.diameter_m", diameter_m)?;
                 check_positive("scene.t_over_d", t_over_d)?;
                 check_range("scene.width_over_d", width_over_d, 1.0, false, 1e3, false)?;
             }
-            Geometry::FlyerPlate { flyer_thickness_m, target_thickness_m, width_m, .. } => {
+            Geometry::FlyerPlate {
+                flyer_thickness_m,
+                target_thickness_m,
+                width_m,
+                ..
+            } => {
                 check_positive("scene.flyer_thickness_m", flyer_thickness_m)?;
                 check_positive("scene.target_thickness_m", target_thickness_m)?;
                 check_positive("scene.width_m", width_m)?;
@@ -319,36 +400,45 @@ impl SceneSpec {
         }
 
         // Resolution -> lattice spacing.
-        let r_eq = match (self.resolution.particles, self.resolution.particles_across_d) {
-            (Some(n), None) => {
-                check_range("resolution.particles", n, 8.0, false, 5e8, false)?;
-                (geometry.volume_m3() / n).cbrt()
-            }
-            (None, Some(k)) => {
-                check_range("resolution.particles_across_d", k, 2.0, false, 2000.0, false)?;
-                match *geometry {
-                    Geometry::SphereOnPlate { diameter_m, .. } => diameter_m / k,
-                    Geometry::FlyerPlate { .. } => {
-                        return Err(EngineError::invalid(
-                            "resolution.particles_across_d",
-                            k,
-                            "only for kind = \"sphere_on_plate\"; use resolution.particles",
-                        ))
+        let r_eq =
+            match (
+                self.resolution.particles,
+                self.resolution.particles_across_d,
+            ) {
+                (Some(n), None) => {
+                    check_range("resolution.particles", n, 8.0, false, 5e8, false)?;
+                    (geometry.volume_m3() / n).cbrt()
+                }
+                (None, Some(k)) => {
+                    check_range(
+                        "resolution.particles_across_d",
+                        k,
+                        2.0,
+                        false,
+                        2000.0,
+                        false,
+                    )?;
+                    match *geometry {
+                        Geometry::SphereOnPlate { diameter_m, .. } => diameter_m / k,
+                        Geometry::FlyerPlate { .. } => {
+                            return Err(EngineError::invalid(
+                                "resolution.particles_across_d",
+                                k,
+                                "only for kind = \"sphere_on_plate\"; use resolution.particles",
+                            ))
+                        }
                     }
                 }
-            }
-            (Some(_), Some(_)) => {
-                return Err(EngineError::Conflict(
+                (Some(_), Some(_)) => return Err(EngineError::Conflict(
                     "give either resolution.particles or resolution.particles_across_d, not both"
                         .into(),
-                ))
-            }
-            (None, None) => {
-                return Err(EngineError::Conflict(
-                    "give resolution.particles or resolution.particles_across_d".into(),
-                ))
-            }
-        };
+                )),
+                (None, None) => {
+                    return Err(EngineError::Conflict(
+                        "give resolution.particles or resolution.particles_across_d".into(),
+                    ))
+                }
+            };
         let sigma = r_eq / paper::r_eq_over_sigma();
         let sigma_ref = paper::reference_sigma_m();
 
@@ -370,7 +460,8 @@ impl SceneSpec {
                 (eps / sigma_ref.powi(3), kappa / sigma_ref)
             }
             (None, None, gamma, lambda) => {
-                let gamma = check_positive("material.gamma_pa", require("material.gamma_pa", gamma)?)?;
+                let gamma =
+                    check_positive("material.gamma_pa", require("material.gamma_pa", gamma)?)?;
                 let lambda =
                     check_positive("material.lambda_pa", require("material.lambda_pa", lambda)?)?;
                 (gamma, lambda)
@@ -396,13 +487,24 @@ impl SceneSpec {
         let n_imp = layout.count(Body::Impactor);
         let n_tgt = layout.count(Body::Target);
         let (vol_imp, vol_tgt) = match *geometry {
-            Geometry::SphereOnPlate { diameter_m, t_over_d, width_over_d, .. } => (
+            Geometry::SphereOnPlate {
+                diameter_m,
+                t_over_d,
+                width_over_d,
+                ..
+            } => (
                 std::f64::consts::PI / 6.0 * diameter_m.powi(3),
                 (width_over_d * diameter_m).powi(2) * t_over_d * diameter_m,
             ),
-            Geometry::FlyerPlate { flyer_thickness_m, target_thickness_m, width_m, .. } => {
-                (width_m * width_m * flyer_thickness_m, width_m * width_m * target_thickness_m)
-            }
+            Geometry::FlyerPlate {
+                flyer_thickness_m,
+                target_thickness_m,
+                width_m,
+                ..
+            } => (
+                width_m * width_m * flyer_thickness_m,
+                width_m * width_m * target_thickness_m,
+            ),
         };
         let mass_imp = density * vol_imp / n_imp as f64;
         let mass_tgt = density * vol_tgt / n_tgt as f64;
@@ -411,20 +513,50 @@ impl SceneSpec {
         let run = &self.run;
         check_positive("run.end_time_s", run.end_time_s)?;
         check_range("run.dt_factor", run.dt_factor, 0.0, true, 1e3, false)?;
-        check_range("run.thermal_ratio", run.thermal_ratio, 0.0, false, 0.1, false)?;
-        check_range("run.skin_over_sigma", run.skin_over_sigma, 0.0, true, 2.0, false)?;
+        check_range(
+            "run.thermal_ratio",
+            run.thermal_ratio,
+            0.0,
+            false,
+            0.1,
+            false,
+        )?;
+        check_range(
+            "run.skin_over_sigma",
+            run.skin_over_sigma,
+            0.0,
+            true,
+            2.0,
+            false,
+        )?;
         if run.energy_every == 0 {
-            return Err(EngineError::invalid("run.energy_every", 0, "an integer >= 1"));
+            return Err(EngineError::invalid(
+                "run.energy_every",
+                0,
+                "an integer >= 1",
+            ));
         }
-        check_range("run.max_energy_drift", run.max_energy_drift, 0.0, true, f64::INFINITY, false)?;
-        check_range("run.min_distance_over_sigma", run.min_distance_over_sigma, 0.0, false, 1.0, true)?;
+        check_range(
+            "run.max_energy_drift",
+            run.max_energy_drift,
+            0.0,
+            true,
+            f64::INFINITY,
+            false,
+        )?;
+        check_range(
+            "run.min_distance_over_sigma",
+            run.min_distance_over_sigma,
+            0.0,
+            false,
+            1.0,
+            true,
+        )?;
         let stiffness = kappa.max(interaction.contact_stiffness_at_r_eq());
         let dt_max = (MAX_STEP_DISPLACEMENT_OVER_SIGMA * sigma / v0)
             .min(MAX_STEP_OVER_SQRT_M_K * (mass_imp.min(mass_tgt) / stiffness).sqrt());
         let dt = match run.dt_s {
-            TimeStep::Keyword(AutoKeyword::Auto) => {
-                paper::TIME_STEP_S * (sigma / sigma_ref) * run.dt_factor
-            }
+            TimeStep::Auto => paper::TIME_STEP_S * (sigma / sigma_ref) * run.dt_factor,
             TimeStep::Fixed(dt) => {
                 check_positive("run.dt_s", dt)?;
                 dt
@@ -433,11 +565,11 @@ impl SceneSpec {
         if dt > dt_max {
             let key = match run.dt_s {
                 TimeStep::Fixed(_) => "run.dt_s",
-                TimeStep::Keyword(_) => "run.dt_factor",
+                TimeStep::Auto => "run.dt_factor",
             };
             let value = match run.dt_s {
                 TimeStep::Fixed(dt) => format!("{dt:e} s"),
-                TimeStep::Keyword(_) => format!("{} (dt = {dt:.3e} s)", run.dt_factor),
+                TimeStep::Auto => format!("{} (dt = {dt:.3e} s)", run.dt_factor),
             };
             return Err(EngineError::invalid(
                 key,
@@ -455,12 +587,18 @@ impl SceneSpec {
             // Check the actual closest distance: a negative standoff overlaps the bodies.
             layout.shift_impactor(-standoff);
             let d = layout.closest_impactor_target_distance();
-            return Err(EngineError::Overlap { distance_m: d, r_eq_m: r_eq });
+            return Err(EngineError::Overlap {
+                distance_m: d,
+                r_eq_m: r_eq,
+            });
         }
         layout.shift_impactor(-standoff);
         let closest = layout.closest_impactor_target_distance();
         if closest < r_eq * (1.0 - 1e-9) {
-            return Err(EngineError::Overlap { distance_m: closest, r_eq_m: r_eq });
+            return Err(EngineError::Overlap {
+                distance_m: closest,
+                r_eq_m: r_eq,
+            });
         }
 
         let steps = ((run.end_time_s + standoff / v0) / dt).ceil() as u64;
@@ -485,7 +623,13 @@ impl SceneSpec {
         };
         let particles = layout.into_particles(mass_imp, mass_tgt, v0, run.thermal_ratio, run.seed);
         let rim_ids = rim_ids(&particles, r_eq);
-        Ok(Setup { spec: self.clone(), derived, interaction, particles, rim_ids })
+        Ok(Setup {
+            spec: self.clone(),
+            derived,
+            interaction,
+            particles,
+            rim_ids,
+        })
     }
 }
 
@@ -538,18 +682,36 @@ impl Layout {
         front - lead
     }
 
-    fn into_particles(self, mass_imp: f64, mass_tgt: f64, v0: f64, thermal: f64, seed: u64) -> Particles {
+    fn into_particles(
+        self,
+        mass_imp: f64,
+        mass_tgt: f64,
+        v0: f64,
+        thermal: f64,
+        seed: u64,
+    ) -> Particles {
         let n = self.sites.len();
         let pos: Vec<DVec3> = (0..n).map(|k| self.position(k)).collect();
         // Bonds: lattice nearest neighbours of the same body, found through a dense index grid.
-        let lo = self.sites.iter().fold([i32::MAX; 3], |a, s| [a[0].min(s[0]), a[1].min(s[1]), a[2].min(s[2])]);
-        let hi = self.sites.iter().fold([i32::MIN; 3], |a, s| [a[0].max(s[0]), a[1].max(s[1]), a[2].max(s[2])]);
-        let dim = [(hi[0] - lo[0] + 1) as usize, (hi[1] - lo[1] + 1) as usize, (hi[2] - lo[2] + 1) as usize];
+        let lo = self.sites.iter().fold([i32::MAX; 3], |a, s| {
+            [a[0].min(s[0]), a[1].min(s[1]), a[2].min(s[2])]
+        });
+        let hi = self.sites.iter().fold([i32::MIN; 3], |a, s| {
+            [a[0].max(s[0]), a[1].max(s[1]), a[2].max(s[2])]
+        });
+        let dim = [
+            (hi[0] - lo[0] + 1) as usize,
+            (hi[1] - lo[1] + 1) as usize,
+            (hi[2] - lo[2] + 1) as usize,
+        ];
         let cell = |s: [i32; 3]| -> Option<usize> {
             if (0..3).any(|a| s[a] < lo[a] || s[a] > hi[a]) {
                 return None;
             }
-            Some(((s[2] - lo[2]) as usize * dim[1] + (s[1] - lo[1]) as usize) * dim[0] + (s[0] - lo[0]) as usize)
+            Some(
+                ((s[2] - lo[2]) as usize * dim[1] + (s[1] - lo[1]) as usize) * dim[0]
+                    + (s[0] - lo[0]) as usize,
+            )
         };
         let mut grid = vec![NO_BOND; dim[0] * dim[1] * dim[2]];
         for (k, &s) in self.sites.iter().enumerate() {
@@ -557,8 +719,14 @@ impl Layout {
                 grid[c] = k as u32;
             }
         }
-        const DIRS: [[i32; 3]; BONDS_PER_PARTICLE] =
-            [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]];
+        const DIRS: [[i32; 3]; BONDS_PER_PARTICLE] = [
+            [1, 0, 0],
+            [-1, 0, 0],
+            [0, 1, 0],
+            [0, -1, 0],
+            [0, 0, 1],
+            [0, 0, -1],
+        ];
         let mut bonds = vec![NO_BOND; n * BONDS_PER_PARTICLE];
         for (k, &s) in self.sites.iter().enumerate() {
             for (slot, d) in DIRS.iter().enumerate() {
@@ -589,7 +757,11 @@ impl Layout {
                 continue;
             }
             let mean = members.iter().fold(DVec3::ZERO, |a, &k| a + vel[k]) / members.len() as f64;
-            let drift = if b == Body::Impactor { DVec3::new(0.0, 0.0, v0) } else { DVec3::ZERO };
+            let drift = if b == Body::Impactor {
+                DVec3::new(0.0, 0.0, v0)
+            } else {
+                DVec3::ZERO
+            };
             for &k in &members {
                 vel[k] = vel[k] - mean + drift;
             }
@@ -597,7 +769,13 @@ impl Layout {
         let mass: Vec<f64> = self
             .body
             .iter()
-            .map(|b| if *b == Body::Impactor { mass_imp } else { mass_tgt })
+            .map(|b| {
+                if *b == Body::Impactor {
+                    mass_imp
+                } else {
+                    mass_tgt
+                }
+            })
             .collect();
         Particles::new(pos, vel, mass, self.body, bonds)
     }
@@ -607,7 +785,12 @@ fn lay_out(geometry: &Geometry, r_eq: f64) -> Result<Layout> {
     let mut sites = Vec::new();
     let mut body = Vec::new();
     match *geometry {
-        Geometry::SphereOnPlate { diameter_m, t_over_d, width_over_d, .. } => {
+        Geometry::SphereOnPlate {
+            diameter_m,
+            t_over_d,
+            width_over_d,
+            ..
+        } => {
             let t = t_over_d * diameter_m;
             let nz = (t / r_eq).round() as i64;
             if nz < 1 {
@@ -630,11 +813,22 @@ fn lay_out(geometry: &Geometry, r_eq: f64) -> Result<Layout> {
                     "at least one particle across the sphere diameter",
                 ));
             }
-            check_range("resolution (total sites)", (nxy * nxy * nz) as f64, 1.0, false, 5e8, false)?;
+            check_range(
+                "resolution (total sites)",
+                (nxy * nxy * nz) as f64,
+                1.0,
+                false,
+                5e8,
+                false,
+            )?;
             // Symmetric about the axis: sites at integer (nxy odd) or half-integer (even) offsets.
             let lateral_offset = if nxy % 2 == 1 { 0.0 } else { 0.5 };
             let half = nxy / 2;
-            let (ilo, ihi) = if nxy % 2 == 1 { (-half, half) } else { (-half, half - 1) };
+            let (ilo, ihi) = if nxy % 2 == 1 {
+                (-half, half)
+            } else {
+                (-half, half - 1)
+            };
             for k in 0..nz {
                 for j in ilo..=ihi {
                     for i in ilo..=ihi {
@@ -686,28 +880,50 @@ fn lay_out(geometry: &Geometry, r_eq: f64) -> Result<Layout> {
                 plate_rear_z: nz as f64 * r_eq,
             })
         }
-        Geometry::FlyerPlate { flyer_thickness_m, target_thickness_m, width_m, .. } => {
+        Geometry::FlyerPlate {
+            flyer_thickness_m,
+            target_thickness_m,
+            width_m,
+            ..
+        } => {
             let nt = (target_thickness_m / r_eq).round() as i64;
             let nf = (flyer_thickness_m / r_eq).round() as i64;
             if nt < 1 {
                 return Err(EngineError::invalid(
                     "scene.target_thickness_m",
                     target_thickness_m,
-                    format!(">= {:.3e} m (one particle at r_eq = {r_eq:.3e} m)", 0.5 * r_eq),
+                    format!(
+                        ">= {:.3e} m (one particle at r_eq = {r_eq:.3e} m)",
+                        0.5 * r_eq
+                    ),
                 ));
             }
             if nf < 1 {
                 return Err(EngineError::invalid(
                     "scene.flyer_thickness_m",
                     flyer_thickness_m,
-                    format!(">= {:.3e} m (one particle at r_eq = {r_eq:.3e} m)", 0.5 * r_eq),
+                    format!(
+                        ">= {:.3e} m (one particle at r_eq = {r_eq:.3e} m)",
+                        0.5 * r_eq
+                    ),
                 ));
             }
             let nxy = ((width_m / r_eq).round() as i64).max(1);
-            check_range("resolution (total sites)", (nxy * nxy * (nt + nf)) as f64, 1.0, false, 5e8, false)?;
+            check_range(
+                "resolution (total sites)",
+                (nxy * nxy * (nt + nf)) as f64,
+                1.0,
+                false,
+                5e8,
+                false,
+            )?;
             let lateral_offset = if nxy % 2 == 1 { 0.0 } else { 0.5 };
             let half = nxy / 2;
-            let (ilo, ihi) = if nxy % 2 == 1 { (-half, half) } else { (-half, half - 1) };
+            let (ilo, ihi) = if nxy % 2 == 1 {
+                (-half, half)
+            } else {
+                (-half, half - 1)
+            };
             for k in -nf..nt {
                 for j in ilo..=ihi {
                     for i in ilo..=ihi {

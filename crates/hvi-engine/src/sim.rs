@@ -15,7 +15,7 @@ use serde::Serialize;
 use crate::error::{EngineError, Result};
 use crate::neighbour::NeighbourList;
 use crate::potential::Interaction;
-use crate::scene::{Derived, Setup};
+use crate::scene::{Derived, RunSettings, Setup};
 use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND, OWNED_BONDS};
 
 /// Particles per work unit and per partial sum.
@@ -102,7 +102,23 @@ pub struct Simulation {
 impl Simulation {
     /// Prepares a run: first neighbour build, forces, initial ledger.
     pub fn new(setup: Setup) -> Result<Self> {
-        let Setup { spec, derived, interaction, particles, .. } = setup;
+        let Setup {
+            spec,
+            derived,
+            interaction,
+            particles,
+            ..
+        } = setup;
+        Self::from_parts(particles, interaction, derived, &spec.run)
+    }
+
+    /// Prepares a run from hand-made parts (tests and tools use this; scenes use [`Self::new`]).
+    pub fn from_parts(
+        particles: Particles,
+        interaction: Interaction,
+        derived: Derived,
+        run: &RunSettings,
+    ) -> Result<Self> {
         let n = particles.len();
         let bonds_initial = particles.intact_bonds() as u64;
         let nchunks = n.div_ceil(CHUNK);
@@ -111,9 +127,9 @@ impl Simulation {
             interaction,
             derived,
             neighbours: NeighbourList::default(),
-            skin_m: spec.run.skin_over_sigma * derived.sigma_m,
-            min_distance2: (spec.run.min_distance_over_sigma * derived.sigma_m).powi(2),
-            max_energy_drift: spec.run.max_energy_drift,
+            skin_m: run.skin_over_sigma * derived.sigma_m,
+            min_distance2: (run.min_distance_over_sigma * derived.sigma_m).powi(2),
+            max_energy_drift: run.max_energy_drift,
             step: 0,
             dt: derived.dt_s,
             bonds_initial,
@@ -164,6 +180,7 @@ impl Simulation {
         let ia = self.interaction;
         let r_eq2 = ia.r_eq2();
         let rcut2 = ia.rcut2();
+        let break_energy = ia.break_energy_at_rcut();
         let p = &mut self.particles;
         let pos = &p.pos;
         self.bond_force
@@ -172,7 +189,10 @@ impl Simulation {
             .zip(self.bond_partials.par_iter_mut())
             .enumerate()
             .for_each(|(c, ((bf, bonds), out))| {
-                let mut part = BondPartial { min_r2: f64::INFINITY, ..Default::default() };
+                let mut part = BondPartial {
+                    min_r2: f64::INFINITY,
+                    ..Default::default()
+                };
                 let nb_total = bf.len();
                 let mut b0 = 0;
                 while b0 < nb_total {
@@ -199,7 +219,11 @@ impl Simulation {
                         if intact && r2 > rcut2 {
                             *slot = s | BROKEN_FLAG;
                             part.broken += 1;
-                            part.broken_energy += ia.spring_energy(r2.sqrt());
+                            // Book the energy the bond holds at rcut (MODEL.md 3), not at the
+                            // overshoot r2 > rcut2: velocity Verlet's trapezoidal work over the
+                            // step in which the force drops to zero matches E(rcut) to O(dt^2),
+                            // while E(r) over-books by about kappa (rcut - r_eq) dr / 2.
+                            part.broken_energy += break_energy;
                             continue;
                         }
                         // Compressed (intact or just broken): contact repulsion; stretched and
@@ -280,7 +304,11 @@ impl Simulation {
     }
 
     fn unstable(&self, reason: String) -> EngineError {
-        EngineError::Unstable { step: self.step, time_s: self.time_s(), reason }
+        EngineError::Unstable {
+            step: self.step,
+            time_s: self.time_s(),
+            reason,
+        }
     }
 
     /// Advances one velocity-Verlet step.
@@ -306,7 +334,13 @@ impl Simulation {
                     pos[k] = x;
                     let d2 = (x - built[i]).length_squared();
                     // NaN fails every comparison: make it win the max so it is caught below.
-                    max_d2 = if d2 <= max_d2 { max_d2 } else if d2.is_nan() { f64::INFINITY } else { d2 };
+                    max_d2 = if d2 <= max_d2 {
+                        max_d2
+                    } else if d2.is_nan() {
+                        f64::INFINITY
+                    } else {
+                        d2
+                    };
                 }
                 *out = max_d2;
             });
@@ -369,7 +403,8 @@ impl Simulation {
                     kin += 0.5 * p.mass[i] * p.vel[i].length_squared();
                     let pi = p.pos[i];
                     for &j in nl.of(i) {
-                        contact += 0.5 * ia.contact_energy((pi - p.pos[j as usize]).length_squared());
+                        contact +=
+                            0.5 * ia.contact_energy((pi - p.pos[j as usize]).length_squared());
                     }
                     for m in 0..OWNED_BONDS {
                         let s = p.bonds[i * BONDS_PER_PARTICLE + 2 * m];
@@ -387,7 +422,10 @@ impl Simulation {
                 [kin, contact, bond]
             })
             .collect();
-        let mut e = Energy { broken_j: self.broken_energy, ..Default::default() };
+        let mut e = Energy {
+            broken_j: self.broken_energy,
+            ..Default::default()
+        };
         for [k, c, b] in partials {
             e.kinetic_j += k;
             e.contact_j += c;

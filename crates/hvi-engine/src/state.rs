@@ -55,7 +55,13 @@ pub struct Particles {
 
 impl Particles {
     /// Particles in their initial order (id = index).
-    pub fn new(pos: Vec<DVec3>, vel: Vec<DVec3>, mass: Vec<f64>, body: Vec<Body>, bonds: Vec<u32>) -> Self {
+    pub fn new(
+        pos: Vec<DVec3>,
+        vel: Vec<DVec3>,
+        mass: Vec<f64>,
+        body: Vec<Body>,
+        bonds: Vec<u32>,
+    ) -> Self {
         let n = pos.len();
         assert_eq!(vel.len(), n);
         assert_eq!(mass.len(), n);
@@ -143,10 +149,15 @@ impl Particles {
         gather(&mut self.id, perm);
         let mut bonds = vec![NO_BOND; n * BONDS_PER_PARTICLE];
         for (k, &old) in perm.iter().enumerate() {
-            let src = &self.bonds[old as usize * BONDS_PER_PARTICLE..(old as usize + 1) * BONDS_PER_PARTICLE];
+            let src = &self.bonds
+                [old as usize * BONDS_PER_PARTICLE..(old as usize + 1) * BONDS_PER_PARTICLE];
             let dst = &mut bonds[k * BONDS_PER_PARTICLE..(k + 1) * BONDS_PER_PARTICLE];
             for (d, &s) in dst.iter_mut().zip(src) {
-                *d = if s == NO_BOND { NO_BOND } else { inv[(s & INDEX_MASK) as usize] | (s & BROKEN_FLAG) };
+                *d = if s == NO_BOND {
+                    NO_BOND
+                } else {
+                    inv[(s & INDEX_MASK) as usize] | (s & BROKEN_FLAG)
+                };
             }
         }
         self.bonds = bonds;

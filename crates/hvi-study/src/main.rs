@@ -56,13 +56,26 @@ fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run { scene, out, sets, threads, dump_every, lammps_data, quiet } => (|| {
+        Command::Run {
+            scene,
+            out,
+            sets,
+            threads,
+            dump_every,
+            lammps_data,
+            quiet,
+        } => (|| {
             if dump_every == Some(0) {
                 anyhow::bail!("invalid value for `--dump-every`: 0 (allowed: an integer >= 1)");
             }
             let spec = load_scene(&scene, &sets)?;
             let pool = thread_pool(threads)?;
-            let opts = RunOptions { out_dir: out.clone(), dump_every, lammps_data, progress: !quiet };
+            let opts = RunOptions {
+                out_dir: out.clone(),
+                dump_every,
+                lammps_data,
+                progress: !quiet,
+            };
             pool.install(|| run_scene(&spec, &opts))?;
             println!("{}", out.join("summary.json").display());
             Ok(())

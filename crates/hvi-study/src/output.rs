@@ -12,10 +12,14 @@ use hvi_engine::state::{Body, Particles};
 /// the target. A reader sees the old file or the new one, never a torn one.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
     let dir = path.parent().unwrap_or_else(|| Path::new("."));
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.tmp.{}", std::process::id()));
     {
-        let file = fs::File::create(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
+        let file =
+            fs::File::create(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
         let mut w = BufWriter::new(file);
         write(&mut w)?;
         w.flush()?;
@@ -56,14 +60,7 @@ pub fn write_xyz(path: &Path, sim: &Simulation) -> Result<()> {
             writeln!(
                 w,
                 "Al {} {} {:.12e} {:.12e} {:.12e} {:.9e} {:.9e} {:.9e}",
-                p.id[i],
-                p.body[i] as u8,
-                x.x,
-                x.y,
-                x.z,
-                v.x,
-                v.y,
-                v.z
+                p.id[i], p.body[i] as u8, x.x, x.y, x.z, v.x, v.y, v.z
             )?;
         }
         Ok(())
@@ -124,7 +121,16 @@ pub fn write_lammps_data(path: &Path, sim: &Simulation) -> Result<()> {
             let i = i as usize;
             let t = if p.body[i] == Body::Impactor { 1 } else { 2 };
             let x = p.pos[i];
-            writeln!(w, "{} {} {} {:.15e} {:.15e} {:.15e}", p.id[i] + 1, t, t, x.x, x.y, x.z)?;
+            writeln!(
+                w,
+                "{} {} {} {:.15e} {:.15e} {:.15e}",
+                p.id[i] + 1,
+                t,
+                t,
+                x.x,
+                x.y,
+                x.z
+            )?;
         }
         writeln!(w)?;
         writeln!(w, "Velocities")?;

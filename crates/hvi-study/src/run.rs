@@ -186,7 +186,11 @@ pub fn describe(d: &Derived, particles: usize, bonds: u64) -> String {
         "eps = {:.4e} J, kappa = {:.4e} N/m at this sigma; gamma = {:.4e} Pa, lambda = {:.4e} Pa; rcut = {:.4e} m",
         d.eps_j, d.kappa_n_m, d.gamma_pa, d.lambda_pa, d.rcut_m
     );
-    let _ = write!(s, "dt = {:.4e} s (stability bound {:.4e} s), v0 = {} m/s", d.dt_s, d.dt_max_s, d.v0_m_s);
+    let _ = write!(
+        s,
+        "dt = {:.4e} s (stability bound {:.4e} s), v0 = {} m/s",
+        d.dt_s, d.dt_max_s, d.v0_m_s
+    );
     s
 }
 
@@ -227,7 +231,12 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         .with_context(|| format!("cannot create output directory {}", opts.out_dir.display()))?;
     let setup = spec.build()?;
     let n = setup.particles.len();
-    let n_imp = setup.particles.body.iter().filter(|b| **b == hvi_engine::state::Body::Impactor).count();
+    let n_imp = setup
+        .particles
+        .body
+        .iter()
+        .filter(|b| **b == hvi_engine::state::Body::Impactor)
+        .count();
     let mut sim = Simulation::new(setup)?;
     let d = sim.derived;
     if opts.progress {
@@ -337,7 +346,11 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     let total = wall0.elapsed();
     let (timing, table) = timing_table(&sim.timing, output_time, total);
     let summary = Summary {
-        status: if failure.is_some() { "unstable".into() } else { "completed".into() },
+        status: if failure.is_some() {
+            "unstable".into()
+        } else {
+            "completed".into()
+        },
         error: failure.as_ref().map(|e| e.to_string()),
         engine_version: env!("CARGO_PKG_VERSION").into(),
         particles: n,
@@ -373,7 +386,10 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         timing,
         scene: spec.clone(),
     };
-    write_atomic_bytes(&opts.out_dir.join("summary.json"), serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    write_atomic_bytes(
+        &opts.out_dir.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
     if opts.progress {
         let mut err = std::io::stderr().lock();
         let _ = writeln!(
@@ -396,5 +412,9 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
             Path::new(&opts.out_dir).display()
         )));
     }
-    Ok(RunOutcome { summary, energy: rows, sim })
+    Ok(RunOutcome {
+        summary,
+        energy: rows,
+        sim,
+    })
 }

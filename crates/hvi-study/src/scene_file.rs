@@ -14,7 +14,9 @@ pub const SECTIONS: [&str; 4] = ["scene", "resolution", "material", "run"];
 fn parse_value(raw: &str) -> toml::Value {
     let raw = raw.trim();
     match toml::from_str::<toml::Table>(&format!("v = {raw}")) {
-        Ok(mut t) => t.remove("v").unwrap_or_else(|| toml::Value::String(raw.to_string())),
+        Ok(mut t) => t
+            .remove("v")
+            .unwrap_or_else(|| toml::Value::String(raw.to_string())),
         Err(_) => toml::Value::String(raw.to_string()),
     }
 }
@@ -27,7 +29,9 @@ pub fn apply_overrides(doc: &mut toml::Table, sets: &[String]) -> Result<()> {
             .ok_or_else(|| anyhow!("--set `{set}`: expected KEY=VALUE, e.g. scene.v0_m_s=6500"))?;
         let key = key.trim();
         let (section, field) = key.split_once('.').ok_or_else(|| {
-            anyhow!("--set `{set}`: key `{key}` must be section.name with section one of {SECTIONS:?}")
+            anyhow!(
+                "--set `{set}`: key `{key}` must be section.name with section one of {SECTIONS:?}"
+            )
         })?;
         if !SECTIONS.contains(&section) {
             bail!("--set `{set}`: unknown section `{section}` (allowed: {SECTIONS:?})");
@@ -46,9 +50,18 @@ pub fn apply_overrides(doc: &mut toml::Table, sets: &[String]) -> Result<()> {
 pub fn parse_scene(text: &str, sets: &[String]) -> Result<SceneSpec> {
     let mut doc: toml::Table = toml::from_str(text).context("scene file is not valid TOML")?;
     apply_overrides(&mut doc, sets)?;
-    let spec: SceneSpec = toml::Value::Table(doc)
-        .try_into()
-        .map_err(|e: toml::de::Error| anyhow!("scene: {}", e.message().trim()))?;
+    // serde_path_to_error names the key of any type error (e.g. `material.contact`).
+    let spec: SceneSpec =
+        serde_path_to_error::deserialize(toml::Value::Table(doc)).map_err(|e| {
+            let path = e.path().to_string();
+            let inner = e.into_inner();
+            let msg = inner.message().trim().to_string();
+            if path.is_empty() || path == "." {
+                anyhow!("scene: {msg}")
+            } else {
+                anyhow!("scene key `{path}`: {msg}")
+            }
+        })?;
     Ok(spec)
 }
 
