@@ -93,7 +93,8 @@ pub struct Simulation {
     pub momentum_initial: DVec3,
     /// Time per phase.
     pub timing: Timing,
-    bond_force: Vec<DVec3>,
+    /// F/r of each owned bond (0 when empty or broken and stretched), per owned slot.
+    bond_force_over_r: Vec<f64>,
     bond_partials: Vec<BondPartial>,
     contact_min_r2: Vec<f64>,
     disp_partials: Vec<f64>,
@@ -138,13 +139,13 @@ impl Simulation {
             energy_initial: Energy::default(),
             momentum_initial: DVec3::ZERO,
             timing: Timing::default(),
-            bond_force: vec![DVec3::ZERO; n * OWNED_BONDS],
+            bond_force_over_r: vec![0.0; n * OWNED_BONDS],
             bond_partials: vec![BondPartial::default(); nchunks],
             contact_min_r2: vec![f64::INFINITY; nchunks],
             disp_partials: vec![0.0; nchunks],
         };
         sim.rebuild();
-        sim.compute_forces()?;
+        sim.compute_forces(false)?;
         sim.energy_initial = sim.energy();
         sim.momentum_initial = sim.momentum();
         Ok(sim)
@@ -175,7 +176,9 @@ impl Simulation {
     /// Forces into `particles.force`: first every owned bond once (spring, or repulsion when
     /// compressed; breaks booked here), then per particle the contact repulsion over the
     /// neighbour list plus the bond forces gathered from its owned and mirror slots.
-    fn compute_forces(&mut self) -> Result<()> {
+    ///
+    /// With `kick`, also applies the second half-kick of velocity Verlet.
+    fn compute_forces(&mut self, kick: bool) -> Result<()> {
         let t0 = Instant::now();
         let ia = self.interaction;
         let r_eq2 = ia.r_eq2();
@@ -183,7 +186,7 @@ impl Simulation {
         let break_energy = ia.break_energy_at_rcut();
         let p = &mut self.particles;
         let pos = &p.pos;
-        self.bond_force
+        self.bond_force_over_r
             .par_chunks_mut(CHUNK * OWNED_BONDS)
             .zip(p.bonds.par_chunks_mut(CHUNK * BONDS_PER_PARTICLE))
             .zip(self.bond_partials.par_iter_mut())
@@ -199,9 +202,6 @@ impl Simulation {
                     let nb = (nb_total - b0).min(BLOCK_BONDS);
                     // Stage 1 (scalar gathers): separation, squared distance and which law
                     // applies. Breaks are booked here (rare, so the branch predicts well).
-                    let mut dx = [0.0f64; BLOCK_BONDS];
-                    let mut dy = [0.0f64; BLOCK_BONDS];
-                    let mut dz = [0.0f64; BLOCK_BONDS];
                     let mut r2s = [r_eq2; BLOCK_BONDS];
                     let mut w_contact = [0.0f64; BLOCK_BONDS];
                     let mut w_spring = [0.0f64; BLOCK_BONDS];
@@ -229,20 +229,17 @@ impl Simulation {
                         // Compressed (intact or just broken): contact repulsion; stretched and
                         // intact: spring; stretched and broken: nothing.
                         let compressed = f64::from(u8::from(r2 < r_eq2));
-                        (dx[b], dy[b], dz[b], r2s[b]) = (d.x, d.y, d.z, r2);
+                        r2s[b] = r2;
                         w_contact[b] = compressed;
                         w_spring[b] = (1.0 - compressed) * f64::from(u8::from(intact));
                         part.min_r2 = part.min_r2.min(r2);
                     }
                     // Stage 2 (vectorised): both laws for every bond, blended by weight. A
                     // branch here would be mispredicted half the time in a hot lattice.
-                    let mut fr = [0.0f64; BLOCK_BONDS];
-                    for b in 0..BLOCK_BONDS {
+                    let fr = &mut bf[b0..b0 + nb];
+                    for b in 0..nb {
                         let (fc, fs) = ia.contact_and_spring_force_over_r(r2s[b]);
                         fr[b] = w_contact[b] * fc + w_spring[b] * fs;
-                    }
-                    for b in 0..nb {
-                        bf[b0 + b] = DVec3::new(dx[b] * fr[b], dy[b] * fr[b], dz[b] * fr[b]);
                     }
                     b0 += nb;
                 }
@@ -251,17 +248,23 @@ impl Simulation {
         let t1 = Instant::now();
         self.timing.bonds += t1 - t0;
 
+        // Contact over the neighbour list, plus each bond slot's F/r times the separation
+        // (the owner's value for both ends: the pair force is exactly antisymmetric), then the
+        // second half-kick of velocity Verlet, fused here to save a pass over memory.
         let nl = &self.neighbours;
-        let bf = &self.bond_force;
+        let fr_bond = &self.bond_force_over_r;
         let bonds = &p.bonds;
+        let inv_mass = &p.inv_mass;
+        let half_dt = if kick { 0.5 * self.dt } else { 0.0 };
         p.force
             .par_chunks_mut(CHUNK)
+            .zip(p.vel.par_chunks_mut(CHUNK))
             .zip(self.contact_min_r2.par_iter_mut())
             .enumerate()
-            .for_each(|(c, (force, min_out))| {
+            .for_each(|(c, ((force, vel), min_out))| {
                 let base = c * CHUNK;
                 let mut min_r2 = f64::INFINITY;
-                for (k, f_out) in force.iter_mut().enumerate() {
+                for (k, (f_out, v)) in force.iter_mut().zip(vel.iter_mut()).enumerate() {
                     let i = base + k;
                     let pi = pos[i];
                     let mut f = DVec3::ZERO;
@@ -275,13 +278,19 @@ impl Simulation {
                     }
                     let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
                     for m in 0..OWNED_BONDS {
-                        f += bf[i * OWNED_BONDS + m];
+                        let owned = slots[2 * m];
+                        if owned != NO_BOND {
+                            let d = pi - pos[(owned & INDEX_MASK) as usize];
+                            f += d * fr_bond[i * OWNED_BONDS + m];
+                        }
                         let mirror = slots[2 * m + 1];
                         if mirror != NO_BOND {
-                            f -= bf[mirror as usize * OWNED_BONDS + m];
+                            let d = pi - pos[mirror as usize];
+                            f += d * fr_bond[mirror as usize * OWNED_BONDS + m];
                         }
                     }
                     *f_out = f;
+                    *v += f * (half_dt * inv_mass[i]);
                 }
                 *min_out = min_r2;
             });
@@ -360,21 +369,7 @@ impl Simulation {
                 )));
             }
         }
-        self.compute_forces()?;
-        let t1 = Instant::now();
-        let p = &mut self.particles;
-        p.vel
-            .par_chunks_mut(CHUNK)
-            .enumerate()
-            .for_each(|(c, vel)| {
-                let base = c * CHUNK;
-                for (k, v) in vel.iter_mut().enumerate() {
-                    let i = base + k;
-                    *v += p.force[i] * (half * p.inv_mass[i]);
-                }
-            });
-        self.timing.integrate += t1.elapsed();
-        Ok(())
+        self.compute_forces(true)
     }
 
     /// Advances `n` steps, sampling nothing.
