@@ -93,6 +93,9 @@ pub struct Simulation {
     pub momentum_initial: DVec3,
     /// Time per phase.
     pub timing: Timing,
+    /// Ids of the target particles on the plate's lateral rim at t = 0 (the residual plate is
+    /// the fragment holding them, MODEL.md section 5).
+    pub rim_ids: Vec<u32>,
     /// F/r of each owned bond (0 when empty or broken and stretched), per owned slot.
     bond_force_over_r: Vec<f64>,
     bond_partials: Vec<BondPartial>,
@@ -139,6 +142,7 @@ impl Simulation {
             energy_initial: Energy::default(),
             momentum_initial: DVec3::ZERO,
             timing: Timing::default(),
+            rim_ids: Vec::new(),
             bond_force_over_r: vec![0.0; n * OWNED_BONDS],
             bond_partials: vec![BondPartial::default(); nchunks],
             contact_min_r2: vec![f64::INFINITY; nchunks],
