@@ -41,6 +41,27 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Engine throughput: run a scene at several thread counts and print particle-steps/s.
+    ///
+    /// Defaults to the paper's calibration scene (2.7e5 particles) through the first 1 us of
+    /// the impact. Also checks that every thread count gives bit-identical physics.
+    Bench {
+        /// Scene file.
+        #[arg(default_value = "studies/scenes/calibration.toml")]
+        scene: PathBuf,
+        /// Override a scene key: section.key=value.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
+        /// Simulated time after first contact, s.
+        #[arg(long, default_value_t = 1e-6)]
+        end_time: f64,
+        /// Thread counts to run, comma-separated.
+        #[arg(long, value_delimiter = ',', default_value = "1,2")]
+        threads: Vec<usize>,
+        /// Where the runs and bench.csv go.
+        #[arg(long, default_value = "runs/bench")]
+        out: PathBuf,
+    },
 }
 
 fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
@@ -78,6 +99,20 @@ fn main() -> ExitCode {
             };
             pool.install(|| run_scene(&spec, &opts))?;
             println!("{}", out.join("summary.json").display());
+            Ok(())
+        })(),
+        Command::Bench {
+            scene,
+            mut sets,
+            end_time,
+            threads,
+            out,
+        } => (|| {
+            sets.push(format!("run.end_time_s={end_time:e}"));
+            let spec = load_scene(&scene, &sets)?;
+            let (_, table) = hvi_study::bench::bench(&spec, &threads, &out)?;
+            print!("{table}");
+            println!("table: {}", out.join("bench.csv").display());
             Ok(())
         })(),
     };
