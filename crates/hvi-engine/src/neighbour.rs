@@ -15,7 +15,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::state::{Particles, BONDS_PER_PARTICLE};
+use crate::state::{Particles, PermuteScratch, BONDS_PER_PARTICLE};
 
 const COORD_BITS: u32 = 21;
 const COORD_OFFSET: i64 = 1 << (COORD_BITS - 1);
@@ -38,6 +38,14 @@ pub struct NeighbourList {
     pub builds: u64,
     /// Particles outside the representable grid at the last build (a blow-up symptom).
     pub out_of_range: usize,
+    scratch: PermuteScratch,
+    order: Vec<(u64, u32)>,
+    perm: Vec<u32>,
+    cell_start: Vec<u32>,
+    cell_keys: Vec<u64>,
+    xs: Vec<f64>,
+    ys: Vec<f64>,
+    zs: Vec<f64>,
 }
 
 #[inline]
@@ -71,36 +79,57 @@ impl NeighbourList {
         let n = p.len();
         p.clear_broken_slots();
         let inv_h = 1.0 / radius;
-        let keyed: Vec<(u64, bool)> = p.pos.par_iter().map(|&x| cell_key(x, inv_h)).collect();
-        self.out_of_range = keyed.iter().filter(|k| !k.1).count();
         // Sort by (key, index); the input is nearly sorted from the previous build. Elements are
         // distinct, so the result does not depend on the algorithm or the thread count.
-        let mut order: Vec<(u64, u32)> = keyed
-            .iter()
-            .enumerate()
-            .map(|(i, k)| (k.0, i as u32))
-            .collect();
-        order.par_sort_unstable();
-        let perm: Vec<u32> = order.iter().map(|o| o.1).collect();
-        let is_identity = perm.iter().enumerate().all(|(k, &o)| k as u32 == o);
-        if !is_identity {
-            p.permute(&perm);
+        let mut order = std::mem::take(&mut self.order);
+        order.clear();
+        order.par_extend(p.pos.par_iter().enumerate().map(|(i, &x)| {
+            let (key, ok) = cell_key(x, inv_h);
+            // Out-of-range particles are counted through the flag bit below.
+            (key, i as u32 | if ok { 0 } else { 1 << 31 })
+        }));
+        self.out_of_range = order.iter().filter(|o| o.1 & (1 << 31) != 0).count();
+        for o in order.iter_mut() {
+            o.1 &= !(1 << 31);
         }
-        let keys: Vec<u64> = order.iter().map(|o| o.0).collect();
+        // std's stable sort finds the long sorted runs of a nearly sorted input (rayon's
+        // parallel quicksort does not: ten times the work here).
+        order.sort();
+        let mut perm = std::mem::take(&mut self.perm);
+        perm.clear();
+        perm.extend(order.iter().map(|o| o.1));
+        if perm.iter().enumerate().any(|(k, &o)| k as u32 != o) {
+            p.permute(&perm, &mut self.scratch);
+        }
         // Cells: runs of equal key.
-        let mut cell_start: Vec<u32> = Vec::with_capacity(n / 2 + 1);
-        let mut cell_key_list: Vec<u64> = Vec::with_capacity(n / 2 + 1);
-        for (i, &k) in keys.iter().enumerate() {
-            if i == 0 || k != keys[i - 1] {
+        let mut cell_start = std::mem::take(&mut self.cell_start);
+        let mut cell_key_list = std::mem::take(&mut self.cell_keys);
+        cell_start.clear();
+        cell_key_list.clear();
+        for (i, o) in order.iter().enumerate() {
+            if i == 0 || o.0 != order[i - 1].0 {
                 cell_start.push(i as u32);
-                cell_key_list.push(k);
+                cell_key_list.push(o.0);
             }
         }
         cell_start.push(n as u32);
+        // Coordinates as separate arrays: the candidate loop below runs over contiguous
+        // ranges of them.
+        let (mut xs, mut ys, mut zs) = (
+            std::mem::take(&mut self.xs),
+            std::mem::take(&mut self.ys),
+            std::mem::take(&mut self.zs),
+        );
+        xs.clear();
+        ys.clear();
+        zs.clear();
+        xs.extend(p.pos.iter().map(|x| x.x));
+        ys.extend(p.pos.iter().map(|x| x.y));
+        zs.extend(p.pos.iter().map(|x| x.z));
         let ncell = cell_key_list.len();
         let r2 = radius * radius;
-        let pos = &p.pos;
         let bonds = &p.bonds;
+        let (xs_r, ys_r, zs_r) = (&xs, &ys, &zs);
         let row = 1i64 << COORD_BITS;
         let plane = 1i64 << (2 * COORD_BITS);
         let mut offsets = [0i64; 9];
@@ -143,17 +172,20 @@ impl NeighbourList {
                     }
                     for i in cell_start[c]..cell_start[c + 1] {
                         let iu = i as usize;
-                        let pi = pos[iu];
+                        let (xs, ys, zs) = (xs_r, ys_r, zs_r);
+                        let (px, py, pz) = (xs[iu], ys[iu], zs[iu]);
                         let slots = &bonds[iu * BONDS_PER_PARTICLE..(iu + 1) * BONDS_PER_PARTICLE];
                         let before = list.len();
                         for &(a, b) in &ranges {
-                            for j in a..b {
-                                if j == i {
-                                    continue;
-                                }
-                                let d = pi - pos[j as usize];
-                                if d.length_squared() < r2 && !slots.contains(&j) {
-                                    list.push(j);
+                            let (a, b) = (a as usize, b as usize);
+                            let (cx, cy, cz) = (&xs[a..b], &ys[a..b], &zs[a..b]);
+                            for k in 0..cx.len() {
+                                let (dx, dy, dz) = (px - cx[k], py - cy[k], pz - cz[k]);
+                                if dx * dx + dy * dy + dz * dz < r2 {
+                                    let j = (a + k) as u32;
+                                    if j != i && !slots.contains(&j) {
+                                        list.push(j);
+                                    }
                                 }
                             }
                         }
@@ -179,6 +211,9 @@ impl NeighbourList {
         }
         self.pos_at_build.clear();
         self.pos_at_build.extend_from_slice(&p.pos);
+        (self.order, self.perm, self.cell_start, self.cell_keys) =
+            (order, perm, cell_start, cell_key_list);
+        (self.xs, self.ys, self.zs) = (xs, ys, zs);
     }
 
     /// Neighbours of particle i.

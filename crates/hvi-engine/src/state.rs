@@ -130,36 +130,62 @@ impl Particles {
     }
 
     /// Reorders all arrays so that new index `k` holds old particle `perm[k]`, remapping bonds.
-    pub(crate) fn permute(&mut self, perm: &[u32]) {
+    /// Forces are not carried over: they are stale and recomputed right after a re-sort.
+    /// Gathers go into `scratch` buffers that are swapped in, so a re-sort allocates nothing.
+    pub(crate) fn permute(&mut self, perm: &[u32], scratch: &mut PermuteScratch) {
+        use rayon::prelude::*;
         let n = self.len();
-        let mut inv = vec![0u32; n];
+        scratch.inv.resize(n, 0);
         for (k, &old) in perm.iter().enumerate() {
-            inv[old as usize] = k as u32;
+            scratch.inv[old as usize] = k as u32;
         }
-        fn gather<T: Copy>(v: &mut Vec<T>, perm: &[u32]) {
-            let out: Vec<T> = perm.iter().map(|&o| v[o as usize]).collect();
-            *v = out;
+        fn gather<T: Copy + Send + Sync>(v: &mut Vec<T>, out: &mut Vec<T>, perm: &[u32]) {
+            out.resize(v.len(), v[0]);
+            out.par_iter_mut()
+                .zip(perm.par_iter())
+                .for_each(|(o, &p)| *o = v[p as usize]);
+            std::mem::swap(v, out);
         }
-        gather(&mut self.pos, perm);
-        gather(&mut self.vel, perm);
-        gather(&mut self.force, perm);
-        gather(&mut self.mass, perm);
-        gather(&mut self.inv_mass, perm);
-        gather(&mut self.body, perm);
-        gather(&mut self.id, perm);
-        let mut bonds = vec![NO_BOND; n * BONDS_PER_PARTICLE];
-        for (k, &old) in perm.iter().enumerate() {
-            let src = &self.bonds
-                [old as usize * BONDS_PER_PARTICLE..(old as usize + 1) * BONDS_PER_PARTICLE];
-            let dst = &mut bonds[k * BONDS_PER_PARTICLE..(k + 1) * BONDS_PER_PARTICLE];
-            for (d, &s) in dst.iter_mut().zip(src) {
-                *d = if s == NO_BOND {
-                    NO_BOND
-                } else {
-                    inv[(s & INDEX_MASK) as usize] | (s & BROKEN_FLAG)
-                };
-            }
+        if n == 0 {
+            return;
         }
-        self.bonds = bonds;
+        gather(&mut self.pos, &mut scratch.vec3, perm);
+        gather(&mut self.vel, &mut scratch.vec3, perm);
+        gather(&mut self.mass, &mut scratch.scalar, perm);
+        gather(&mut self.inv_mass, &mut scratch.scalar, perm);
+        gather(&mut self.body, &mut scratch.body, perm);
+        gather(&mut self.id, &mut scratch.index, perm);
+        let inv = &scratch.inv;
+        let src = &self.bonds;
+        scratch.bonds.resize(n * BONDS_PER_PARTICLE, NO_BOND);
+        scratch
+            .bonds
+            .par_chunks_mut(BONDS_PER_PARTICLE)
+            .zip(perm.par_iter())
+            .for_each(|(dst, &old)| {
+                let old = old as usize;
+                for (d, &s) in dst
+                    .iter_mut()
+                    .zip(&src[old * BONDS_PER_PARTICLE..(old + 1) * BONDS_PER_PARTICLE])
+                {
+                    *d = if s == NO_BOND {
+                        NO_BOND
+                    } else {
+                        inv[(s & INDEX_MASK) as usize] | (s & BROKEN_FLAG)
+                    };
+                }
+            });
+        std::mem::swap(&mut self.bonds, &mut scratch.bonds);
     }
+}
+
+/// Buffers reused by every re-sort of the particles.
+#[derive(Debug, Default, Clone)]
+pub struct PermuteScratch {
+    inv: Vec<u32>,
+    vec3: Vec<DVec3>,
+    scalar: Vec<f64>,
+    body: Vec<Body>,
+    index: Vec<u32>,
+    bonds: Vec<u32>,
 }
