@@ -46,6 +46,7 @@ pub struct NeighbourList {
     xs: Vec<f64>,
     ys: Vec<f64>,
     zs: Vec<f64>,
+    fill: Vec<u32>,
 }
 
 #[inline]
@@ -132,30 +133,27 @@ impl NeighbourList {
         let (xs_r, ys_r, zs_r) = (&xs, &ys, &zs);
         let row = 1i64 << COORD_BITS;
         let plane = 1i64 << (2 * COORD_BITS);
-        let mut offsets = [0i64; 9];
-        let mut r = 0;
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                offsets[r] = dz * plane + dy * row;
-                r += 1;
-            }
-        }
-        let chunks: Vec<(Vec<u32>, Vec<u32>)> = (0..ncell.div_ceil(CELL_CHUNK))
+        // Half stencil: rows whose keys follow the cell's own (same row from x - 1, the next
+        // row, and the three rows of the next plane). Sorted order is key order, so these hold
+        // exactly the candidates j > i: each pair is examined once and entered on both lists.
+        const ROWS: usize = 5;
+        let offsets: [i64; ROWS] = [0, row, plane - row, plane, plane + row];
+        let pairs: Vec<Vec<(u32, u32)>> = (0..ncell.div_ceil(CELL_CHUNK))
             .into_par_iter()
             .map(|chunk| {
                 let c0 = chunk * CELL_CHUNK;
                 let c1 = (c0 + CELL_CHUNK).min(ncell);
-                let mut counts = Vec::with_capacity((cell_start[c1] - cell_start[c0]) as usize);
-                let mut list = Vec::with_capacity(counts.capacity() * 4);
+                let mut found = Vec::with_capacity((cell_start[c1] - cell_start[c0]) as usize * 2);
                 let k0 = cell_key_list[c0] as i64;
-                let mut ptr = [0usize; 9];
+                let mut ptr = [0usize; ROWS];
                 for (r, off) in offsets.iter().enumerate() {
                     let lo = (k0 + off - 1) as u64;
                     ptr[r] = cell_key_list.partition_point(|&k| k < lo);
                 }
+                let (xs, ys, zs) = (xs_r, ys_r, zs_r);
                 for c in c0..c1 {
                     let key = cell_key_list[c] as i64;
-                    let mut ranges = [(0u32, 0u32); 9];
+                    let mut ranges = [(0usize, 0usize); ROWS];
                     for (r, off) in offsets.iter().enumerate() {
                         let lo = (key + off - 1) as u64;
                         let hi = (key + off + 1) as u64;
@@ -168,47 +166,56 @@ impl NeighbourList {
                         while b < ncell && cell_key_list[b] <= hi {
                             b += 1;
                         }
-                        ranges[r] = (cell_start[a], cell_start[b]);
+                        ranges[r] = (cell_start[a] as usize, cell_start[b] as usize);
                     }
-                    for i in cell_start[c]..cell_start[c + 1] {
-                        let iu = i as usize;
-                        let (xs, ys, zs) = (xs_r, ys_r, zs_r);
-                        let (px, py, pz) = (xs[iu], ys[iu], zs[iu]);
-                        let slots = &bonds[iu * BONDS_PER_PARTICLE..(iu + 1) * BONDS_PER_PARTICLE];
-                        let before = list.len();
-                        for &(a, b) in &ranges {
-                            let (a, b) = (a as usize, b as usize);
+                    for i in cell_start[c] as usize..cell_start[c + 1] as usize {
+                        let (px, py, pz) = (xs[i], ys[i], zs[i]);
+                        let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
+                        for (r, &(a, b)) in ranges.iter().enumerate() {
+                            // The own row holds cells x - 1 .. x + 1: only j > i is forward.
+                            let a = if r == 0 { a.max(i + 1) } else { a };
+                            if a >= b {
+                                continue;
+                            }
                             let (cx, cy, cz) = (&xs[a..b], &ys[a..b], &zs[a..b]);
                             for k in 0..cx.len() {
                                 let (dx, dy, dz) = (px - cx[k], py - cy[k], pz - cz[k]);
                                 if dx * dx + dy * dy + dz * dz < r2 {
                                     let j = (a + k) as u32;
-                                    if j != i && !slots.contains(&j) {
-                                        list.push(j);
+                                    if !slots.contains(&j) {
+                                        found.push((i as u32, j));
                                     }
                                 }
                             }
                         }
-                        counts.push((list.len() - before) as u32);
                     }
                 }
-                (counts, list)
+                found
             })
             .collect();
-        self.start.clear();
-        self.start.reserve(n + 1);
-        self.start.push(0);
-        let total: usize = chunks.iter().map(|c| c.1.len()).sum();
-        self.neighbours.clear();
-        self.neighbours.reserve(total);
-        let mut acc = 0u32;
-        for (counts, list) in &chunks {
-            for &c in counts {
-                acc += c;
-                self.start.push(acc);
-            }
-            self.neighbours.extend_from_slice(list);
+        // Full lists in compressed-row form: count, prefix-sum, fill in pair order (fixed by
+        // the sorted walk, so the lists are the same at any thread count).
+        let mut fill = std::mem::take(&mut self.fill);
+        fill.clear();
+        fill.resize(n + 1, 0);
+        for &(i, j) in pairs.iter().flatten() {
+            fill[i as usize + 1] += 1;
+            fill[j as usize + 1] += 1;
         }
+        for k in 0..n {
+            fill[k + 1] += fill[k];
+        }
+        self.start.clear();
+        self.start.extend_from_slice(&fill);
+        self.neighbours.clear();
+        self.neighbours.resize(fill[n] as usize, 0);
+        for &(i, j) in pairs.iter().flatten() {
+            self.neighbours[fill[i as usize] as usize] = j;
+            fill[i as usize] += 1;
+            self.neighbours[fill[j as usize] as usize] = i;
+            fill[j as usize] += 1;
+        }
+        self.fill = fill;
         self.pos_at_build.clear();
         self.pos_at_build.extend_from_slice(&p.pos);
         (self.order, self.perm, self.cell_start, self.cell_keys) =
@@ -220,5 +227,63 @@ impl NeighbourList {
     #[inline(always)]
     pub fn of(&self, i: usize) -> &[u32] {
         &self.neighbours[self.start[i] as usize..self.start[i + 1] as usize]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::state::{Body, NO_BOND};
+
+    /// The list equals a brute-force search: every unbonded pair closer than the radius, on
+    /// both particles' lists, once; intact bonded pairs left out.
+    #[test]
+    fn matches_brute_force() {
+        let n = 600;
+        let pos: Vec<DVec3> = (0..n as u64)
+            .map(|k| {
+                DVec3::new(
+                    crate::rng::uniform(3, k, 0) * 8.0 - 4.0,
+                    crate::rng::uniform(3, k, 1) * 6.0,
+                    crate::rng::uniform(3, k, 2) * 5.0 - 30.0,
+                )
+            })
+            .collect();
+        let mut bonds = vec![NO_BOND; n * BONDS_PER_PARTICLE];
+        // Bond k to k + 1 along "x" for even k (owner slot 0, mirror slot 1).
+        for k in (0..n - 1).step_by(2) {
+            bonds[k * BONDS_PER_PARTICLE] = (k + 1) as u32;
+            bonds[(k + 1) * BONDS_PER_PARTICLE + 1] = k as u32;
+        }
+        let mut p = Particles::new(
+            pos,
+            vec![DVec3::ZERO; n],
+            vec![1.0; n],
+            vec![Body::Target; n],
+            bonds,
+        );
+        let radius = 1.3;
+        let mut nl = NeighbourList::default();
+        nl.build(&mut p, radius);
+        let mut brute = 0;
+        for i in 0..n {
+            let mut got: Vec<u32> = nl.of(i).to_vec();
+            got.sort_unstable();
+            let mut want: Vec<u32> = (0..n)
+                .filter(|&j| {
+                    j != i
+                        && (p.pos[i] - p.pos[j]).length_squared() < radius * radius
+                        && !p.intact_partners_of(i).any(|b| b == j)
+                })
+                .map(|j| j as u32)
+                .collect();
+            want.sort_unstable();
+            brute += want.len();
+            assert_eq!(got, want, "particle {i}");
+        }
+        assert!(
+            brute > n,
+            "the test must exercise real neighbours ({brute})"
+        );
     }
 }

@@ -105,6 +105,24 @@ impl Particles {
         })
     }
 
+    /// Partners of particle `i` through intact bonds (owned or mirror slots), current indices.
+    pub fn intact_partners_of(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+        (0..BONDS_PER_PARTICLE).filter_map(move |k| {
+            let s = self.bonds[i * BONDS_PER_PARTICLE + k];
+            if s == NO_BOND {
+                return None;
+            }
+            let j = (s & INDEX_MASK) as usize;
+            // A mirror slot is intact when the owner's slot carries no broken flag.
+            let owner_slot = if k % 2 == 0 {
+                s
+            } else {
+                self.bonds[j * BONDS_PER_PARTICLE + k - 1]
+            };
+            (owner_slot & BROKEN_FLAG == 0).then_some(j)
+        })
+    }
+
     /// Clears the owned and mirror slots of bonds that broke since the last call.
     pub(crate) fn clear_broken_slots(&mut self) {
         for i in 0..self.len() {
