@@ -7,3 +7,4 @@ pub mod bench;
 pub mod output;
 pub mod run;
 pub mod scene_file;
+pub mod study;

@@ -41,6 +41,20 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Validate a study and write its plan.json (every run's scene checked), running nothing.
+    Plan(hvi_study::study::cli::StudyArgs),
+    /// Run every run of a study (in parallel, finished runs reused) and write results.csv/json.
+    Sweep(hvi_study::study::cli::StudyArgs),
+    /// Run one run of a written plan.json by its index (for an external scheduler).
+    RunUnit {
+        /// The plan.json of a study's output directory.
+        plan: PathBuf,
+        /// The run's index in the plan.
+        index: usize,
+        /// Worker threads (default: every core).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
     /// Engine throughput: run a scene at several thread counts and print particle-steps/s.
     ///
     /// Defaults to the paper's calibration scene (2.7e5 particles) through the first 1 us of
@@ -115,6 +129,21 @@ fn main() -> ExitCode {
             println!("table: {}", out.join("bench.csv").display());
             Ok(())
         })(),
+        Command::Plan(args) => hvi_study::study::cli::plan(&args),
+        Command::Sweep(args) => hvi_study::study::cli::sweep(&args),
+        Command::RunUnit {
+            plan,
+            index,
+            threads,
+        } => hvi_study::study::cli::run_unit(&plan, index, threads).and_then(|ok| {
+            if ok {
+                Ok(())
+            } else {
+                Err(anyhow::anyhow!(
+                    "run {index} failed (recorded in its directory)"
+                ))
+            }
+        }),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

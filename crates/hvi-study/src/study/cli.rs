@@ -1,0 +1,166 @@
+//! The study subcommands' arguments and entry points (`main.rs` only dispatches here).
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Args;
+
+use super::exec::ExecOptions;
+use super::plan::{build_plan, Plan, PlanRequest};
+use super::spec::Study;
+use super::store::{RunStatus, Store};
+use super::{default_out_dir, execute_plan, job_of};
+
+/// What every study command takes: the study, its tier and where its results go.
+#[derive(Args, Debug, Clone)]
+pub struct StudyArgs {
+    /// Study file (TOML), e.g. studies/calibration.toml.
+    pub study: PathBuf,
+    /// Resolution tier, as named in the study's [tiers] (default: its default_tier, `quick`).
+    #[arg(long)]
+    pub tier: Option<String>,
+    /// Override the tier's particle count (resolution.particles).
+    #[arg(long, value_name = "N")]
+    pub particles: Option<f64>,
+    /// Override a scene key in every run: section.key=value (not an axis key).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// Output directory (default: runs/studies/<study>/<tier>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Worker threads in all (default: every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Runs at once (default: as many as threads; the rest of the threads go inside runs).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// No progress output.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+impl StudyArgs {
+    /// Loads the study, builds and validates its plan, and writes `plan.json`.
+    pub fn plan(&self) -> Result<(Study, Plan, PathBuf)> {
+        if self.threads == Some(0) {
+            anyhow::bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
+        }
+        if self.jobs == Some(0) {
+            anyhow::bail!("invalid value for `--jobs`: 0 (allowed: an integer >= 1)");
+        }
+        let study = Study::load(&self.study)?;
+        let plan = build_plan(
+            &study,
+            &PlanRequest {
+                tier: self.tier.clone(),
+                particles: self.particles,
+                set: self.sets.clone(),
+            },
+        )?;
+        let out = self
+            .out
+            .clone()
+            .unwrap_or_else(|| default_out_dir(&plan.study, &plan.tier, self.particles));
+        plan.write(&out)?;
+        Ok((study, plan, out))
+    }
+
+    /// Execution options from the flags.
+    pub fn exec_options(&self) -> ExecOptions {
+        ExecOptions {
+            threads: self.threads.unwrap_or(0),
+            jobs: self.jobs,
+            progress: !self.quiet,
+        }
+    }
+}
+
+/// `hvi-study plan`: validates a study and writes its plan.json without running anything.
+pub fn plan(args: &StudyArgs) -> Result<()> {
+    let (_, plan, out) = args.plan()?;
+    let store = Store::open(&out)?;
+    let mut done = 0;
+    for r in &plan.runs {
+        if matches!(store.lookup(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
+        {
+            done += 1;
+        }
+    }
+    println!(
+        "study `{}` at tier `{}`: {} runs ({} already done); axes: {}",
+        plan.study,
+        plan.tier,
+        plan.runs.len(),
+        done,
+        plan.axes
+            .iter()
+            .map(|a| format!("{} ({} values)", a.key, a.values.len()))
+            .collect::<Vec<_>>()
+            .join(" x ")
+    );
+    println!("{}", out.join("plan.json").display());
+    Ok(())
+}
+
+/// `hvi-study sweep`: plans and executes every run of a study, writes results.csv/json.
+pub fn sweep(args: &StudyArgs) -> Result<()> {
+    let (_, plan, out) = args.plan()?;
+    let (_, report) = execute_plan(&plan, &out, &args.exec_options())?;
+    eprintln!("{}", report.line());
+    print_failures(&report.records);
+    println!("{}", out.join("results.csv").display());
+    Ok(())
+}
+
+/// Prints each failed run's error (a failed run does not fail the study).
+pub fn print_failures(records: &[super::store::Record]) {
+    for (i, r) in records.iter().enumerate() {
+        if r.status == RunStatus::Failed {
+            eprintln!(
+                "run {i} failed: {}",
+                r.error.as_deref().unwrap_or("(no message)")
+            );
+        }
+    }
+}
+
+/// `hvi-study run-unit PLAN INDEX`: executes one run of a written plan (for an external
+/// scheduler). A finished run is not repeated. Returns whether the run completed.
+pub fn run_unit(plan_path: &std::path::Path, index: usize, threads: Option<usize>) -> Result<bool> {
+    if threads == Some(0) {
+        anyhow::bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
+    }
+    let plan = Plan::load(plan_path)?;
+    let dir = plan_path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or_else(|| std::path::Path::new("."));
+    let job = job_of(&plan, index)?;
+    let store = Store::open(dir)?;
+    let record = match store.lookup(&job.fingerprint)? {
+        Some(r) if r.status == RunStatus::Completed => {
+            eprintln!("run {index}: already done");
+            r
+        }
+        _ => {
+            let threads = threads
+                .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+            store.execute(&job, threads)?
+        }
+    };
+    let dir = store.dir(&job.fingerprint);
+    match record.status {
+        RunStatus::Completed => {
+            println!("{}", dir.display());
+            Ok(true)
+        }
+        RunStatus::Failed => {
+            eprintln!(
+                "run {index} failed: {}",
+                record.error.as_deref().unwrap_or("(no message)")
+            );
+            println!("{}", dir.display());
+            Ok(false)
+        }
+    }
+}

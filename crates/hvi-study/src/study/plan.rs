@@ -1,0 +1,366 @@
+//! The validated plan: every run of a study at one tier, with its full scene, its fingerprint
+//! and its directory, checked before anything runs and written as `plan.json`.
+//!
+//! Overrides apply in this order: the study's `set`, the tier's `set`, the command line's
+//! `--set`, `--particles`, then the run's axis values. An axis key may not appear in any of the
+//! others (the study parser and [`build_plan`] reject it), so order only matters among fixed
+//! overrides, where the later one wins.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Context, Result};
+use hvi_engine::scene::SceneSpec;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use super::spec::{json_to_override, override_key, Axis, Study};
+use crate::output::write_atomic_bytes;
+use crate::scene_file::parse_scene;
+
+/// Version of the plan and run-record formats, and of what the fingerprint covers. Bump it
+/// when either changes meaning, so old results are not mistaken for new ones.
+pub const STUDY_FORMAT_VERSION: u32 = 1;
+
+/// The engine version a fingerprint records: the workspace version. Results that a code change
+/// alters need a version bump to invalidate cached runs (a decision: a hash of the source
+/// would invalidate every run on every commit).
+pub const ENGINE_VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// How many hex digits of the fingerprint name a run's directory.
+pub const DIR_DIGITS: usize = 16;
+
+/// One run of a plan.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PlannedRun {
+    /// Position in the plan (`hvi-study run-unit PLAN INDEX`).
+    pub index: usize,
+    /// Index into each axis's values.
+    pub coords: Vec<usize>,
+    /// The axis values, one per axis (same order as `Plan::axes`).
+    pub values: Vec<serde_json::Value>,
+    /// Every override applied to the base scene, in order.
+    pub set: Vec<String>,
+    /// SHA-256 of the canonical JSON of what determines the result ([`fingerprint`]).
+    pub fingerprint: String,
+    /// The run's directory, relative to the plan's directory.
+    pub dir: String,
+    /// The scene as it will run.
+    pub scene: SceneSpec,
+}
+
+/// A study expanded at one tier.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Plan {
+    /// [`STUDY_FORMAT_VERSION`].
+    pub format: u32,
+    /// The study's name.
+    pub study: String,
+    /// What it is.
+    pub description: String,
+    /// The study file.
+    pub study_file: PathBuf,
+    /// The base scene file.
+    pub base_scene: PathBuf,
+    /// The tier's name.
+    pub tier: String,
+    /// The tier's description.
+    pub tier_description: String,
+    /// Overrides common to every run (study, tier, command line), in order.
+    pub set: Vec<String>,
+    /// The axes.
+    pub axes: Vec<Axis>,
+    /// [`ENGINE_VERSION`].
+    pub engine_version: String,
+    /// The runs, the last axis varying fastest.
+    pub runs: Vec<PlannedRun>,
+}
+
+/// What to plan: the tier and the command line's extra overrides.
+#[derive(Debug, Clone, Default)]
+pub struct PlanRequest {
+    /// Tier name (default: the study's default tier).
+    pub tier: Option<String>,
+    /// `--particles N`: overrides `resolution.particles` after the tier.
+    pub particles: Option<f64>,
+    /// `--set KEY=VALUE` overrides, after the tier.
+    pub set: Vec<String>,
+}
+
+/// Serialises a JSON value with object keys sorted and no whitespace: the same value always
+/// gives the same bytes (serde_json writes floats in their shortest round-trip form).
+pub fn canonical_json(v: &serde_json::Value) -> String {
+    fn write(v: &serde_json::Value, out: &mut String) {
+        match v {
+            serde_json::Value::Object(m) => {
+                let mut keys: Vec<&String> = m.keys().collect();
+                keys.sort();
+                out.push('{');
+                for (i, k) in keys.iter().enumerate() {
+                    if i > 0 {
+                        out.push(',');
+                    }
+                    out.push_str(&serde_json::Value::String((*k).clone()).to_string());
+                    out.push(':');
+                    write(&m[*k], out);
+                }
+                out.push('}');
+            }
+            serde_json::Value::Array(a) => {
+                out.push('[');
+                for (i, x) in a.iter().enumerate() {
+                    if i > 0 {
+                        out.push(',');
+                    }
+                    write(x, out);
+                }
+                out.push(']');
+            }
+            other => out.push_str(&other.to_string()),
+        }
+    }
+    let mut s = String::new();
+    write(v, &mut s);
+    s
+}
+
+/// The fingerprint of a run: SHA-256 (hex) of the canonical JSON of the format version, the
+/// engine version, the tier and the full scene as run (which holds every parameter, the
+/// resolution and the seed). Two runs with the same fingerprint give the same result.
+pub fn fingerprint(scene: &SceneSpec, tier: &str) -> Result<String> {
+    let doc = serde_json::json!({
+        "format": STUDY_FORMAT_VERSION,
+        "engine_version": ENGINE_VERSION,
+        "tier": tier,
+        "scene": serde_json::to_value(scene).context("scene as JSON")?,
+    });
+    let digest = Sha256::digest(canonical_json(&doc).as_bytes());
+    Ok(digest.iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// The directory of a run with this fingerprint, relative to the study's output directory.
+pub fn run_dir_name(fingerprint: &str) -> String {
+    format!("runs/{}", &fingerprint[..DIR_DIGITS.min(fingerprint.len())])
+}
+
+/// Describes a run's axis values, e.g. `material.eps_j=0.01, material.kappa_n_m=4560000.0`.
+pub fn describe_values(axes: &[Axis], values: &[serde_json::Value]) -> String {
+    axes.iter()
+        .zip(values)
+        .map(|(a, v)| format!("{}={v}", a.key))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Parses the base scene with overrides and checks every value with the engine (which lays
+/// out the particles: at the quick tier this takes milliseconds, at the paper's 2.7e5
+/// particles about a second per run, spread over the cores).
+pub fn validated_scene(study: &Study, set: &[String]) -> Result<SceneSpec> {
+    let spec = parse_scene(&study.scene_text, set)?;
+    spec.build()?;
+    Ok(spec)
+}
+
+/// Expands a study at a tier into a validated plan. Every run's scene is built and checked
+/// before this returns; the first errors (up to five distinct ones) are reported together,
+/// each naming the key and the run.
+pub fn build_plan(study: &Study, req: &PlanRequest) -> Result<Plan> {
+    let tier = study.tier(req.tier.as_deref())?;
+    let mut common: Vec<String> = study.set.clone();
+    common.extend(tier.set.iter().cloned());
+    for s in &req.set {
+        let k = override_key(s);
+        if study.axes.iter().any(|a| a.key == k) {
+            bail!("--set `{s}`: `{k}` is an axis of this study (allowed: keys that are not axes)");
+        }
+        common.push(s.clone());
+    }
+    if let Some(n) = req.particles {
+        if !(n.is_finite() && n >= 8.0) {
+            bail!("invalid value for `--particles`: {n} (allowed: a number >= 8)");
+        }
+        if study.axes.iter().any(|a| a.key == "resolution.particles") {
+            bail!("--particles: `resolution.particles` is an axis of this study");
+        }
+        common.push(format!("resolution.particles={n}"));
+    }
+
+    // The grid, last axis fastest.
+    let n_runs = study.grid_len();
+    let mut drafts: Vec<(Vec<usize>, Vec<serde_json::Value>, Vec<String>)> = Vec::new();
+    for index in 0..n_runs {
+        let mut coords = vec![0; study.axes.len()];
+        let mut rest = index;
+        for (k, a) in study.axes.iter().enumerate().rev() {
+            coords[k] = rest % a.values.len();
+            rest /= a.values.len();
+        }
+        let mut set = common.clone();
+        let mut values = Vec::new();
+        for (a, &c) in study.axes.iter().zip(&coords) {
+            let v = &a.values[c];
+            set.push(format!("{}={}", a.key, json_to_override(v)?));
+            values.push(v.clone());
+        }
+        drafts.push((coords, values, set));
+    }
+
+    // Validate every run's scene (in parallel: at high tiers each build lays out the lattice).
+    let checked: Vec<Result<SceneSpec>> = drafts
+        .par_iter()
+        .map(|(_, _, set)| validated_scene(study, set))
+        .collect();
+    let mut errors: Vec<String> = Vec::new();
+    let mut n_bad = 0;
+    for (i, r) in checked.iter().enumerate() {
+        if let Err(e) = r {
+            n_bad += 1;
+            let msg = format!("{e:#}");
+            if errors.len() < 5 && !errors.iter().any(|m| m.ends_with(&msg)) {
+                let what = describe_values(&study.axes, &drafts[i].1);
+                errors.push(format!("run {i} ({what}): {msg}"));
+            }
+        }
+    }
+    if n_bad > 0 {
+        bail!(
+            "study `{}` at tier `{}`: {n_bad} of {n_runs} runs have invalid scenes; nothing was run:\n  {}",
+            study.name,
+            tier.name,
+            errors.join("\n  ")
+        );
+    }
+
+    let mut runs = Vec::with_capacity(n_runs);
+    for (index, ((coords, values, set), scene)) in drafts.into_iter().zip(checked).enumerate() {
+        let scene = scene?;
+        let fp = fingerprint(&scene, &tier.name)?;
+        runs.push(PlannedRun {
+            index,
+            coords,
+            values,
+            set,
+            dir: run_dir_name(&fp),
+            fingerprint: fp,
+            scene,
+        });
+    }
+    Ok(Plan {
+        format: STUDY_FORMAT_VERSION,
+        study: study.name.clone(),
+        description: study.description.clone(),
+        study_file: absolute(&study.path),
+        base_scene: absolute(&study.scene_path),
+        tier: tier.name.clone(),
+        tier_description: tier.description.clone(),
+        set: common,
+        axes: study.axes.clone(),
+        engine_version: ENGINE_VERSION.to_string(),
+        runs,
+    })
+}
+
+fn absolute(p: &Path) -> PathBuf {
+    std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf())
+}
+
+impl Plan {
+    /// Writes `plan.json` into `dir` atomically. Refuses a directory that holds another
+    /// study's or tier's plan, so results of different studies never mix.
+    pub fn write(&self, dir: &Path) -> Result<PathBuf> {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create study directory {}", dir.display()))?;
+        let path = dir.join("plan.json");
+        if path.exists() {
+            let old = Plan::load(&path).with_context(|| {
+                format!(
+                    "{} holds a plan that cannot be read; move it away or use another --out",
+                    path.display()
+                )
+            })?;
+            if old.study != self.study || old.tier != self.tier {
+                bail!(
+                    "{} holds study `{}` at tier `{}`, not `{}` at `{}`: use another --out",
+                    dir.display(),
+                    old.study,
+                    old.tier,
+                    self.study,
+                    self.tier
+                );
+            }
+        }
+        write_atomic_bytes(&path, serde_json::to_string_pretty(self)?.as_bytes())?;
+        Ok(path)
+    }
+
+    /// Reads a `plan.json`, and checks that every run's fingerprint matches its scene (a plan
+    /// edited by hand, or written by another version, is refused).
+    pub fn load(path: &Path) -> Result<Plan> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read plan {}", path.display()))?;
+        let plan: Plan = serde_json::from_str(&text)
+            .with_context(|| format!("{} is not a plan.json", path.display()))?;
+        if plan.format != STUDY_FORMAT_VERSION {
+            bail!(
+                "{}: plan format {} (this hvi-study reads {STUDY_FORMAT_VERSION}); plan the study again",
+                path.display(),
+                plan.format
+            );
+        }
+        for r in &plan.runs {
+            let fp = fingerprint(&r.scene, &plan.tier)?;
+            if fp != r.fingerprint {
+                bail!(
+                    "{}: run {} has fingerprint {} but its scene hashes to {fp} (edited plan, or \
+                     another engine version {}); plan the study again",
+                    path.display(),
+                    r.index,
+                    r.fingerprint,
+                    plan.engine_version
+                );
+            }
+        }
+        Ok(plan)
+    }
+
+    /// The run at `index`, or an error naming the valid range.
+    pub fn run(&self, index: usize) -> Result<&PlannedRun> {
+        self.runs.get(index).ok_or_else(|| {
+            anyhow!(
+                "invalid run index {index}: this plan has {} runs (allowed: 0..={})",
+                self.runs.len(),
+                self.runs.len().saturating_sub(1)
+            )
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn canonical_json_sorts_keys_at_every_level() {
+        let a = serde_json::json!({"b": 1, "a": {"y": [1.5, "x"], "x": null}});
+        assert_eq!(
+            canonical_json(&a),
+            r#"{"a":{"x":null,"y":[1.5,"x"]},"b":1}"#
+        );
+    }
+
+    #[test]
+    fn fingerprint_follows_the_scene_and_the_tier() {
+        let text = "[scene]\nkind = \"sphere_on_plate\"\ndiameter_m = 1e-2\nt_over_d = 0.4\nv0_m_s = 6000\n[resolution]\nparticles = 500\n[material]\n";
+        let a = parse_scene(text, &[]).expect("scene");
+        let b = parse_scene(text, &["material.eps_j=0.1".into()]).expect("scene");
+        let fa = fingerprint(&a, "quick").expect("fp");
+        assert_eq!(fa.len(), 64);
+        assert_eq!(fa, fingerprint(&a.clone(), "quick").expect("fp"));
+        assert_ne!(fa, fingerprint(&b, "quick").expect("fp"));
+        assert_ne!(fa, fingerprint(&a, "paper").expect("fp"));
+        // A scene survives the JSON round trip of plan.json with the same fingerprint.
+        let back: SceneSpec =
+            serde_json::from_str(&serde_json::to_string(&a).expect("json")).expect("back");
+        assert_eq!(fa, fingerprint(&back, "quick").expect("fp"));
+    }
+}

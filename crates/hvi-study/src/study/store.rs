@@ -1,0 +1,441 @@
+//! The run store: one directory per fingerprint, each appearing complete or not at all.
+//!
+//! Layout under a study's output directory:
+//!
+//! ```text
+//! runs/<first 16 hex digits of the fingerprint>/
+//!     record.json      the run's record: fingerprint, status, error, observables (written last)
+//!     summary.json     the engine run's summary (hvi_study::run::run_scene)
+//!     energy.csv, cloud_track.csv, fragments.csv
+//! runs/.tmp-<digits>-<pid>-<n>/   a run in progress
+//! ```
+//!
+//! A run works in a temporary directory and, once `record.json` is written and synced, renames
+//! it to its final name. A process killed at any moment (even SIGKILL) therefore leaves either a
+//! complete run directory or a temporary one, which the next execution removes (when the process
+//! that made it is gone) and redoes. A directory whose `record.json` names another fingerprint
+//! is refused, never reused.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use anyhow::{anyhow, bail, Context, Result};
+use hvi_engine::scene::SceneSpec;
+use serde::{Deserialize, Serialize};
+
+use super::plan::{DIR_DIGITS, ENGINE_VERSION, STUDY_FORMAT_VERSION};
+use crate::output::write_atomic_bytes;
+use crate::run::{run_scene, RunOptions};
+
+/// How a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunStatus {
+    /// Reached its end time; observables measured.
+    Completed,
+    /// Stopped with an error (e.g. an instability); the error is recorded.
+    Failed,
+}
+
+/// What the study reads of a run's `summary.json`: the debris-cloud observables
+/// (`hvi_engine::cloud`, MODEL.md section 5) and a few health numbers. `None` where the run
+/// did not measure it (failed run, no cloud, or an older summary).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Observables {
+    /// Particles in the run.
+    pub particles: Option<f64>,
+    /// Fragmentation F = N_frag / N_part (eq. 21).
+    pub fragmentation: Option<f64>,
+    /// Particles in the debris cloud.
+    pub n_part: Option<f64>,
+    /// Fragments in the debris cloud.
+    pub n_frag: Option<f64>,
+    /// Axial length La, m.
+    pub length_axial_m: Option<f64>,
+    /// Radial length Lr, m.
+    pub length_radial_m: Option<f64>,
+    /// R = La / Lr.
+    pub length_ratio: Option<f64>,
+    /// Front velocity va, m/s.
+    pub front_velocity_m_s: Option<f64>,
+    /// va / v0.
+    pub front_velocity_ratio: Option<f64>,
+    /// Largest fragment's mass over the impactor mass.
+    pub largest_fragment_mass_fraction: Option<f64>,
+    /// Largest fragment's volume-equivalent diameter, m.
+    pub largest_fragment_diameter_m: Option<f64>,
+    /// Mass-weighted mean fragment diameter, m.
+    pub mean_fragment_diameter_m: Option<f64>,
+    /// Time since first contact of the cloud measurement, s.
+    pub tau_s: Option<f64>,
+    /// Bonds broken over bonds at t = 0.
+    pub bonds_broken_fraction: Option<f64>,
+    /// Relative drift of the energy ledger at the end.
+    pub energy_relative_drift: Option<f64>,
+}
+
+/// The observables' names, in table order (the fields of [`Observables`]).
+pub const OBSERVABLE_NAMES: [&str; 15] = [
+    "particles",
+    "fragmentation",
+    "n_part",
+    "n_frag",
+    "length_axial_m",
+    "length_radial_m",
+    "length_ratio",
+    "front_velocity_m_s",
+    "front_velocity_ratio",
+    "largest_fragment_mass_fraction",
+    "largest_fragment_diameter_m",
+    "mean_fragment_diameter_m",
+    "tau_s",
+    "bonds_broken_fraction",
+    "energy_relative_drift",
+];
+
+impl Observables {
+    /// Reads the observables out of a `summary.json` document. The cloud's fields are looked
+    /// up by name in `cloud` (flattened) or in `cloud.measurement`, so this reads every
+    /// summary layout the run module has written.
+    pub fn from_summary(s: &serde_json::Value) -> Observables {
+        let num = |v: Option<&serde_json::Value>| v.and_then(serde_json::Value::as_f64);
+        let cloud = s.get("cloud").filter(|c| c.is_object());
+        let c = |name: &str| {
+            cloud.and_then(|c| {
+                num(c.get(name)).or_else(|| num(c.get("measurement").and_then(|m| m.get(name))))
+            })
+        };
+        let bonds0 = num(s.get("bonds_initial"));
+        let broken = num(s.get("bonds_broken"));
+        Observables {
+            particles: num(s.get("particles")),
+            fragmentation: c("fragmentation"),
+            n_part: c("n_part"),
+            n_frag: c("n_frag"),
+            length_axial_m: c("length_axial_m"),
+            length_radial_m: c("length_radial_m"),
+            length_ratio: c("length_ratio"),
+            front_velocity_m_s: c("front_velocity_m_s"),
+            front_velocity_ratio: c("front_velocity_ratio"),
+            largest_fragment_mass_fraction: c("largest_fragment_mass_fraction"),
+            largest_fragment_diameter_m: c("largest_fragment_diameter_m"),
+            mean_fragment_diameter_m: c("mean_fragment_diameter_m"),
+            tau_s: c("tau_s"),
+            bonds_broken_fraction: match (broken, bonds0) {
+                (Some(b), Some(b0)) if b0 > 0.0 => Some(b / b0),
+                _ => None,
+            },
+            energy_relative_drift: num(s.get("energy").and_then(|e| e.get("relative_drift"))),
+        }
+    }
+
+    /// The observable of that name (one of [`OBSERVABLE_NAMES`]).
+    pub fn get(&self, name: &str) -> Option<f64> {
+        match name {
+            "particles" => self.particles,
+            "fragmentation" => self.fragmentation,
+            "n_part" => self.n_part,
+            "n_frag" => self.n_frag,
+            "length_axial_m" => self.length_axial_m,
+            "length_radial_m" => self.length_radial_m,
+            "length_ratio" => self.length_ratio,
+            "front_velocity_m_s" => self.front_velocity_m_s,
+            "front_velocity_ratio" => self.front_velocity_ratio,
+            "largest_fragment_mass_fraction" => self.largest_fragment_mass_fraction,
+            "largest_fragment_diameter_m" => self.largest_fragment_diameter_m,
+            "mean_fragment_diameter_m" => self.mean_fragment_diameter_m,
+            "tau_s" => self.tau_s,
+            "bonds_broken_fraction" => self.bonds_broken_fraction,
+            "energy_relative_drift" => self.energy_relative_drift,
+            _ => None,
+        }
+    }
+}
+
+/// `record.json`: the last file of a run's directory, and the proof that it is complete.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Record {
+    /// [`STUDY_FORMAT_VERSION`].
+    pub format: u32,
+    /// The full fingerprint.
+    pub fingerprint: String,
+    /// The study that first ran it.
+    pub study: String,
+    /// The tier.
+    pub tier: String,
+    /// The run's parameters (axis key -> value) as the study named them.
+    pub params: serde_json::Map<String, serde_json::Value>,
+    /// How it ended.
+    pub status: RunStatus,
+    /// The error, when it failed.
+    pub error: Option<String>,
+    /// What was measured (also for a failed run, where the summary has anything).
+    pub observables: Observables,
+    /// Wall time of the run, s.
+    pub wall_seconds: f64,
+    /// Threads the run used.
+    pub threads: usize,
+    /// hvi-study version that ran it.
+    pub engine_version: String,
+}
+
+/// A run to execute: its scene and its identity.
+#[derive(Debug, Clone)]
+pub struct Job {
+    /// The full fingerprint ([`super::plan::fingerprint`]).
+    pub fingerprint: String,
+    /// The scene as it runs.
+    pub scene: SceneSpec,
+    /// The study's name.
+    pub study: String,
+    /// The tier.
+    pub tier: String,
+    /// The run's parameters, for the record and the tables.
+    pub params: serde_json::Map<String, serde_json::Value>,
+}
+
+/// The run directories of one study output directory.
+#[derive(Debug, Clone)]
+pub struct Store {
+    runs: PathBuf,
+}
+
+static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Whether the process with this id is alive (Linux: /proc; elsewhere assumed alive, so
+/// nothing of a running process is ever removed).
+fn process_alive(pid: u32) -> bool {
+    if !Path::new("/proc/self").exists() {
+        return true;
+    }
+    Path::new(&format!("/proc/{pid}")).exists()
+}
+
+fn sync_dir(dir: &Path) {
+    // Makes a rename durable; not every platform can open a directory, so errors are ignored.
+    if let Ok(f) = fs::File::open(dir) {
+        let _ = f.sync_all();
+    }
+}
+
+impl Store {
+    /// Opens (creates) `study_dir/runs` and removes what killed processes left there.
+    pub fn open(study_dir: &Path) -> Result<Store> {
+        let runs = study_dir.join("runs");
+        fs::create_dir_all(&runs)
+            .with_context(|| format!("cannot create run store {}", runs.display()))?;
+        let store = Store { runs };
+        store.sweep_stale()?;
+        Ok(store)
+    }
+
+    /// Removes temporary directories whose process is gone. Returns how many.
+    pub fn sweep_stale(&self) -> Result<usize> {
+        let mut n = 0;
+        for entry in fs::read_dir(&self.runs)? {
+            let entry = entry?;
+            let name = entry.file_name().to_string_lossy().into_owned();
+            let Some(rest) = name
+                .strip_prefix(".tmp-")
+                .or_else(|| name.strip_prefix(".old-"))
+            else {
+                continue;
+            };
+            // rest = <digits>-<pid>-<n>
+            let pid = rest.split('-').nth(1).and_then(|p| p.parse::<u32>().ok());
+            if let Some(pid) = pid {
+                if pid != std::process::id() && !process_alive(pid) {
+                    fs::remove_dir_all(entry.path()).with_context(|| {
+                        format!("cannot remove stale {}", entry.path().display())
+                    })?;
+                    n += 1;
+                }
+            }
+        }
+        Ok(n)
+    }
+
+    /// The directory of a run.
+    pub fn dir(&self, fingerprint: &str) -> PathBuf {
+        self.runs
+            .join(&fingerprint[..DIR_DIGITS.min(fingerprint.len())])
+    }
+
+    /// The record of a finished run, if there is one. An unreadable record or one with another
+    /// fingerprint is an error: results of different inputs are never mixed.
+    pub fn lookup(&self, fingerprint: &str) -> Result<Option<Record>> {
+        let dir = self.dir(fingerprint);
+        let path = dir.join("record.json");
+        if !path.exists() {
+            if dir.exists() {
+                bail!(
+                    "{} exists without record.json: not written by this store; move it away",
+                    dir.display()
+                );
+            }
+            return Ok(None);
+        }
+        let text =
+            fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
+        let rec: Record = serde_json::from_str(&text).with_context(|| {
+            format!(
+                "{} is not a run record; move the directory away",
+                path.display()
+            )
+        })?;
+        if rec.fingerprint != fingerprint {
+            bail!(
+                "refusing to mix results: {} holds fingerprint {} but this run's is {fingerprint}; \
+                 move the directory away",
+                dir.display(),
+                rec.fingerprint
+            );
+        }
+        if rec.format != STUDY_FORMAT_VERSION {
+            bail!(
+                "{}: record format {} (this hvi-study writes {STUDY_FORMAT_VERSION})",
+                path.display(),
+                rec.format
+            );
+        }
+        Ok(Some(rec))
+    }
+
+    /// Runs a job on `threads` worker threads and stores its directory atomically. A failed
+    /// simulation (instability, panic) is a record with status `failed`, not an error; errors
+    /// are for the store itself (disk, permissions).
+    pub fn execute(&self, job: &Job, threads: usize) -> Result<Record> {
+        let digits = &job.fingerprint[..DIR_DIGITS.min(job.fingerprint.len())];
+        let tmp = self.runs.join(format!(
+            ".tmp-{digits}-{}-{}",
+            std::process::id(),
+            TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        if tmp.exists() {
+            fs::remove_dir_all(&tmp)?;
+        }
+        fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
+        let t0 = Instant::now();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.max(1))
+            .build()
+            .context("cannot start worker threads")?;
+        let opts = RunOptions {
+            out_dir: tmp.clone(),
+            progress: false,
+            ..RunOptions::default()
+        };
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            pool.install(|| run_scene(&job.scene, &opts).map(|_| ()))
+        }));
+        let error = match outcome {
+            Ok(Ok(())) => None,
+            Ok(Err(e)) => Some(format!("{e:#}")),
+            Err(panic) => Some(format!(
+                "panic: {}",
+                panic
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_else(|| "(no message)".into())
+            )),
+        };
+        let summary = fs::read_to_string(tmp.join("summary.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
+        let observables = summary
+            .as_ref()
+            .map(Observables::from_summary)
+            .unwrap_or_default();
+        let record = Record {
+            format: STUDY_FORMAT_VERSION,
+            fingerprint: job.fingerprint.clone(),
+            study: job.study.clone(),
+            tier: job.tier.clone(),
+            params: job.params.clone(),
+            status: if error.is_none() {
+                RunStatus::Completed
+            } else {
+                RunStatus::Failed
+            },
+            error,
+            observables,
+            wall_seconds: t0.elapsed().as_secs_f64(),
+            threads: threads.max(1),
+            engine_version: ENGINE_VERSION.to_string(),
+        };
+        write_atomic_bytes(
+            &tmp.join("record.json"),
+            serde_json::to_string_pretty(&record)?.as_bytes(),
+        )?;
+        sync_dir(&tmp);
+        self.install(&tmp, &job.fingerprint)?;
+        Ok(record)
+    }
+
+    /// Moves a finished temporary directory to its final name, replacing a failed run's.
+    fn install(&self, tmp: &Path, fingerprint: &str) -> Result<()> {
+        let dest = self.dir(fingerprint);
+        if dest.exists() {
+            match self.lookup(fingerprint) {
+                // Another process finished the same run first: keep its result.
+                Ok(Some(r)) if r.status == RunStatus::Completed => {
+                    fs::remove_dir_all(tmp)?;
+                    return Ok(());
+                }
+                Ok(_) => {}
+                Err(e) => return Err(e),
+            }
+            let old = self.runs.join(format!(
+                ".old-{}-{}-{}",
+                &fingerprint[..DIR_DIGITS.min(fingerprint.len())],
+                std::process::id(),
+                TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+            ));
+            fs::rename(&dest, &old)
+                .with_context(|| format!("cannot move {} aside", dest.display()))?;
+            fs::rename(tmp, &dest)
+                .with_context(|| format!("cannot move {} into place", dest.display()))?;
+            sync_dir(&self.runs);
+            fs::remove_dir_all(&old)?;
+        } else {
+            fs::rename(tmp, &dest)
+                .map_err(|e| anyhow!("cannot move {} to {}: {e}", tmp.display(), dest.display()))?;
+            sync_dir(&self.runs);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn observables_read_flat_and_nested_cloud_blocks() {
+        let flat = serde_json::json!({
+            "particles": 2000, "bonds_initial": 100, "bonds_broken": 25,
+            "energy": {"relative_drift": 1e-6},
+            "cloud": {"fragmentation": 0.5, "n_part": 10, "length_ratio": 1.2,
+                      "front_velocity_ratio": 1.01}
+        });
+        let o = Observables::from_summary(&flat);
+        assert_eq!(o.fragmentation, Some(0.5));
+        assert_eq!(o.n_part, Some(10.0));
+        assert_eq!(o.bonds_broken_fraction, Some(0.25));
+        assert_eq!(o.energy_relative_drift, Some(1e-6));
+        assert_eq!(o.get("front_velocity_ratio"), Some(1.01));
+        let nested = serde_json::json!({"cloud": {"measurement": {"fragmentation": 0.7},
+                                                  "front_velocity_ratio": 0.9}});
+        let o = Observables::from_summary(&nested);
+        assert_eq!(o.fragmentation, Some(0.7));
+        assert_eq!(o.front_velocity_ratio, Some(0.9));
+        let none = Observables::from_summary(&serde_json::json!({"cloud": null}));
+        assert_eq!(none.fragmentation, None);
+        for name in OBSERVABLE_NAMES {
+            assert_eq!(none.get(name), None, "{name}");
+        }
+    }
+}

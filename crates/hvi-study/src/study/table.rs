@@ -1,0 +1,143 @@
+//! The results table of a study: one row per run with its parameters, status, observables
+//! and scores, written as `results.csv` and `results.json` (an array of objects whose keys
+//! are the CSV's columns, in the same order).
+
+use std::path::Path;
+
+use anyhow::Result;
+use serde_json::Value;
+
+use super::plan::Plan;
+use super::store::{Record, RunStatus, OBSERVABLE_NAMES};
+use crate::output::write_atomic;
+
+/// A table: named columns, rows of JSON values (null where there is nothing).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Table {
+    /// Column names.
+    pub columns: Vec<String>,
+    /// Rows, each as long as `columns`.
+    pub rows: Vec<Vec<Value>>,
+}
+
+impl Table {
+    /// The column's index.
+    pub fn column(&self, name: &str) -> Option<usize> {
+        self.columns.iter().position(|c| c == name)
+    }
+
+    /// Adds a column with one value per row.
+    pub fn push_column(&mut self, name: &str, values: Vec<Value>) {
+        debug_assert_eq!(values.len(), self.rows.len());
+        self.columns.push(name.to_string());
+        for (row, v) in self.rows.iter_mut().zip(values) {
+            row.push(v);
+        }
+    }
+
+    /// Writes `<stem>.csv` and `<stem>.json` into `dir`, atomically.
+    pub fn write(&self, dir: &Path, stem: &str) -> Result<()> {
+        write_atomic(&dir.join(format!("{stem}.csv")), |w| {
+            let mut csv = csv::Writer::from_writer(w);
+            csv.write_record(&self.columns)?;
+            for row in &self.rows {
+                csv.write_record(row.iter().map(cell))?;
+            }
+            csv.flush()?;
+            Ok(())
+        })?;
+        write_atomic(&dir.join(format!("{stem}.json")), |w| {
+            writeln!(w, "[")?;
+            for (i, row) in self.rows.iter().enumerate() {
+                let fields: Vec<String> = self
+                    .columns
+                    .iter()
+                    .zip(row)
+                    .map(|(c, v)| format!("{}: {}", Value::String(c.clone()), v))
+                    .collect();
+                let sep = if i + 1 < self.rows.len() { "," } else { "" };
+                writeln!(w, "  {{{}}}{sep}", fields.join(", "))?;
+            }
+            writeln!(w, "]")?;
+            Ok(())
+        })
+    }
+}
+
+/// A JSON value as a CSV cell: numbers and strings as they are, null as empty.
+fn cell(v: &Value) -> String {
+    match v {
+        Value::Null => String::new(),
+        Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+fn num(x: Option<f64>) -> Value {
+    x.filter(|v| v.is_finite())
+        .map_or(Value::Null, |v| serde_json::json!(v))
+}
+
+/// The table of a plan's runs with their records (a missing record gives status `missing`).
+pub fn results_table(plan: &Plan, records: &[Option<Record>]) -> Table {
+    let mut columns = vec!["index".to_string()];
+    columns.extend(plan.axes.iter().map(|a| a.key.clone()));
+    columns.extend(["status", "fingerprint", "dir"].map(String::from));
+    columns.extend(OBSERVABLE_NAMES.iter().map(|s| s.to_string()));
+    columns.extend(["wall_seconds", "error"].map(String::from));
+    let rows = plan
+        .runs
+        .iter()
+        .zip(records)
+        .map(|(run, rec)| {
+            let mut row = vec![serde_json::json!(run.index)];
+            row.extend(run.values.iter().cloned());
+            let status = match rec {
+                Some(r) if r.status == RunStatus::Completed => "completed",
+                Some(_) => "failed",
+                None => "missing",
+            };
+            row.push(Value::String(status.into()));
+            row.push(Value::String(run.fingerprint.clone()));
+            row.push(Value::String(run.dir.clone()));
+            for name in OBSERVABLE_NAMES {
+                row.push(num(rec.as_ref().and_then(|r| r.observables.get(name))));
+            }
+            row.push(num(rec.as_ref().map(|r| r.wall_seconds)));
+            row.push(
+                rec.as_ref()
+                    .and_then(|r| r.error.clone())
+                    .map_or(Value::Null, Value::String),
+            );
+            row
+        })
+        .collect();
+    Table { columns, rows }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_csv_and_json_with_the_same_columns() {
+        let mut t = Table {
+            columns: vec!["a".into(), "b".into()],
+            rows: vec![
+                vec![serde_json::json!(1.5), Value::Null],
+                vec![serde_json::json!("x,y"), serde_json::json!(2)],
+            ],
+        };
+        t.push_column("c", vec![serde_json::json!(true), Value::Null]);
+        let dir = std::env::temp_dir().join(format!("hvi-table-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        t.write(&dir, "results").expect("writes");
+        let csv = std::fs::read_to_string(dir.join("results.csv")).expect("csv");
+        assert_eq!(csv, "a,b,c\n1.5,,true\n\"x,y\",2,\n");
+        let json: Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).expect("json"))
+                .expect("valid json");
+        assert_eq!(json[1]["a"], "x,y");
+        assert_eq!(json[0]["c"], true);
+    }
+}

@@ -1,0 +1,391 @@
+//! End-to-end tests of the study runner (`hvi-study plan`, `sweep`, `run-unit`) on tiny
+//! studies: plan validation, caching by fingerprint, resuming after SIGKILL, invalidation of
+//! only the runs a change affects, failed runs recorded without stopping the study.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_hvi-study"))
+}
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .expect("repo")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("hvi-study-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+/// A study over the default scene with the given axes and quick tier; returns its path.
+fn write_study(dir: &Path, name: &str, axes: &str, tier_set: &str) -> PathBuf {
+    let scene = repo().join("studies/scenes/default.toml");
+    let text = format!(
+        "[study]\nname = \"{name}\"\nscene = \"{}\"\n\n{axes}\n[tiers.quick]\nset = [{tier_set}]\n",
+        scene.display()
+    );
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, text).expect("study file");
+    path
+}
+
+/// Tiny runs: 400 particles, 2 us after first contact (a fraction of a second each).
+const TINY: &str = "\"resolution.particles=400\", \"run.end_time_s=2e-6\"";
+
+fn sweep(study: &Path, out: &Path, extra: &[&str]) -> Output {
+    bin()
+        .arg("sweep")
+        .arg(study)
+        .arg("--out")
+        .arg(out)
+        .args(["--threads", "2"])
+        .args(extra)
+        .output()
+        .expect("runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn assert_ok(o: &Output) {
+    assert!(o.status.success(), "exit {:?}\n{}", o.status, stderr(o));
+}
+
+/// The `runs: N total, C cached, R ran, F failed` line's numbers.
+fn counts(o: &Output) -> (usize, usize, usize, usize) {
+    let err = stderr(o);
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("runs: "))
+        .unwrap_or_else(|| panic!("no summary line in\n{err}"));
+    let nums: Vec<usize> = line
+        .split(|c: char| !c.is_ascii_digit() && c != '.')
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    (nums[0], nums[1], nums[2], nums[3])
+}
+
+/// Completed run directories (name -> record.json bytes and modification time).
+fn records(out: &Path) -> Vec<(String, Vec<u8>, std::time::SystemTime)> {
+    let mut v: Vec<_> = std::fs::read_dir(out.join("runs"))
+        .map(|rd| {
+            rd.filter_map(|e| e.ok())
+                .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
+                .filter_map(|e| {
+                    let p = e.path().join("record.json");
+                    let bytes = std::fs::read(&p).ok()?;
+                    let mtime = std::fs::metadata(&p).ok()?.modified().ok()?;
+                    Some((e.file_name().to_string_lossy().into_owned(), bytes, mtime))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+fn results(out: &Path) -> Vec<serde_json::Value> {
+    let text = std::fs::read_to_string(out.join("results.json")).expect("results.json");
+    serde_json::from_str::<Vec<serde_json::Value>>(&text).expect("results.json parses")
+}
+
+const GRID_2X2: &str = "[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01, 0.1]\n\n[[axes]]\nkey = \"material.kappa_n_m\"\nvalues = [2.28e6, 4.56e6]\n";
+
+#[test]
+fn plan_rejects_bad_studies_before_running_anything() {
+    let dir = scratch("bad");
+    let cases: [(&str, &str, &str); 7] = [
+        (
+            "[[axes]]\nkey = \"material.epsilon\"\nvalues = [0.01]\n",
+            TINY,
+            "epsilon",
+        ),
+        (
+            "[[axes]]\nkey = \"material.eps_j\"\nvalues = []\n",
+            TINY,
+            "material.eps_j",
+        ),
+        (
+            "[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01, -1.0]\n",
+            TINY,
+            "material.eps_j",
+        ),
+        (
+            "[[axes]]\nkey = \"material.rcut_over_sigma\"\nvalues = [1.5, 1.0]\n",
+            TINY,
+            "material.rcut_over_sigma",
+        ),
+        (
+            "[[axes]]\nkey = \"scene.v0_m_s\"\nrange = { from = 1000, to = 2000, count = 0 }\n",
+            TINY,
+            "scene.v0_m_s",
+        ),
+        (GRID_2X2, "\"run.end_time=1e-6\"", "end_time"),
+        (
+            GRID_2X2,
+            "\"resolution.particles=-5\"",
+            "resolution.particles",
+        ),
+    ];
+    for (k, (axes, tier, needle)) in cases.iter().enumerate() {
+        let study = write_study(&dir, &format!("bad{k}"), axes, tier);
+        let out = dir.join(format!("out{k}"));
+        let o = sweep(&study, &out, &[]);
+        assert_eq!(o.status.code(), Some(2), "case {k}: {}", stderr(&o));
+        assert!(
+            stderr(&o).contains(needle),
+            "case {k}: error does not name `{needle}`:\n{}",
+            stderr(&o)
+        );
+        assert!(
+            !out.join("runs").exists(),
+            "case {k}: something ran before the plan was valid"
+        );
+    }
+    // An axis key may not also be a fixed override.
+    let study = write_study(&dir, "clash", GRID_2X2, TINY);
+    let o = sweep(&study, &dir.join("clash"), &["--set", "material.eps_j=1"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("material.eps_j"), "{}", stderr(&o));
+    // An unknown tier lists the study's tiers.
+    let o = sweep(&study, &dir.join("tier"), &["--tier", "huge"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("quick"), "{}", stderr(&o));
+}
+
+#[test]
+fn running_again_does_no_new_simulation() {
+    let dir = scratch("again");
+    let study = write_study(&dir, "again", GRID_2X2, TINY);
+    let out = dir.join("out");
+    let first = sweep(&study, &out, &[]);
+    assert_ok(&first);
+    assert_eq!(counts(&first), (4, 0, 4, 0), "{}", stderr(&first));
+    let before = records(&out);
+    assert_eq!(before.len(), 4);
+    let rows = results(&out);
+    assert_eq!(rows.len(), 4);
+    for r in &rows {
+        assert_eq!(r["status"], "completed", "{r}");
+        assert!(r["particles"].as_f64().is_some(), "{r}");
+    }
+    assert!(std::fs::read_to_string(out.join("results.csv"))
+        .expect("csv")
+        .starts_with("index,material.eps_j,material.kappa_n_m,status,fingerprint"));
+
+    let second = sweep(&study, &out, &[]);
+    assert_ok(&second);
+    assert_eq!(counts(&second), (4, 4, 0, 0), "{}", stderr(&second));
+    assert_eq!(records(&out), before, "a cached run was rewritten");
+    assert_eq!(results(&out), rows);
+}
+
+#[test]
+fn changed_parameter_invalidates_only_the_affected_runs() {
+    let dir = scratch("change");
+    let study = write_study(&dir, "change", GRID_2X2, TINY);
+    let out = dir.join("out");
+    assert_ok(&sweep(&study, &out, &[]));
+    // One eps value changes: the two runs at eps = 0.01 are kept, two new ones run.
+    let changed = GRID_2X2.replace("[0.01, 0.1]", "[0.01, 0.3]");
+    let study = write_study(&dir, "change", &changed, TINY);
+    let o = sweep(&study, &out, &[]);
+    assert_ok(&o);
+    assert_eq!(counts(&o), (4, 2, 2, 0), "{}", stderr(&o));
+    // A change every run sees (the seed) invalidates all of them.
+    let o = sweep(&study, &out, &["--set", "run.seed=2"]);
+    assert_ok(&o);
+    assert_eq!(counts(&o), (4, 0, 4, 0), "{}", stderr(&o));
+    // ...and going back finds the earlier results again.
+    let o = sweep(&study, &out, &[]);
+    assert_ok(&o);
+    assert_eq!(counts(&o), (4, 4, 0, 0), "{}", stderr(&o));
+}
+
+#[test]
+fn a_study_killed_mid_way_resumes_without_loss() {
+    let dir = scratch("kill");
+    // Six runs of about a second each, one at a time.
+    let study = write_study(
+        &dir,
+        "kill",
+        "[[axes]]\nkey = \"run.seed\"\nvalues = [1, 2, 3, 4, 5, 6]\n",
+        "\"resolution.particles=1500\", \"run.end_time_s=6e-6\"",
+    );
+    let out = dir.join("out");
+    let mut child = bin()
+        .arg("sweep")
+        .arg(&study)
+        .arg("--out")
+        .arg(&out)
+        .args(["--threads", "1", "--quiet"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("spawns");
+    let t0 = Instant::now();
+    while records(&out).is_empty() {
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "no run finished in 2 min"
+        );
+        if let Some(status) = child.try_wait().expect("wait") {
+            panic!("the study ended before it could be killed: {status}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().expect("SIGKILL"); // Child::kill is SIGKILL on Unix
+    child.wait().expect("reaped");
+    let survived = records(&out);
+    assert!(
+        !survived.is_empty() && survived.len() < 6,
+        "{}",
+        survived.len()
+    );
+
+    let o = sweep(&study, &out, &[]);
+    assert_ok(&o);
+    let (total, cached, ran, failed) = counts(&o);
+    assert_eq!((total, failed), (6, 0), "{}", stderr(&o));
+    assert_eq!(cached, survived.len(), "{}", stderr(&o));
+    assert_eq!(ran, 6 - survived.len(), "{}", stderr(&o));
+    let after = records(&out);
+    assert_eq!(after.len(), 6);
+    for s in &survived {
+        assert!(after.contains(s), "run {} was redone or changed", s.0);
+    }
+    let leftovers: Vec<_> = std::fs::read_dir(out.join("runs"))
+        .expect("runs")
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(
+        leftovers.is_empty(),
+        "temporary directories left: {leftovers:?}"
+    );
+    for r in results(&out) {
+        assert_eq!(r["status"], "completed", "{r}");
+    }
+}
+
+#[test]
+fn a_failed_run_is_recorded_and_the_study_goes_on() {
+    let dir = scratch("fail");
+    // A ledger tolerance of 1e-14 trips at the first energy sample: that run is "unstable".
+    let study = write_study(
+        &dir,
+        "fail",
+        "[[axes]]\nkey = \"run.max_energy_drift\"\nvalues = [0.05, 1e-14]\n",
+        TINY,
+    );
+    let out = dir.join("out");
+    let o = sweep(&study, &out, &[]);
+    assert_ok(&o);
+    assert_eq!(counts(&o), (2, 0, 2, 1), "{}", stderr(&o));
+    let rows = results(&out);
+    assert_eq!(rows[0]["status"], "completed");
+    assert_eq!(rows[1]["status"], "failed");
+    assert!(
+        rows[1]["error"].as_str().unwrap_or("").contains("energy"),
+        "{}",
+        rows[1]
+    );
+    let summary = std::fs::read_to_string(
+        out.join(rows[1]["dir"].as_str().expect("dir"))
+            .join("summary.json"),
+    )
+    .expect("the failed run keeps its summary");
+    assert!(summary.contains("\"unstable\""));
+    // Failed runs are tried again; completed ones are not.
+    let o = sweep(&study, &out, &[]);
+    assert_eq!(counts(&o), (2, 1, 1, 1), "{}", stderr(&o));
+}
+
+#[test]
+fn run_unit_executes_one_run_of_a_plan() {
+    let dir = scratch("unit");
+    let study = write_study(&dir, "unit", GRID_2X2, TINY);
+    let out = dir.join("out");
+    let o = bin()
+        .arg("plan")
+        .arg(&study)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert_ok(&o);
+    let plan = out.join("plan.json");
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&plan).expect("plan")).expect("json");
+    assert_eq!(doc["runs"].as_array().map(Vec::len), Some(4));
+    assert!(!out.join("runs").read_dir().expect("runs").any(|_| true));
+
+    let o = bin()
+        .args(["run-unit"])
+        .arg(&plan)
+        .args(["2", "--threads", "1"])
+        .output()
+        .expect("runs");
+    assert_ok(&o);
+    let run_dir = PathBuf::from(String::from_utf8_lossy(&o.stdout).trim());
+    assert!(run_dir.join("record.json").exists());
+    assert!(run_dir.join("summary.json").exists());
+    assert_eq!(
+        run_dir
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned()),
+        doc["runs"][2]["dir"]
+            .as_str()
+            .and_then(|d| d.strip_prefix("runs/"))
+            .map(String::from)
+    );
+    let o = bin()
+        .args(["run-unit"])
+        .arg(&plan)
+        .arg("4")
+        .output()
+        .expect("runs");
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("0..=3"), "{}", stderr(&o));
+    // The sweep finds the run-unit's result.
+    let o = sweep(&study, &out, &[]);
+    assert_eq!(counts(&o), (4, 1, 3, 0), "{}", stderr(&o));
+}
+
+#[test]
+fn results_of_different_studies_never_mix() {
+    let dir = scratch("mix");
+    let a = write_study(&dir, "alpha", GRID_2X2, TINY);
+    let b = write_study(&dir, "beta", GRID_2X2, TINY);
+    let out = dir.join("out");
+    let o = bin()
+        .arg("plan")
+        .arg(&a)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert_ok(&o);
+    let o = sweep(&b, &out, &[]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("alpha"), "{}", stderr(&o));
+    // A run directory whose record names another fingerprint is refused, not reused.
+    let o = sweep(&a, &out, &[]);
+    assert_ok(&o);
+    let rows = results(&out);
+    let d0 = out.join(rows[0]["dir"].as_str().expect("dir"));
+    let d1 = out.join(rows[1]["dir"].as_str().expect("dir"));
+    std::fs::copy(d1.join("record.json"), d0.join("record.json")).expect("tamper");
+    let o = sweep(&a, &out, &[]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("refusing to mix"), "{}", stderr(&o));
+}
