@@ -2,7 +2,7 @@
 //! thread counts, with a check that every thread count gives bit-identical physics.
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use hvi_engine::scene::SceneSpec;
@@ -41,11 +41,7 @@ pub struct BenchRow {
 }
 
 /// Runs `spec` once per thread count; fails if the physics differs between thread counts.
-pub fn bench(
-    spec: &SceneSpec,
-    threads: &[usize],
-    out: &PathBuf,
-) -> Result<(Vec<BenchRow>, String)> {
+pub fn bench(spec: &SceneSpec, threads: &[usize], out: &Path) -> Result<(Vec<BenchRow>, String)> {
     if threads.is_empty() || threads.contains(&0) {
         bail!("invalid value for `--threads`: {threads:?} (allowed: a list of integers >= 1, e.g. 1,2)");
     }
