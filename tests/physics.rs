@@ -3,7 +3,9 @@
 
 use glam::DVec3;
 use hvi_engine::potential::{ContactForm, Interaction};
-use hvi_engine::scene::{Derived, Geometry, Material, Resolution, RunSettings, SceneSpec};
+use hvi_engine::scene::{
+    Analysis, Derived, Geometry, Material, Resolution, RunSettings, SceneSpec,
+};
 use hvi_engine::sim::{Energy, Simulation};
 use hvi_engine::state::{Body, Particles, BONDS_PER_PARTICLE, NO_BOND};
 use hvi_engine::{paper, EngineError};
@@ -27,6 +29,7 @@ fn sphere_scene(particles: f64, end_time_s: f64) -> SceneSpec {
             end_time_s,
             ..RunSettings::default()
         },
+        analysis: Analysis::default(),
     }
 }
 
@@ -132,6 +135,7 @@ fn flyer_curves(particles: f64, sizing: bool) -> Vec<(f64, f64, f64)> {
             energy_every: 10,
             ..RunSettings::default()
         },
+        analysis: Analysis::default(),
     };
     let mut sim = Simulation::new(spec.build().expect("valid")).expect("starts");
     let mut out = Vec::new();

@@ -7,7 +7,7 @@
 //! velocity Verlet. The crate knows nothing of files, plots or command lines.
 //!
 //! ```
-//! use hvi_engine::scene::{Geometry, Material, Resolution, RunSettings, SceneSpec};
+//! use hvi_engine::scene::{Analysis, Geometry, Material, Resolution, RunSettings, SceneSpec};
 //! use hvi_engine::sim::Simulation;
 //!
 //! let spec = SceneSpec {
@@ -18,6 +18,7 @@
 //!     resolution: Resolution { particles: Some(2000.0), particles_across_d: None },
 //!     material: Material::default(),
 //!     run: RunSettings { end_time_s: 1e-7, ..RunSettings::default() },
+//!     analysis: Analysis::default(),
 //! };
 //! let setup = spec.build().expect("valid scene");
 //! let mut sim = Simulation::new(setup).expect("stable start");
@@ -27,6 +28,7 @@
 //! assert!(drift.abs() < 1e-3);
 //! ```
 
+pub mod cloud;
 pub mod error;
 pub mod neighbour;
 pub mod paper;

@@ -1,7 +1,7 @@
 //! Scene description (what a scene file says) and its validation into a ready-to-run setup.
 //!
 //! The spec types mirror the TOML scene files one to one (`[scene]`, `[resolution]`,
-//! `[material]`, `[run]`); their keys are the keys `hvi-study run --set` accepts.
+//! `[material]`, `[run]`, `[analysis]`); their keys are the keys `hvi-study run --set` accepts.
 //! [`SceneSpec::build`] validates every value (naming the key and the allowed range on error)
 //! and lays out the particles: simple cubic lattice at r_eq, nearest-neighbour bonds inside each
 //! body, mass m = M/N per body (eq. 20), seeded Maxwell-Boltzmann thermal velocities.
@@ -28,6 +28,9 @@ pub struct SceneSpec {
     /// Time integration and safety settings.
     #[serde(default)]
     pub run: RunSettings,
+    /// What to measure of the debris cloud, and when (definitions in [`crate::cloud`]).
+    #[serde(default)]
+    pub analysis: Analysis,
 }
 
 fn default_density() -> f64 {
@@ -217,7 +220,6 @@ impl<'de> Deserialize<'de> for TimeStep {
     }
 }
 
-
 /// Time integration and safety settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -258,6 +260,91 @@ impl Default for RunSettings {
     }
 }
 
+/// What a run measures of the debris cloud, and when. The observables themselves are defined in
+/// [`crate::cloud`] (MODEL.md section 5); these keys only choose the quantile, the times and
+/// how often. Only what is asked for is computed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Analysis {
+    /// Measure the cloud at the end of the run (the analysis time): fragments, N_part, N_frag,
+    /// F, La, Lr, R, fragment sizes, and the front velocity va from the two front times.
+    pub cloud: bool,
+    /// Quantile of the cloud particles' axial and radial positions that defines the front and
+    /// the radial extent (so that a few stray particles do not decide La and Lr), in [0.5, 1];
+    /// 1 is the plain maximum (always reported as well).
+    pub quantile: f64,
+    /// The two times since first contact at which the front is located for va, s, with
+    /// 0 <= t1 < t2 <= `run.end_time_s`. When not given: the experiment's 28 and 32 us if the
+    /// run reaches 32 us, else 7/8 of the end time and the end time
+    /// ([`Analysis::front_times_s`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub front_times_s: Option<[f64; 2]>,
+    /// Steps between samples of the cloud track (front, La, Lr over time; one fragment
+    /// labelling each, about the cost of one step); 0 turns the track off.
+    pub track_every: u64,
+    /// Times since first contact of the rendered 3-D series (`hvi-study run --render`, Fig. 12),
+    /// s; times beyond the end of the run are skipped.
+    pub render_times_s: Vec<f64>,
+}
+
+impl Default for Analysis {
+    fn default() -> Self {
+        Analysis {
+            cloud: true,
+            quantile: crate::cloud::DEFAULT_QUANTILE,
+            front_times_s: None,
+            track_every: 100,
+            render_times_s: paper::FIG12_TIMES_S.to_vec(),
+        }
+    }
+}
+
+impl Analysis {
+    /// The two front times for va, s since first contact, for a run that ends at `end_time_s`:
+    /// the given ones, or the experiment's (28, 32) us when the run reaches 32 us, or else
+    /// (7/8 T, T) with T the end time (the same ratio, so a short run still measures a speed).
+    pub fn front_times_s(&self, end_time_s: f64) -> [f64; 2] {
+        match self.front_times_s {
+            Some(t) => t,
+            None => {
+                let [t1, t2] = crate::cloud::DEFAULT_FRONT_TIMES_S;
+                if end_time_s >= t2 {
+                    [t1, t2]
+                } else {
+                    [t1 / t2 * end_time_s, end_time_s]
+                }
+            }
+        }
+    }
+
+    /// Checks every value against its allowed range, naming the key.
+    pub fn validate(&self, end_time_s: f64) -> Result<()> {
+        check_range("analysis.quantile", self.quantile, 0.5, false, 1.0, false)?;
+        if let Some([t1, t2]) = self.front_times_s {
+            let ok = t1.is_finite() && t2.is_finite() && 0.0 <= t1 && t1 < t2 && t2 <= end_time_s;
+            if !ok {
+                return Err(EngineError::invalid(
+                    "analysis.front_times_s",
+                    format!("[{t1:e}, {t2:e}]"),
+                    format!(
+                        "two times since first contact in s with 0 <= t1 < t2 <= run.end_time_s                          = {end_time_s:e}"
+                    ),
+                ));
+            }
+        }
+        for &t in &self.render_times_s {
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(EngineError::invalid(
+                    "analysis.render_times_s",
+                    t,
+                    "times since first contact in s, each finite and >= 0",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Numbers derived from a scene that every run prints (and the summary records).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Derived {
@@ -281,6 +368,8 @@ pub struct Derived {
     pub mass_impactor_kg: f64,
     /// Particle mass of the target plate, kg.
     pub mass_target_kg: f64,
+    /// Density of both bodies, kg/m^3 (a particle stands for the volume mass / density).
+    pub density_kg_m3: f64,
     /// Time step, s.
     pub dt_s: f64,
     /// Largest step the validation accepts, s.
@@ -299,7 +388,8 @@ pub struct Derived {
 
 impl Derived {
     /// Derived numbers for a hand-made particle set (tests and tools): the interaction's
-    /// constants, the given step, and zeros for the scene geometry.
+    /// constants, the given step, the lattice's density mass / r_eq^3, and zeros for the
+    /// scene geometry.
     pub fn for_interaction(ia: &Interaction, dt_s: f64, mass_kg: f64, steps: u64) -> Derived {
         Derived {
             sigma_m: ia.sigma_m,
@@ -312,6 +402,7 @@ impl Derived {
             rcut_m: ia.rcut_m,
             mass_impactor_kg: mass_kg,
             mass_target_kg: mass_kg,
+            density_kg_m3: mass_kg / ia.r_eq_m.powi(3),
             dt_s,
             dt_max_s: f64::INFINITY,
             v0_m_s: 0.0,
@@ -552,6 +643,7 @@ impl SceneSpec {
             1.0,
             true,
         )?;
+        self.analysis.validate(run.end_time_s)?;
         let stiffness = kappa.max(interaction.contact_stiffness_at_r_eq());
         let dt_max = (MAX_STEP_DISPLACEMENT_OVER_SIGMA * sigma / v0)
             .min(MAX_STEP_OVER_SQRT_M_K * (mass_imp.min(mass_tgt) / stiffness).sqrt());
@@ -613,6 +705,7 @@ impl SceneSpec {
             rcut_m: interaction.rcut_m,
             mass_impactor_kg: mass_imp,
             mass_target_kg: mass_tgt,
+            density_kg_m3: density,
             dt_s: dt,
             dt_max_s: dt_max,
             v0_m_s: v0,

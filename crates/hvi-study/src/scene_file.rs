@@ -1,5 +1,5 @@
-//! Scene files: TOML with `[scene]`, `[resolution]`, `[material]`, `[run]`, plus `--set`
-//! overrides `section.key=value`. Parsing and overriding happen here; every value check is the
+//! Scene files: TOML with `[scene]`, `[resolution]`, `[material]`, `[run]`, `[analysis]`,
+//! plus `--set` overrides `section.key=value`. Parsing and overriding happen here; every value check is the
 //! engine's (`SceneSpec::build`), so there is one place that knows the allowed ranges.
 
 use std::path::Path;
@@ -8,7 +8,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use hvi_engine::scene::SceneSpec;
 
 /// The sections a scene file may have.
-pub const SECTIONS: [&str; 4] = ["scene", "resolution", "material", "run"];
+pub const SECTIONS: [&str; 5] = ["scene", "resolution", "material", "run", "analysis"];
 
 /// Parses one `--set` right-hand side as a TOML value; bare words become strings.
 fn parse_value(raw: &str) -> toml::Value {

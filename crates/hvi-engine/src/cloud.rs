@@ -1,0 +1,886 @@
+//! The debris cloud and its observables (MODEL.md section 5): the one place that defines them.
+//!
+//! Every number a run reports about the cloud, every plot of it and every score compares is
+//! computed here; the study crate calls these functions and never re-derives a definition.
+//!
+//! # Definitions
+//!
+//! - **Fragment**: a connected set of particles under intact bonds; a lone particle is a
+//!   fragment. Its *label* is the smallest particle id in it, so labels depend neither on the
+//!   thread count nor on the storage order (which changes at every neighbour build).
+//! - **Residual plate**: the fragment(s) holding at least one particle of the target plate's
+//!   outer rim at t = 0 (`Simulation::rim_ids`).
+//! - **Debris cloud** at time tau: the particles whose centre lies beyond the plate's original
+//!   rear face (z > `plate_rear_z_m`) and that are not in the residual plate.
+//! - **N_part**, **N_frag**: the cloud's particles, and the distinct fragments among them. A
+//!   fragment that straddles the rear face counts with its cloud part only, so the cloud's mass
+//!   is exactly the sum of its fragments' masses; how many fragments straddle is reported
+//!   (`fragments_crossing_rear_face`, normally 0 once the cloud has left the plate).
+//! - **Fragmentation** F = N_frag / N_part (eq. 21): 1 when every cloud particle is alone.
+//! - **Front** z_f: the `quantile` (default 99.5 %) of the cloud particles' z. **Axial length**
+//!   La = z_f - `plate_rear_z_m`. **Radial length** Lr: twice the same quantile of the
+//!   particles' distance from the impact axis x = y = 0 (the full width). **R** = La / Lr. The
+//!   plain maxima (quantile 1) are reported beside them. Positions are particle centres.
+//!   Quantiles interpolate linearly between order statistics (numpy's default, Hyndman-Fan
+//!   type 7), see [`quantile`].
+//! - **Front velocity** va = (z_f(t2) - z_f(t1)) / (t2 - t1): the front located at two times,
+//!   as the experiment's pair of X-ray images does (default 28 and 32 us, see
+//!   [`crate::scene::Analysis::front_times_s`]); also va / v0.
+//! - **Fragment size**: particles; mass; volume-equivalent diameter d = (6 V / pi)^(1/3) with
+//!   V = mass / density. A particle stands for the volume mass / density, which is its body's
+//!   volume over the body's particle count (eq. 20): the impactor's and the plate's particles
+//!   differ slightly in mass, and this keeps every fragment's volume exact. A lone particle has
+//!   d of about 1.24 r_eq, the resolution floor of every size.
+//! - **Largest fragment**: the cloud fragment of largest mass (ties go to the smaller label);
+//!   its mass over the impactor's mass, and its d. **Mean fragment diameter**: mass-weighted,
+//!   sum m_f d_f / sum m_f over the cloud's fragments.
+//!
+//! # Cost
+//!
+//! Fragment labelling is a union-find over the intact bonds, O(N) and about the cost of one
+//! time step. It runs only when a measurement is due: at each sample of the cloud track
+//! (`analysis.track_every` steps), at the two front times, and once for the full measurement at
+//! the end of the run ([`CloudObserver`]). Sums are taken in particle-id order, so every result
+//! is bit-identical at any thread count and any storage order.
+
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+
+use crate::scene::{Analysis, Derived};
+use crate::sim::Simulation;
+use crate::state::{Body, Particles};
+
+/// Default quantile of the front and of the radial extent (MODEL.md section 5: "for instance
+/// 99.5 %").
+pub const DEFAULT_QUANTILE: f64 = 0.995;
+/// Default times since first contact at which the front is located for va, s (MODEL.md
+/// section 5: "for instance 28 and 32 us", like the experiment's X-ray pair).
+pub const DEFAULT_FRONT_TIMES_S: [f64; 2] = [28e-6, 32e-6];
+/// Fragments listed one by one in the summary (largest first).
+pub const LARGEST_FRAGMENTS_LISTED: usize = 10;
+
+/// The q-quantile of `values` by linear interpolation between order statistics (numpy's
+/// default): with the values sorted, x_(h) at h = (n - 1) q. `None` when empty. Reorders
+/// `values` (selection, O(n)); the result does not depend on their initial order.
+pub fn quantile(values: &mut [f64], q: f64) -> Option<f64> {
+    let n = values.len();
+    if n == 0 {
+        return None;
+    }
+    let h = (n - 1) as f64 * q.clamp(0.0, 1.0);
+    let lo = (h.floor() as usize).min(n - 1);
+    let (_, &mut x_lo, upper) = values.select_nth_unstable_by(lo, f64::total_cmp);
+    let frac = h - lo as f64;
+    if upper.is_empty() || frac == 0.0 {
+        return Some(x_lo);
+    }
+    let x_hi = upper.iter().copied().fold(f64::INFINITY, f64::min);
+    Some(x_lo + frac * (x_hi - x_lo))
+}
+
+/// Volume-equivalent diameter of a fragment of mass `mass_kg`: d = (6 m / (pi rho))^(1/3), m.
+pub fn equivalent_diameter_m(mass_kg: f64, density_kg_m3: f64) -> f64 {
+    (6.0 * mass_kg / (std::f64::consts::PI * density_kg_m3)).cbrt()
+}
+
+/// What the definitions need to know about a scene, fixed at t = 0.
+#[derive(Debug, Clone)]
+pub struct CloudReference {
+    /// z of the target plate's original rear face, m: the cloud lies beyond it.
+    pub plate_rear_z_m: f64,
+    /// Density of the material, kg/m^3 (a particle's volume is its mass over it).
+    pub density_kg_m3: f64,
+    /// The impactor's total mass, kg.
+    pub impactor_mass_kg: f64,
+    /// Impact velocity, m/s.
+    pub v0_m_s: f64,
+    /// Whether each id is on the plate's outer rim at t = 0.
+    rim_by_id: Vec<bool>,
+}
+
+impl CloudReference {
+    /// The reference of a particle set: `rim_ids` are the ids of the plate's outer rim.
+    pub fn new(particles: &Particles, derived: &Derived, rim_ids: &[u32]) -> Self {
+        let n = particles.len();
+        let mut rim_by_id = vec![false; n];
+        for &id in rim_ids {
+            if let Some(r) = rim_by_id.get_mut(id as usize) {
+                *r = true;
+            }
+        }
+        let impactor_mass_kg = ids_in_order(particles)
+            .filter(|&i| particles.body[i] == Body::Impactor)
+            .map(|i| particles.mass[i])
+            .sum();
+        CloudReference {
+            plate_rear_z_m: derived.plate_rear_z_m,
+            density_kg_m3: derived.density_kg_m3,
+            impactor_mass_kg,
+            v0_m_s: derived.v0_m_s,
+            rim_by_id,
+        }
+    }
+
+    /// The reference of a running simulation (its rim ids and derived numbers).
+    pub fn of(sim: &Simulation) -> Self {
+        Self::new(&sim.particles, &sim.derived, &sim.rim_ids)
+    }
+
+    /// True when particle `id` was on the plate's outer rim at t = 0.
+    pub fn is_rim(&self, id: u32) -> bool {
+        self.rim_by_id.get(id as usize).copied().unwrap_or(false)
+    }
+}
+
+/// Current indices in id order (ids are 0..n).
+fn ids_in_order(p: &Particles) -> impl Iterator<Item = usize> {
+    p.index_of_id().into_iter().map(|i| i as usize)
+}
+
+fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    // Path halving: every visited node skips to its grandparent.
+    while parent[x as usize] != x {
+        let grand = parent[parent[x as usize] as usize];
+        parent[x as usize] = grand;
+        x = grand;
+    }
+    x
+}
+
+/// Fragment labelling (union-find over intact bonds) with reusable buffers.
+#[derive(Debug, Clone, Default)]
+pub struct Labeller {
+    parent: Vec<u32>,
+    label_of_root: Vec<u32>,
+}
+
+impl Labeller {
+    /// Writes into `labels[i]` the fragment label of the particle at current index `i`: the
+    /// smallest id in its fragment.
+    pub fn label(&mut self, p: &Particles, labels: &mut Vec<u32>) {
+        let n = p.len();
+        self.parent.clear();
+        self.parent.extend(0..n as u32);
+        for (i, j) in p.intact_bond_pairs() {
+            let a = find(&mut self.parent, i as u32);
+            let b = find(&mut self.parent, j as u32);
+            if a != b {
+                let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+                self.parent[hi as usize] = lo;
+            }
+        }
+        self.label_of_root.clear();
+        self.label_of_root.resize(n, u32::MAX);
+        labels.clear();
+        for i in 0..n {
+            let r = find(&mut self.parent, i as u32) as usize;
+            self.label_of_root[r] = self.label_of_root[r].min(p.id[i]);
+            labels.push(r as u32);
+        }
+        for l in labels.iter_mut() {
+            *l = self.label_of_root[*l as usize];
+        }
+    }
+}
+
+/// Fragment labels of every particle, by current index (see [`Labeller::label`]).
+pub fn label_fragments(p: &Particles) -> Vec<u32> {
+    let mut labels = Vec::new();
+    Labeller::default().label(p, &mut labels);
+    labels
+}
+
+/// The debris cloud at one instant, by current index.
+#[derive(Debug, Clone, Default)]
+pub struct CloudMembers {
+    /// Fragment label of every particle (the smallest id in its fragment).
+    pub labels: Vec<u32>,
+    /// Whether each particle belongs to the residual plate.
+    pub in_residual_plate: Vec<bool>,
+    /// Whether each particle belongs to the debris cloud.
+    pub in_cloud: Vec<bool>,
+}
+
+impl CloudMembers {
+    /// Number of cloud particles, N_part.
+    pub fn n_part(&self) -> usize {
+        self.in_cloud.iter().filter(|&&c| c).count()
+    }
+}
+
+/// Finds the debris cloud (labels, residual plate, members) with reusable buffers.
+#[derive(Debug, Clone, Default)]
+pub struct CloudFinder {
+    labeller: Labeller,
+    residual_by_label: Vec<bool>,
+    members: CloudMembers,
+}
+
+impl CloudFinder {
+    /// Labels the fragments and marks the residual plate and the cloud.
+    pub fn find(&mut self, p: &Particles, reference: &CloudReference) -> &CloudMembers {
+        let n = p.len();
+        let m = &mut self.members;
+        self.labeller.label(p, &mut m.labels);
+        self.residual_by_label.clear();
+        self.residual_by_label.resize(n, false);
+        for i in 0..n {
+            if reference.is_rim(p.id[i]) {
+                self.residual_by_label[m.labels[i] as usize] = true;
+            }
+        }
+        m.in_residual_plate.clear();
+        m.in_residual_plate
+            .extend(m.labels.iter().map(|&l| self.residual_by_label[l as usize]));
+        m.in_cloud.clear();
+        m.in_cloud.extend(
+            p.pos
+                .iter()
+                .zip(&m.in_residual_plate)
+                .map(|(x, &plate)| x.z > reference.plate_rear_z_m && !plate),
+        );
+        &self.members
+    }
+}
+
+/// Finds the debris cloud of a particle set (see [`CloudFinder`]).
+pub fn find_cloud(p: &Particles, reference: &CloudReference) -> CloudMembers {
+    let mut f = CloudFinder::default();
+    f.find(p, reference);
+    f.members
+}
+
+/// The cloud's extent at one instant: front, La, Lr, R by the quantile and by the maximum.
+/// Lengths are `None` while the cloud is empty; ratios while Lr is 0.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct Extent {
+    /// Cloud particles, N_part.
+    pub n_part: usize,
+    /// Front z_f (quantile of z), m.
+    pub front_z_m: Option<f64>,
+    /// La = z_f - rear face, m.
+    pub length_axial_m: Option<f64>,
+    /// Lr = 2 x quantile of the distance from the axis, m.
+    pub length_radial_m: Option<f64>,
+    /// R = La / Lr.
+    pub length_ratio: Option<f64>,
+    /// Largest z, m.
+    pub front_z_max_m: Option<f64>,
+    /// Largest z - rear face, m.
+    pub length_axial_max_m: Option<f64>,
+    /// Twice the largest distance from the axis, m.
+    pub length_radial_max_m: Option<f64>,
+    /// La / Lr by the maxima.
+    pub length_ratio_max: Option<f64>,
+}
+
+/// The extent of the particles marked `in_cloud` (see the module's definitions).
+pub fn extent(p: &Particles, in_cloud: &[bool], plate_rear_z_m: f64, q: f64) -> Extent {
+    let mut z: Vec<f64> = Vec::new();
+    let mut rho: Vec<f64> = Vec::new();
+    for (x, _) in p.pos.iter().zip(in_cloud).filter(|(_, &c)| c) {
+        z.push(x.z);
+        rho.push(x.x.hypot(x.y));
+    }
+    let n_part = z.len();
+    let max = |v: &[f64]| v.iter().copied().reduce(f64::max);
+    let front_z_max_m = max(&z);
+    let rho_max = max(&rho);
+    let front_z_m = quantile(&mut z, q);
+    let rho_q = quantile(&mut rho, q);
+    let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
+        (Some(a), Some(b)) if b > 0.0 => Some(a / b),
+        _ => None,
+    };
+    let length_axial_m = front_z_m.map(|f| f - plate_rear_z_m);
+    let length_radial_m = rho_q.map(|r| 2.0 * r);
+    let length_axial_max_m = front_z_max_m.map(|f| f - plate_rear_z_m);
+    let length_radial_max_m = rho_max.map(|r| 2.0 * r);
+    Extent {
+        n_part,
+        front_z_m,
+        length_axial_m,
+        length_radial_m,
+        length_ratio: ratio(length_axial_m, length_radial_m),
+        front_z_max_m,
+        length_axial_max_m,
+        length_radial_max_m,
+        length_ratio_max: ratio(length_axial_max_m, length_radial_max_m),
+    }
+}
+
+/// Front velocity va from two front positions (m) at two times (s), m/s.
+pub fn front_velocity(t1_s: f64, front1_m: f64, t2_s: f64, front2_m: f64) -> Option<f64> {
+    (t2_s > t1_s).then(|| (front2_m - front1_m) / (t2_s - t1_s))
+}
+
+/// One fragment of the cloud (its cloud part, see the module's definitions).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Fragment {
+    /// Label: the smallest particle id in the fragment.
+    pub label: u32,
+    /// Particles.
+    pub particles: usize,
+    /// Of which impactor particles.
+    pub impactor_particles: usize,
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Volume-equivalent diameter, m.
+    pub diameter_m: f64,
+    /// Centre of mass, m.
+    pub centroid_m: [f64; 3],
+    /// Centre-of-mass velocity, m/s.
+    pub velocity_m_s: [f64; 3],
+}
+
+/// The full measurement of the cloud at one instant.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CloudMeasurement {
+    /// Simulated time of the measurement, s.
+    pub time_s: f64,
+    /// Time since first contact of the measurement, s.
+    pub tau_s: f64,
+    /// Quantile used for the front and the radial extent.
+    pub quantile: f64,
+    /// Cloud particles.
+    pub n_part: usize,
+    /// Distinct fragments among them.
+    pub n_frag: usize,
+    /// F = N_frag / N_part (eq. 21); `None` while the cloud is empty.
+    pub fragmentation: Option<f64>,
+    /// Front z_f, m.
+    pub front_z_m: Option<f64>,
+    /// La, m.
+    pub length_axial_m: Option<f64>,
+    /// Lr, m.
+    pub length_radial_m: Option<f64>,
+    /// R = La / Lr.
+    pub length_ratio: Option<f64>,
+    /// Largest z, m.
+    pub front_z_max_m: Option<f64>,
+    /// La by the maximum, m.
+    pub length_axial_max_m: Option<f64>,
+    /// Lr by the maximum, m.
+    pub length_radial_max_m: Option<f64>,
+    /// R by the maxima.
+    pub length_ratio_max: Option<f64>,
+    /// The cloud's mass, kg (the sum of its fragments' masses).
+    pub mass_kg: f64,
+    /// Share of the impactor's mass that is in the cloud.
+    pub impactor_mass_fraction_in_cloud: f64,
+    /// Mass of the largest fragment, kg.
+    pub largest_fragment_mass_kg: Option<f64>,
+    /// Mass of the largest fragment over the impactor's mass.
+    pub largest_fragment_mass_fraction: Option<f64>,
+    /// Volume-equivalent diameter of the largest fragment, m.
+    pub largest_fragment_diameter_m: Option<f64>,
+    /// Particles in the largest fragment.
+    pub largest_fragment_particles: usize,
+    /// Mass-weighted mean volume-equivalent diameter of the cloud's fragments, m.
+    pub mean_fragment_diameter_m: Option<f64>,
+    /// Volume-equivalent diameter of one particle (the resolution floor), m.
+    pub particle_diameter_m: f64,
+    /// Fragments with particles on both sides of the rear face (counted by their cloud part).
+    pub fragments_crossing_rear_face: usize,
+}
+
+/// A measurement and the fragments it counted (largest first).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CloudAnalysis {
+    /// The numbers.
+    pub measurement: CloudMeasurement,
+    /// Every cloud fragment, by decreasing mass (ties: smaller label first).
+    pub fragments: Vec<Fragment>,
+}
+
+/// Measures the cloud marked in `members` (see the module's definitions). Sums run in id order.
+pub fn measure(
+    p: &Particles,
+    members: &CloudMembers,
+    reference: &CloudReference,
+    q: f64,
+    time_s: f64,
+    tau_s: f64,
+) -> CloudAnalysis {
+    let n = p.len();
+    let rho = reference.density_kg_m3;
+    struct Acc {
+        label: u32,
+        particles: usize,
+        impactor: usize,
+        mass: f64,
+        moment: glam::DVec3,
+        momentum: glam::DVec3,
+        crossing: bool,
+    }
+    let mut slot_of_label = vec![u32::MAX; n];
+    let mut acc: Vec<Acc> = Vec::new();
+    let order: Vec<usize> = ids_in_order(p).collect();
+    for &i in &order {
+        if !members.in_cloud[i] {
+            continue;
+        }
+        let l = members.labels[i] as usize;
+        if slot_of_label[l] == u32::MAX {
+            slot_of_label[l] = acc.len() as u32;
+            acc.push(Acc {
+                label: l as u32,
+                particles: 0,
+                impactor: 0,
+                mass: 0.0,
+                moment: glam::DVec3::ZERO,
+                momentum: glam::DVec3::ZERO,
+                crossing: false,
+            });
+        }
+        let a = &mut acc[slot_of_label[l] as usize];
+        let m = p.mass[i];
+        a.particles += 1;
+        a.impactor += usize::from(p.body[i] == Body::Impactor);
+        a.mass += m;
+        a.moment += p.pos[i] * m;
+        a.momentum += p.vel[i] * m;
+    }
+    for i in 0..n {
+        let s = slot_of_label[members.labels[i] as usize];
+        if s != u32::MAX && !members.in_cloud[i] {
+            acc[s as usize].crossing = true;
+        }
+    }
+    let fragments_crossing_rear_face = acc.iter().filter(|a| a.crossing).count();
+    let mut fragments: Vec<Fragment> = acc
+        .into_iter()
+        .map(|a| Fragment {
+            label: a.label,
+            particles: a.particles,
+            impactor_particles: a.impactor,
+            mass_kg: a.mass,
+            diameter_m: equivalent_diameter_m(a.mass, rho),
+            centroid_m: (a.moment / a.mass).to_array(),
+            velocity_m_s: (a.momentum / a.mass).to_array(),
+        })
+        .collect();
+    fragments.sort_by(|a, b| b.mass_kg.total_cmp(&a.mass_kg).then(a.label.cmp(&b.label)));
+
+    let ext = extent(p, &members.in_cloud, reference.plate_rear_z_m, q);
+    let n_part = ext.n_part;
+    let n_frag = fragments.len();
+    let mass_kg: f64 = fragments.iter().map(|f| f.mass_kg).sum();
+    let impactor_in_cloud: f64 = order
+        .iter()
+        .filter(|&&i| members.in_cloud[i] && p.body[i] == Body::Impactor)
+        .map(|&i| p.mass[i])
+        .sum();
+    let largest = fragments.first();
+    let mean_fragment_diameter_m = (mass_kg > 0.0).then(|| {
+        fragments
+            .iter()
+            .map(|f| f.mass_kg * f.diameter_m)
+            .sum::<f64>()
+            / mass_kg
+    });
+    // One particle's diameter: the smallest particle mass present (the finer body).
+    let particle_mass = p.mass.iter().copied().fold(f64::INFINITY, f64::min);
+    let per_impactor = |m: f64| {
+        if reference.impactor_mass_kg > 0.0 {
+            m / reference.impactor_mass_kg
+        } else {
+            f64::NAN
+        }
+    };
+    let measurement = CloudMeasurement {
+        time_s,
+        tau_s,
+        quantile: q,
+        n_part,
+        n_frag,
+        fragmentation: (n_part > 0).then(|| n_frag as f64 / n_part as f64),
+        front_z_m: ext.front_z_m,
+        length_axial_m: ext.length_axial_m,
+        length_radial_m: ext.length_radial_m,
+        length_ratio: ext.length_ratio,
+        front_z_max_m: ext.front_z_max_m,
+        length_axial_max_m: ext.length_axial_max_m,
+        length_radial_max_m: ext.length_radial_max_m,
+        length_ratio_max: ext.length_ratio_max,
+        mass_kg,
+        impactor_mass_fraction_in_cloud: per_impactor(impactor_in_cloud),
+        largest_fragment_mass_kg: largest.map(|f| f.mass_kg),
+        largest_fragment_mass_fraction: largest.map(|f| per_impactor(f.mass_kg)),
+        largest_fragment_diameter_m: largest.map(|f| f.diameter_m),
+        largest_fragment_particles: largest.map_or(0, |f| f.particles),
+        mean_fragment_diameter_m,
+        particle_diameter_m: if particle_mass.is_finite() {
+            equivalent_diameter_m(particle_mass, rho)
+        } else {
+            0.0
+        },
+        fragments_crossing_rear_face,
+    };
+    CloudAnalysis {
+        measurement,
+        fragments,
+    }
+}
+
+/// One class of the size distribution: all fragments with the same number of particles.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SizeClass {
+    /// Particles per fragment.
+    pub particles: usize,
+    /// Fragments of this size.
+    pub fragments: usize,
+    /// Their total mass, kg.
+    pub mass_kg: f64,
+    /// Their share of the cloud's mass.
+    pub mass_fraction: f64,
+    /// Share of the cloud's mass in fragments of at least this many particles.
+    pub mass_fraction_at_least: f64,
+    /// Mass-weighted mean volume-equivalent diameter of the class, m.
+    pub diameter_m: f64,
+}
+
+/// The size distribution of `fragments` by particle count, smallest first.
+pub fn size_distribution(fragments: &[Fragment]) -> Vec<SizeClass> {
+    let mut sorted: Vec<&Fragment> = fragments.iter().collect();
+    sorted.sort_by(|a, b| {
+        a.particles
+            .cmp(&b.particles)
+            .then(a.mass_kg.total_cmp(&b.mass_kg))
+            .then(a.label.cmp(&b.label))
+    });
+    let total: f64 = fragments.iter().map(|f| f.mass_kg).sum();
+    let mut classes: Vec<SizeClass> = Vec::new();
+    let mut weighted_d: Vec<f64> = Vec::new();
+    for f in sorted {
+        match classes.last_mut() {
+            Some(c) if c.particles == f.particles => {
+                c.fragments += 1;
+                c.mass_kg += f.mass_kg;
+                if let Some(w) = weighted_d.last_mut() {
+                    *w += f.mass_kg * f.diameter_m;
+                }
+            }
+            _ => {
+                classes.push(SizeClass {
+                    particles: f.particles,
+                    fragments: 1,
+                    mass_kg: f.mass_kg,
+                    mass_fraction: 0.0,
+                    mass_fraction_at_least: 0.0,
+                    diameter_m: 0.0,
+                });
+                weighted_d.push(f.mass_kg * f.diameter_m);
+            }
+        }
+    }
+    let mut above = 0.0;
+    for (c, w) in classes.iter_mut().zip(weighted_d).rev() {
+        above += c.mass_kg;
+        c.diameter_m = w / c.mass_kg;
+        if total > 0.0 {
+            c.mass_fraction = c.mass_kg / total;
+            c.mass_fraction_at_least = above / total;
+        }
+    }
+    classes
+}
+
+/// One sample of the cloud track (written as `cloud_track.csv`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TrackRow {
+    /// Step number.
+    pub step: u64,
+    /// Simulated time, s.
+    pub time_s: f64,
+    /// Time since first contact, s.
+    pub tau_s: f64,
+    /// Cloud particles.
+    pub n_part: usize,
+    /// Front z_f (quantile), m.
+    pub front_z_m: Option<f64>,
+    /// La, m.
+    pub length_axial_m: Option<f64>,
+    /// Lr, m.
+    pub length_radial_m: Option<f64>,
+    /// R = La / Lr.
+    pub length_ratio: Option<f64>,
+    /// Largest z, m.
+    pub front_z_max_m: Option<f64>,
+    /// La by the maximum, m.
+    pub length_axial_max_m: Option<f64>,
+    /// Lr by the maximum, m.
+    pub length_radial_max_m: Option<f64>,
+    /// Front velocity between the previous sample and this one, m/s (a finite difference of
+    /// the track, shown to see the front settle; va itself comes from the two front times).
+    pub front_velocity_m_s: Option<f64>,
+}
+
+/// The front located at one of the two front times.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FrontSample {
+    /// Time since first contact, s (the step nearest the requested time).
+    pub tau_s: f64,
+    /// Front z_f, m (`None` if the cloud was empty).
+    pub front_z_m: Option<f64>,
+}
+
+/// The cloud part of `summary.json`: the full measurement at the analysis time, va and the
+/// largest fragments.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CloudReport {
+    /// The measurement at the analysis time (the end of the run).
+    #[serde(flatten)]
+    pub measurement: CloudMeasurement,
+    /// va, m/s.
+    pub front_velocity_m_s: Option<f64>,
+    /// va / v0.
+    pub front_velocity_ratio: Option<f64>,
+    /// The two times since first contact of the front positions, s (as sampled).
+    pub front_velocity_times_s: [Option<f64>; 2],
+    /// The front positions z_f at those times, m.
+    pub front_positions_m: [Option<f64>; 2],
+    /// The largest fragments, largest first.
+    pub largest_fragments: Vec<Fragment>,
+}
+
+/// The step nearest to time `tau_s` since first contact, clamped to the run.
+pub fn step_at_tau(derived: &Derived, tau_s: f64) -> u64 {
+    let s = ((tau_s + derived.contact_time_s) / derived.dt_s).round();
+    if s.is_nan() || s <= 0.0 {
+        0
+    } else {
+        (s as u64).min(derived.steps)
+    }
+}
+
+/// Watches a run: samples the cloud track every `analysis.track_every` steps, locates the front
+/// at the two front times, and measures the cloud at the end. Call [`CloudObserver::observe`]
+/// at step 0 and after every step; it does nothing (two comparisons) unless a sample is due.
+#[derive(Debug, Clone)]
+pub struct CloudObserver {
+    reference: CloudReference,
+    quantile: f64,
+    measure_cloud: bool,
+    track_every: u64,
+    last_step: u64,
+    front_steps: [u64; 2],
+    finder: CloudFinder,
+    /// The cloud track so far.
+    pub track: Vec<TrackRow>,
+    /// The front at the two front times, once reached.
+    pub front: [Option<FrontSample>; 2],
+    /// Wall time spent observing (labelling, quantiles, the final measurement).
+    pub elapsed: Duration,
+}
+
+impl CloudObserver {
+    /// An observer of `sim` (a run ending at `sim.derived.steps`) as `analysis` asks;
+    /// `end_time_s` is the run's `run.end_time_s` (it sets the default front times).
+    pub fn new(sim: &Simulation, analysis: &Analysis, end_time_s: f64) -> Self {
+        let [t1, t2] = analysis.front_times_s(end_time_s);
+        CloudObserver {
+            reference: CloudReference::of(sim),
+            quantile: analysis.quantile,
+            measure_cloud: analysis.cloud,
+            track_every: analysis.track_every,
+            last_step: sim.derived.steps,
+            front_steps: [step_at_tau(&sim.derived, t1), step_at_tau(&sim.derived, t2)],
+            finder: CloudFinder::default(),
+            track: Vec::new(),
+            front: [None, None],
+            elapsed: Duration::ZERO,
+        }
+    }
+
+    /// The reference the observer measures against.
+    pub fn reference(&self) -> &CloudReference {
+        &self.reference
+    }
+
+    fn track_due(&self, step: u64) -> bool {
+        step.checked_rem(self.track_every) == Some(0)
+            || (self.track_every > 0 && step == self.last_step)
+    }
+
+    fn front_due(&self, step: u64) -> bool {
+        self.measure_cloud && self.front_steps.contains(&step)
+    }
+
+    /// Samples whatever is due at the simulation's current step.
+    pub fn observe(&mut self, sim: &Simulation) {
+        let step = sim.step;
+        let (track, front) = (self.track_due(step), self.front_due(step));
+        if !track && !front {
+            return;
+        }
+        let t0 = Instant::now();
+        let members = self.finder.find(&sim.particles, &self.reference);
+        let ext = extent(
+            &sim.particles,
+            &members.in_cloud,
+            self.reference.plate_rear_z_m,
+            self.quantile,
+        );
+        let tau = sim.tau_s();
+        if track {
+            let front_velocity_m_s =
+                self.track
+                    .last()
+                    .and_then(|prev| match (prev.front_z_m, ext.front_z_m) {
+                        (Some(a), Some(b)) => front_velocity(prev.tau_s, a, tau, b),
+                        _ => None,
+                    });
+            self.track.push(TrackRow {
+                step,
+                time_s: sim.time_s(),
+                tau_s: tau,
+                n_part: ext.n_part,
+                front_z_m: ext.front_z_m,
+                length_axial_m: ext.length_axial_m,
+                length_radial_m: ext.length_radial_m,
+                length_ratio: ext.length_ratio,
+                front_z_max_m: ext.front_z_max_m,
+                length_axial_max_m: ext.length_axial_max_m,
+                length_radial_max_m: ext.length_radial_max_m,
+                front_velocity_m_s,
+            });
+        }
+        if front {
+            for k in 0..2 {
+                if self.front_steps[k] == step {
+                    self.front[k] = Some(FrontSample {
+                        tau_s: tau,
+                        front_z_m: ext.front_z_m,
+                    });
+                }
+            }
+        }
+        self.elapsed += t0.elapsed();
+    }
+
+    /// The full measurement of the cloud now (the analysis time), with va from the front
+    /// samples; `None` when the scene does not ask for it (`analysis.cloud = false`).
+    pub fn finish(&mut self, sim: &Simulation) -> Option<CloudResult> {
+        if !self.measure_cloud {
+            return None;
+        }
+        let t0 = Instant::now();
+        let members = self.finder.find(&sim.particles, &self.reference);
+        let analysis = measure(
+            &sim.particles,
+            members,
+            &self.reference,
+            self.quantile,
+            sim.time_s(),
+            sim.tau_s(),
+        );
+        let [a, b] = self.front;
+        let va = match (a, b) {
+            (
+                Some(FrontSample {
+                    tau_s: t1,
+                    front_z_m: Some(z1),
+                }),
+                Some(FrontSample {
+                    tau_s: t2,
+                    front_z_m: Some(z2),
+                }),
+            ) => front_velocity(t1, z1, t2, z2),
+            _ => None,
+        };
+        let v0 = self.reference.v0_m_s;
+        let report = CloudReport {
+            measurement: analysis.measurement.clone(),
+            front_velocity_m_s: va,
+            front_velocity_ratio: va.filter(|_| v0 > 0.0).map(|v| v / v0),
+            front_velocity_times_s: [a.map(|s| s.tau_s), b.map(|s| s.tau_s)],
+            front_positions_m: [a.and_then(|s| s.front_z_m), b.and_then(|s| s.front_z_m)],
+            largest_fragments: analysis
+                .fragments
+                .iter()
+                .take(LARGEST_FRAGMENTS_LISTED)
+                .cloned()
+                .collect(),
+        };
+        self.elapsed += t0.elapsed();
+        Some(CloudResult {
+            report,
+            fragments: analysis.fragments,
+            labels_by_id: {
+                let mut by_id = vec![0u32; sim.particles.len()];
+                for (i, &l) in members.labels.iter().enumerate() {
+                    by_id[sim.particles.id[i] as usize] = l;
+                }
+                by_id
+            },
+        })
+    }
+}
+
+/// What [`CloudObserver::finish`] returns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CloudResult {
+    /// The `cloud` object of `summary.json`.
+    pub report: CloudReport,
+    /// Every cloud fragment, largest first (for the size distribution).
+    pub fragments: Vec<Fragment>,
+    /// The fragment label of every particle, indexed by id.
+    pub labels_by_id: Vec<u32>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    #[test]
+    fn quantile_interpolates_like_numpy() {
+        let mut v = vec![4.0, 1.0, 3.0, 2.0, 5.0];
+        assert_eq!(quantile(&mut v, 0.5), Some(3.0));
+        assert_eq!(quantile(&mut v, 1.0), Some(5.0));
+        assert_eq!(quantile(&mut v, 0.0), Some(1.0));
+        // h = 4 * 0.9 = 3.6: 4 + 0.6 * (5 - 4).
+        let q = quantile(&mut v, 0.9).expect("non-empty");
+        assert!((q - 4.6).abs() < 1e-12, "{q}");
+        assert_eq!(quantile(&mut [], 0.5), None);
+        assert_eq!(quantile(&mut [7.0], 0.995), Some(7.0));
+    }
+
+    #[test]
+    fn equivalent_diameter_of_a_sphere_is_its_diameter() {
+        let d: f64 = 2e-3;
+        let rho = 2700.0;
+        let m = rho * std::f64::consts::PI / 6.0 * d.powi(3);
+        assert!((equivalent_diameter_m(m, rho) - d).abs() < 1e-15);
+    }
+
+    #[test]
+    fn labels_are_the_smallest_id_of_each_chain() {
+        // Two chains along x: ids 0-1-2 and 3-4, plus a loner 5; stored in shuffled order.
+        let n = 6;
+        let pos: Vec<DVec3> = (0..n).map(|k| DVec3::new(k as f64, 0.0, 0.0)).collect();
+        let mut p = Particles::new(
+            pos,
+            vec![DVec3::ZERO; n],
+            vec![1.0; n],
+            vec![Body::Target; n],
+            vec![crate::state::NO_BOND; n * crate::state::BONDS_PER_PARTICLE],
+        );
+        // Storage: index -> id.
+        p.id = vec![4, 2, 5, 0, 3, 1];
+        let idx = p.index_of_id();
+        let mut bond = |a: u32, b: u32| {
+            let (i, j) = (idx[a as usize] as usize, idx[b as usize] as usize);
+            p.bonds[i * crate::state::BONDS_PER_PARTICLE] = j as u32;
+            p.bonds[j * crate::state::BONDS_PER_PARTICLE + 1] = i as u32;
+        };
+        bond(1, 0);
+        bond(2, 1);
+        bond(4, 3);
+        let labels = label_fragments(&p);
+        let by_id: Vec<u32> = (0..n).map(|id| labels[idx[id] as usize]).collect();
+        assert_eq!(by_id, vec![0, 0, 0, 3, 3, 5]);
+    }
+}
