@@ -5,6 +5,7 @@
 
 pub mod bench;
 pub mod output;
+pub mod render;
 pub mod run;
 pub mod scene_file;
 pub mod study;

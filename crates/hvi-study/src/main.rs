@@ -18,7 +18,8 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Run one scene and write summary.json and energy.csv into --out.
+    /// Run one scene and write summary.json, energy.csv, cloud_track.csv and fragments.csv
+    /// into --out.
     Run {
         /// Scene file (TOML), e.g. studies/scenes/default.toml.
         scene: PathBuf,
@@ -40,6 +41,10 @@ enum Command {
         /// No progress output.
         #[arg(long)]
         quiet: bool,
+        /// Write pictures: cloud_side.png (the cloud at the end, Figs. 7/11), cloud_series.png
+        /// (3-D views at analysis.render_times_s, Fig. 12), fragments.png, cloud_track.png.
+        #[arg(long)]
+        render: bool,
     },
     /// Validate a study and write its plan.json (every run's scene checked), running nothing.
     Plan(hvi_study::study::cli::StudyArgs),
@@ -99,6 +104,7 @@ fn main() -> ExitCode {
             dump_every,
             lammps_data,
             quiet,
+            render,
         } => (|| {
             if dump_every == Some(0) {
                 anyhow::bail!("invalid value for `--dump-every`: 0 (allowed: an integer >= 1)");
@@ -110,6 +116,7 @@ fn main() -> ExitCode {
                 dump_every,
                 lammps_data,
                 progress: !quiet,
+                render,
             };
             pool.install(|| run_scene(&spec, &opts))?;
             println!("{}", out.join("summary.json").display());

@@ -1,5 +1,7 @@
 //! One run of one scene: the engine stepped to the end time, with the energy ledger sampled,
-//! optional snapshots, progress, and `summary.json` + `energy.csv` written atomically.
+//! the debris cloud observed (`hvi_engine::cloud`: the track, the two front times, the full
+//! measurement at the end), optional snapshots and pictures, progress, and `summary.json`,
+//! `energy.csv`, `cloud_track.csv`, `fragments.csv` written atomically.
 
 use std::fmt::Write as _;
 use std::io::{IsTerminal, Write as _};
@@ -7,6 +9,9 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
+use hvi_engine::cloud::{
+    size_distribution, step_at_tau, CloudObserver, CloudReport, CloudResult, TrackRow,
+};
 use hvi_engine::scene::{Derived, SceneSpec};
 use hvi_engine::sim::{Energy, Simulation, Timing};
 use hvi_engine::EngineError;
@@ -14,6 +19,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 
 use crate::output::{write_atomic, write_atomic_bytes, write_lammps_data, write_xyz};
+use crate::render::{self, Frame, SceneInfo};
 
 /// How to run and what to write besides the summary.
 #[derive(Debug, Clone, Default)]
@@ -26,6 +32,9 @@ pub struct RunOptions {
     pub lammps_data: Option<PathBuf>,
     /// Show a progress bar and thermo lines on stderr.
     pub progress: bool,
+    /// Write pictures: the cloud's side view at the end, the 3-D series at
+    /// `analysis.render_times_s`, the fragment histogram and the cloud track.
+    pub render: bool,
 }
 
 /// One row of `energy.csv`.
@@ -94,6 +103,10 @@ pub struct TimingSummary {
     pub integrate_s: f64,
     /// Energy samples.
     pub energy_s: f64,
+    /// Cloud observation: track samples, front times, the final measurement.
+    pub analysis_s: f64,
+    /// Pictures (`--render`).
+    pub render_s: f64,
     /// Files and progress.
     pub output_s: f64,
     /// Everything else (set-up).
@@ -145,6 +158,9 @@ pub struct Summary {
     pub derived: Derived,
     /// Time per phase.
     pub timing: TimingSummary,
+    /// The debris cloud at the analysis time (the end of the run), when the scene asks for it
+    /// (`analysis.cloud`) and the run completed; definitions in `hvi_engine::cloud`.
+    pub cloud: Option<CloudReport>,
     /// The scene as run (after overrides).
     pub scene: SceneSpec,
 }
@@ -157,6 +173,10 @@ pub struct RunOutcome {
     pub energy: Vec<EnergyRow>,
     /// Final state (for analysis by the caller).
     pub sim: Simulation,
+    /// The cloud track.
+    pub track: Vec<TrackRow>,
+    /// The full cloud measurement with every fragment and the labels by id.
+    pub cloud: Option<CloudResult>,
 }
 
 fn row(sim: &Simulation, e: &Energy) -> EnergyRow {
@@ -194,9 +214,16 @@ pub fn describe(d: &Derived, particles: usize, bonds: u64) -> String {
     s
 }
 
-fn timing_table(t: &Timing, output: Duration, total: Duration) -> (TimingSummary, String) {
+fn timing_table(
+    t: &Timing,
+    analysis: Duration,
+    render: Duration,
+    output: Duration,
+    total: Duration,
+) -> (TimingSummary, String) {
     let secs = |d: Duration| d.as_secs_f64();
-    let accounted = t.contact + t.bonds + t.neighbour + t.integrate + t.energy + output;
+    let accounted =
+        t.contact + t.bonds + t.neighbour + t.integrate + t.energy + analysis + render + output;
     let other = total.saturating_sub(accounted);
     let ts = TimingSummary {
         contact_s: secs(t.contact),
@@ -204,6 +231,8 @@ fn timing_table(t: &Timing, output: Duration, total: Duration) -> (TimingSummary
         neighbour_s: secs(t.neighbour),
         integrate_s: secs(t.integrate),
         energy_s: secs(t.energy),
+        analysis_s: secs(analysis),
+        render_s: secs(render),
         output_s: secs(output),
         other_s: secs(other),
     };
@@ -215,6 +244,8 @@ fn timing_table(t: &Timing, output: Duration, total: Duration) -> (TimingSummary
         ("Neigh", ts.neighbour_s),
         ("Integrate", ts.integrate_s),
         ("Energy", ts.energy_s),
+        ("Analysis", ts.analysis_s),
+        ("Render", ts.render_s),
         ("Output", ts.output_s),
         ("Other", ts.other_s),
     ] {
@@ -223,8 +254,9 @@ fn timing_table(t: &Timing, output: Duration, total: Duration) -> (TimingSummary
     (ts, s)
 }
 
-/// Runs a scene to its end time, writing `summary.json` and `energy.csv` (also when it stops
-/// early on an instability: the error comes back after the files are written).
+/// Runs a scene to its end time, writing `summary.json`, `energy.csv` and the cloud files
+/// (also when it stops early on an instability: the error comes back after the files are
+/// written; the cloud is then not measured, its track is kept).
 pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     let wall0 = Instant::now();
     std::fs::create_dir_all(&opts.out_dir)
@@ -237,13 +269,19 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         .iter()
         .filter(|b| **b == hvi_engine::state::Body::Impactor)
         .count();
+    let rim_ids = setup.rim_ids.clone();
     let mut sim = Simulation::new(setup)?;
+    if sim.rim_ids.is_empty() {
+        // `Simulation::new` leaves the rim to its caller: the residual plate needs it.
+        sim.rim_ids = rim_ids;
+    }
     let d = sim.derived;
     if opts.progress {
         eprintln!("{}", describe(&d, n, sim.bonds_initial));
         eprintln!("threads {}", rayon::current_num_threads());
     }
     let mut output_time = Duration::ZERO;
+    let mut render_time = Duration::ZERO;
     if let Some(path) = &opts.lammps_data {
         let t = Instant::now();
         write_lammps_data(path, &sim)?;
@@ -252,6 +290,45 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     let mut rows = vec![row(&sim, &sim.energy_initial)];
     let mut max_drift: f64 = 0.0;
     let e0 = sim.energy_initial.total_j();
+
+    // The cloud: observed only as the scene's [analysis] asks (nothing when all is off).
+    let analysis = &spec.analysis;
+    let mut observer = (analysis.cloud || analysis.track_every > 0)
+        .then(|| CloudObserver::new(&sim, analysis, spec.run.end_time_s));
+    // Render times within the run, as steps (the nearest step to each time).
+    let end_tau = d.steps as f64 * d.dt_s - d.contact_time_s;
+    let mut render_steps: Vec<(u64, f64)> = Vec::new();
+    if opts.render {
+        for &t in &analysis.render_times_s {
+            if t <= end_tau + 0.5 * d.dt_s {
+                let s = step_at_tau(&d, t);
+                if !render_steps.iter().any(|&(x, _)| x == s) {
+                    render_steps.push((s, t));
+                }
+            } else if opts.progress {
+                eprintln!(
+                    "render: tau = {:.2} us is beyond the end of the run ({:.2} us), skipped",
+                    t * 1e6,
+                    end_tau * 1e6
+                );
+            }
+        }
+        render_steps.sort_by_key(|&(s, _)| s);
+    }
+    let mut frames: Vec<Frame> = Vec::new();
+    let capture = |sim: &Simulation, frames: &mut Vec<Frame>| {
+        if render_steps.iter().any(|&(s, _)| s == sim.step) {
+            let t = Instant::now();
+            frames.push(Frame::capture(sim));
+            t.elapsed()
+        } else {
+            Duration::ZERO
+        }
+    };
+    if let Some(o) = observer.as_mut() {
+        o.observe(&sim);
+    }
+    render_time += capture(&sim, &mut frames);
 
     let bar = if opts.progress && std::io::stderr().is_terminal() {
         let b = ProgressBar::with_draw_target(Some(d.steps), ProgressDrawTarget::stderr());
@@ -291,6 +368,10 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
                 }
             }
         }
+        if let Some(o) = observer.as_mut() {
+            o.observe(&sim);
+        }
+        render_time += capture(&sim, &mut frames);
         if dump_every > 0 && (s % dump_every == 0 || s == d.steps) {
             let t = Instant::now();
             write_xyz(&opts.out_dir.join(format!("dump_{s:09}.xyz")), &sim)?;
@@ -320,7 +401,12 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let step_wall = step_wall0.elapsed().as_secs_f64();
+    // The engine's throughput: the loop without the cloud observation and picture captures.
+    let observed_in_loop = observer.as_ref().map_or(Duration::ZERO, |o| o.elapsed);
+    let step_wall = step_wall0
+        .elapsed()
+        .saturating_sub(observed_in_loop + render_time)
+        .as_secs_f64();
     let final_energy = match rows.last() {
         Some(r) if (r.time_s - sim.time_s()).abs() < 0.5 * d.dt_s => *r,
         _ => {
@@ -333,6 +419,16 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     let momentum = sim.momentum();
     let total_mass: f64 = sim.particles.mass.iter().sum();
     let scale = (total_mass * d.v0_m_s).max(f64::MIN_POSITIVE);
+
+    // The full cloud measurement at the analysis time: the end of a completed run.
+    let cloud = match (observer.as_mut(), &failure) {
+        (Some(o), None) => o.finish(&sim),
+        _ => None,
+    };
+    let track = observer.map(|o| (o.track.clone(), o.elapsed));
+    let analysis_time = track.as_ref().map_or(Duration::ZERO, |t| t.1);
+    let track = track.map(|t| t.0).unwrap_or_default();
+
     let t = Instant::now();
     write_atomic(&opts.out_dir.join("energy.csv"), |w| {
         let mut csv = csv::Writer::from_writer(w);
@@ -342,9 +438,79 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         csv.flush()?;
         Ok(())
     })?;
+    if !track.is_empty() {
+        write_atomic(&opts.out_dir.join("cloud_track.csv"), |w| {
+            let mut csv = csv::Writer::from_writer(w);
+            for r in &track {
+                csv.serialize(r)?;
+            }
+            csv.flush()?;
+            Ok(())
+        })?;
+    }
+    if let Some(c) = &cloud {
+        write_atomic(&opts.out_dir.join("fragments.csv"), |w| {
+            let mut csv = csv::Writer::from_writer(w);
+            for r in size_distribution(&c.fragments) {
+                csv.serialize(r)?;
+            }
+            csv.flush()?;
+            Ok(())
+        })?;
+    }
     output_time += t.elapsed();
+
+    // Pictures.
+    if opts.render && failure.is_none() {
+        let t = Instant::now();
+        let info = SceneInfo::new(spec, &d, n);
+        let dir = &opts.out_dir;
+        let last = Frame::capture(&sim);
+        render::side_view(
+            &dir.join("cloud_side.png"),
+            &last,
+            &info,
+            cloud.as_ref().map(|c| &c.report.measurement),
+        )
+        .context("rendering cloud_side.png")?;
+        if !frames.is_empty() {
+            render::series(&dir.join("cloud_series.png"), &frames, &info)
+                .context("rendering cloud_series.png")?;
+        }
+        if let Some(c) = &cloud {
+            render::fragment_histogram(
+                &dir.join("fragments.png"),
+                &c.fragments,
+                &c.report.measurement,
+                &info,
+            )
+            .context("rendering fragments.png")?;
+        }
+        if !track.is_empty() {
+            render::track_plot(
+                &dir.join("cloud_track.png"),
+                &track,
+                cloud
+                    .as_ref()
+                    .map_or([None, None], |c| c.report.front_velocity_times_s),
+                cloud.as_ref().and_then(|c| c.report.front_velocity_ratio),
+                &info,
+            )
+            .context("rendering cloud_track.png")?;
+        }
+        render_time += t.elapsed();
+        if opts.progress {
+            eprintln!(
+                "pictures: {:.2} s for {} particles ({} series frames)",
+                t.elapsed().as_secs_f64(),
+                n,
+                frames.len()
+            );
+        }
+    }
+
     let total = wall0.elapsed();
-    let (timing, table) = timing_table(&sim.timing, output_time, total);
+    let (timing, table) = timing_table(&sim.timing, analysis_time, render_time, output_time, total);
     let summary = Summary {
         status: if failure.is_some() {
             "unstable".into()
@@ -384,6 +550,7 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         },
         derived: d,
         timing,
+        cloud: cloud.as_ref().map(|c| c.report.clone()),
         scene: spec.clone(),
     };
     write_atomic_bytes(
@@ -404,6 +571,9 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
             summary.energy.relative_drift,
             summary.neighbour_builds
         );
+        if let Some(c) = &summary.cloud {
+            let _ = writeln!(err, "{}", describe_cloud(c));
+        }
         let _ = write!(err, "{table}");
     }
     if let Some(e) = failure {
@@ -416,5 +586,40 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         summary,
         energy: rows,
         sim,
+        track,
+        cloud,
     })
+}
+
+/// The lines a run prints about its debris cloud.
+pub fn describe_cloud(c: &CloudReport) -> String {
+    let m = &c.measurement;
+    let f = |x: Option<f64>, k: f64, p: usize| {
+        x.map_or("n/a".to_string(), |v| format!("{:.*}", p, v * k))
+    };
+    format!(
+        "cloud at tau = {:.2} us: N_part {}, N_frag {}, F = {}; La = {} mm, Lr = {} mm, R = {} \
+         ({:.1} % quantile; by the maxima {} / {} mm, R = {})\n\
+         front velocity va = {} m/s, va/v0 = {} (front at tau = {} and {} us); largest fragment \
+         {} mm, {} of the impactor mass ({} particles); mass-weighted mean d = {} mm",
+        m.tau_s * 1e6,
+        m.n_part,
+        m.n_frag,
+        f(m.fragmentation, 1.0, 4),
+        f(m.length_axial_m, 1e3, 2),
+        f(m.length_radial_m, 1e3, 2),
+        f(m.length_ratio, 1.0, 3),
+        100.0 * m.quantile,
+        f(m.length_axial_max_m, 1e3, 2),
+        f(m.length_radial_max_m, 1e3, 2),
+        f(m.length_ratio_max, 1.0, 3),
+        f(c.front_velocity_m_s, 1.0, 0),
+        f(c.front_velocity_ratio, 1.0, 4),
+        f(c.front_velocity_times_s[0], 1e6, 2),
+        f(c.front_velocity_times_s[1], 1e6, 2),
+        f(m.largest_fragment_diameter_m, 1e3, 3),
+        f(m.largest_fragment_mass_fraction, 1.0, 4),
+        m.largest_fragment_particles,
+        f(m.mean_fragment_diameter_m, 1e3, 3),
+    )
 }
