@@ -64,6 +64,7 @@ fn counts(o: &Output) -> (usize, usize, usize, usize) {
     let err = stderr(o);
     let line = err
         .lines()
+        .map(|l| l.trim_start_matches("grid: "))
         .find(|l| l.starts_with("runs: "))
         .unwrap_or_else(|| panic!("no summary line in\n{err}"));
     let nums: Vec<usize> = line
@@ -388,4 +389,76 @@ fn results_of_different_studies_never_mix() {
     let o = sweep(&a, &out, &[]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("refusing to mix"), "{}", stderr(&o));
+}
+
+#[test]
+fn calibrate_scores_the_grid_refines_through_the_store_and_compares_with_the_paper() {
+    let dir = scratch("calibrate");
+    let targets = repo().join("experiments_data/calibration-shot.toml");
+    let axes = format!(
+        "{GRID_2X2}\n[calibrate]\ntargets = \"{}\"\nmax_iters = 2\nsd_tolerance = 0\n",
+        targets.display()
+    );
+    let study = write_study(&dir, "cal", &axes, TINY);
+    let out = dir.join("out");
+    let run = || {
+        bin()
+            .arg("calibrate")
+            .arg(&study)
+            .arg("--out")
+            .arg(&out)
+            .args(["--threads", "2"])
+            .output()
+            .expect("runs")
+    };
+    let o = run();
+    assert_ok(&o);
+    for needle in ["best:", "paper's fit:", "length_ratio", "not scored (gap)"] {
+        assert!(
+            stderr(&o).contains(needle),
+            "no `{needle}` in\n{}",
+            stderr(&o)
+        );
+    }
+    let read = || -> serde_json::Value {
+        serde_json::from_str(
+            &std::fs::read_to_string(out.join("calibration.json")).expect("calibration.json"),
+        )
+        .expect("json")
+    };
+    let c = read();
+    let best = c["best"]["objective"].as_f64().expect("best objective");
+    assert!(
+        best <= c["best_grid"]["objective"]
+            .as_f64()
+            .expect("grid objective")
+    );
+    assert!(c["best"]["params"]["material.eps_j"].as_f64().is_some());
+    assert_eq!(
+        c["paper"]["params"]["material.kappa_n_m"].as_f64(),
+        Some(4.56e6)
+    );
+    let terms = c["best"]["score"]["terms"].as_array().expect("terms");
+    assert_eq!(terms.len(), 3);
+    assert!(c["termination"]
+        .as_str()
+        .unwrap_or("")
+        .contains("iterations"));
+    let evaluations = c["refinement"].as_array().expect("refinement").len();
+    assert!(evaluations >= 3, "{evaluations}");
+    let table = std::fs::read_to_string(out.join("results.csv")).expect("results.csv");
+    assert!(table
+        .lines()
+        .next()
+        .unwrap_or("")
+        .contains("score_length_ratio"));
+    assert!(out.join("evaluations.csv").exists());
+
+    // Again: grid and refinement come from the store, the same result, no new run.
+    let o = run();
+    assert_ok(&o);
+    let c2 = read();
+    assert_eq!(c2["refinement_runs"], 0, "{}", stderr(&o));
+    assert_eq!(c2["best"], c["best"]);
+    assert_eq!(counts(&o).2, 0, "{}", stderr(&o));
 }

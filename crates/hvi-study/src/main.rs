@@ -50,6 +50,9 @@ enum Command {
     Plan(hvi_study::study::cli::StudyArgs),
     /// Run every run of a study (in parallel, finished runs reused) and write results.csv/json.
     Sweep(hvi_study::study::cli::StudyArgs),
+    /// Calibrate: the study's grid scored against experiments_data, then a Nelder-Mead
+    /// refinement from the best grid point; writes calibration.json and evaluations.csv.
+    Calibrate(hvi_study::study::calibrate::CalibrateArgs),
     /// Run one run of a written plan.json by its index (for an external scheduler).
     RunUnit {
         /// The plan.json of a study's output directory.
@@ -138,6 +141,7 @@ fn main() -> ExitCode {
         })(),
         Command::Plan(args) => hvi_study::study::cli::plan(&args),
         Command::Sweep(args) => hvi_study::study::cli::sweep(&args),
+        Command::Calibrate(args) => hvi_study::study::calibrate::calibrate(&args).map(|_| ()),
         Command::RunUnit {
             plan,
             index,

@@ -5,9 +5,11 @@
 //! study file (`spec`) -> plan (`plan`, `plan.json`) -> runs (`exec`, `store`,
 //! `runs/<fingerprint>/`) -> table (`table`, `results.csv`, `results.json`).
 
+pub mod calibrate;
 pub mod cli;
 pub mod exec;
 pub mod plan;
+pub mod score;
 pub mod spec;
 pub mod store;
 pub mod table;

@@ -1,0 +1,709 @@
+//! `hvi-study calibrate`: the grid of a calibration study scored against the experiments, then
+//! a Nelder-Mead refinement (argmin) from the best grid point that runs real simulations
+//! through the same run store.
+//!
+//! The study's `[calibrate]` section:
+//!
+//! ```toml
+//! [calibrate]
+//! targets = "../experiments_data/calibration-shot.toml"   # relative to the study file
+//! weights = { fragment_size = 0.5 }       # optional: override target weights by name
+//! refine = ["material.eps_j", "material.kappa_n_m"]   # default: every axis with > 1 value
+//! log_axes = ["material.eps_j", "material.kappa_n_m"] # refined in log10 (default these two)
+//! max_iters = 8          # Nelder-Mead iterations (each 1-2 runs, a shrink n more)
+//! sd_tolerance = 0.02    # stop when the simplex's objective values agree this well
+//! ```
+//!
+//! Termination is whichever comes first: `max_iters` iterations, or the standard deviation of
+//! the objective over the simplex below `sd_tolerance` (argmin's criterion). The search stays in
+//! the grid's box (each refined axis between its smallest and largest grid value): a point
+//! outside, or one whose scene the engine rejects, costs [`OUTSIDE_COST`] without a run.
+
+use std::cell::RefCell;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Result};
+use argmin::core::{CostFunction, Executor, State};
+use argmin::solver::neldermead::NelderMead;
+use clap::Args;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use super::cli::{print_failures, StudyArgs};
+use super::exec::thread_split;
+use super::execute_plan;
+use super::plan::{fingerprint, validated_scene, Plan};
+use super::score::{objective, Score, Targets, MISSING_TERM};
+use super::spec::{json_to_override, round_sig, Study};
+use super::store::{Job, Record, RunStatus, Store};
+use super::table::Table;
+use crate::output::{write_atomic, write_atomic_bytes};
+
+/// The cost of a point outside the grid's box or with an invalid scene (no run is made).
+pub const OUTSIDE_COST: f64 = 10.0 * MISSING_TERM;
+
+/// The paper's best fit (Figs. 11-12): eps = 0.01 J, kappa = 4.56e6 N/m, rcut = 1.5 sigma.
+pub const PAPER_BEST: [(&str, f64); 3] = [
+    ("material.eps_j", hvi_engine::paper::BEST_EPS_J),
+    ("material.kappa_n_m", hvi_engine::paper::BEST_KAPPA_N_M),
+    (
+        "material.rcut_over_sigma",
+        hvi_engine::paper::BEST_RCUT_OVER_SIGMA,
+    ),
+];
+
+fn default_log_axes() -> Vec<String> {
+    vec!["material.eps_j".into(), "material.kappa_n_m".into()]
+}
+fn default_max_iters() -> u64 {
+    8
+}
+fn default_sd_tolerance() -> f64 {
+    0.02
+}
+
+/// `[calibrate]` of a study file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrateConfig {
+    /// The target file, relative to the study file.
+    pub targets: PathBuf,
+    /// Weights by target name, overriding the target file's.
+    #[serde(default)]
+    pub weights: BTreeMap<String, f64>,
+    /// The axes the refinement moves (default: every axis with more than one value).
+    #[serde(default)]
+    pub refine: Option<Vec<String>>,
+    /// Axes refined in log10.
+    #[serde(default = "default_log_axes")]
+    pub log_axes: Vec<String>,
+    /// Nelder-Mead iterations at most.
+    #[serde(default = "default_max_iters")]
+    pub max_iters: u64,
+    /// Stop when the objective's standard deviation over the simplex falls below this.
+    #[serde(default = "default_sd_tolerance")]
+    pub sd_tolerance: f64,
+}
+
+impl CalibrateConfig {
+    /// Reads `[calibrate]` of a study.
+    pub fn of(study: &Study) -> Result<CalibrateConfig> {
+        let v = study.calibrate.clone().ok_or_else(|| {
+            anyhow!(
+                "study `{}` has no [calibrate] section (it needs at least targets = \"...\")",
+                study.name
+            )
+        })?;
+        let cfg: CalibrateConfig = serde_path_to_error::deserialize(v).map_err(|e| {
+            let p = e.path().to_string();
+            anyhow!(
+                "study key `calibrate.{p}`: {}",
+                e.into_inner().message().trim()
+            )
+        })?;
+        if !(cfg.sd_tolerance.is_finite() && cfg.sd_tolerance >= 0.0) {
+            bail!(
+                "study key `calibrate.sd_tolerance`: {} (allowed: a number >= 0)",
+                cfg.sd_tolerance
+            );
+        }
+        Ok(cfg)
+    }
+}
+
+/// `hvi-study calibrate` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct CalibrateArgs {
+    /// The study, tier, output and threads.
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// Only the grid stage: score the grid, no refinement.
+    #[arg(long)]
+    pub no_refine: bool,
+    /// Nelder-Mead iterations at most (overrides calibrate.max_iters).
+    #[arg(long)]
+    pub max_iters: Option<u64>,
+}
+
+/// One evaluated point: a grid run or a refinement step.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Evaluation {
+    /// `grid`, `refine` or `paper`.
+    pub stage: String,
+    /// Sequence number within the stage.
+    pub step: usize,
+    /// Parameter values by key.
+    pub params: BTreeMap<String, f64>,
+    /// The score (None for a point that was not run).
+    pub score: Option<Score>,
+    /// The objective (OUTSIDE_COST for a point outside the box or invalid).
+    pub objective: f64,
+    /// Run status, or why it was not run.
+    pub status: String,
+    /// Whether the run was found in the store.
+    pub cached: bool,
+    /// The run's directory, relative to the study directory.
+    pub dir: Option<String>,
+}
+
+/// What `calibrate` writes into calibration.json.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CalibrationResult {
+    /// The study.
+    pub study: String,
+    /// The tier.
+    pub tier: String,
+    /// Particles of the runs (from the best run).
+    pub particles: Option<f64>,
+    /// The target file.
+    pub targets_file: PathBuf,
+    /// The targets' names, kinds, values, tolerances and weights.
+    pub targets: Vec<super::score::Target>,
+    /// The documented gaps (not scored).
+    pub gaps: Vec<super::score::Gap>,
+    /// The best point over grid and refinement.
+    pub best: Evaluation,
+    /// The best grid point.
+    pub best_grid: Evaluation,
+    /// The paper's best fit, scored at this tier.
+    pub paper: Evaluation,
+    /// Best over paper for each refined parameter.
+    pub ratio_to_paper: BTreeMap<String, f64>,
+    /// Why the refinement stopped (or that it was skipped).
+    pub termination: String,
+    /// Refinement runs made (not counting cache hits).
+    pub refinement_runs: usize,
+    /// Every refinement evaluation in order.
+    pub refinement: Vec<Evaluation>,
+}
+
+/// The numeric value of a JSON axis value.
+fn as_num(v: &Value, key: &str) -> Result<f64> {
+    v.as_f64()
+        .ok_or_else(|| anyhow!("axis `{key}`: value {v} is not a number (calibrate needs numbers)"))
+}
+
+/// Scores every row of a results table and adds `objective` and `score_<name>` columns.
+pub fn score_table(table: &mut Table, records: &[Record], targets: &Targets) -> Vec<Score> {
+    let scores: Vec<Score> = records
+        .iter()
+        .map(|r| objective(&targets.targets, |name| r.observables.get(name)))
+        .collect();
+    let num = |x: f64| {
+        if x.is_finite() {
+            serde_json::json!(x)
+        } else {
+            Value::Null
+        }
+    };
+    table.push_column(
+        "objective",
+        scores.iter().map(|s| num(s.objective)).collect(),
+    );
+    for (k, t) in targets.targets.iter().enumerate() {
+        table.push_column(
+            &format!("score_{}", t.name),
+            scores.iter().map(|s| num(s.terms[k].term)).collect(),
+        );
+    }
+    scores
+}
+
+/// The refinement's problem: parameters in transformed coordinates -> objective, each point a
+/// run through the store.
+struct Refinement<'a> {
+    study: &'a Study,
+    plan: &'a Plan,
+    store: &'a Store,
+    targets: &'a Targets,
+    /// Fixed overrides: the plan's common ones plus the non-refined axes at the best point.
+    fixed: Vec<String>,
+    /// Refined keys, whether each is in log10, and the box in transformed coordinates.
+    dims: Vec<(String, bool, f64, f64)>,
+    threads: usize,
+    progress: bool,
+    log: RefCell<Vec<Evaluation>>,
+    ran: RefCell<usize>,
+}
+
+impl Refinement<'_> {
+    fn values(&self, x: &[f64]) -> BTreeMap<String, f64> {
+        self.dims
+            .iter()
+            .zip(x)
+            .map(|((k, log, _, _), &u)| {
+                let v = if *log { 10f64.powf(u) } else { u };
+                (k.clone(), round_sig(v, 6))
+            })
+            .collect()
+    }
+
+    /// Evaluates a parameter point (by key), running it if the store lacks it.
+    fn evaluate(&self, stage: &str, params: &BTreeMap<String, f64>) -> Result<Evaluation> {
+        let step = self
+            .log
+            .borrow()
+            .iter()
+            .filter(|e| e.stage == stage)
+            .count();
+        let outside = |status: String| Evaluation {
+            stage: stage.into(),
+            step,
+            params: params.clone(),
+            score: None,
+            objective: OUTSIDE_COST,
+            status,
+            cached: false,
+            dir: None,
+        };
+        let mut set = self.fixed.clone();
+        for (k, v) in params {
+            set.push(format!("{k}={}", json_to_override(&serde_json::json!(v))?));
+        }
+        let scene = match validated_scene(self.study, &set) {
+            Ok(s) => s,
+            Err(e) => return Ok(outside(format!("invalid scene: {e:#}"))),
+        };
+        let fp = fingerprint(&scene, &self.plan.tier)?;
+        let job = Job {
+            fingerprint: fp.clone(),
+            scene,
+            study: self.plan.study.clone(),
+            tier: self.plan.tier.clone(),
+            params: params
+                .iter()
+                .map(|(k, v)| (k.clone(), serde_json::json!(v)))
+                .collect(),
+        };
+        let (record, cached) = match self.store.lookup(&fp)? {
+            Some(r) if r.status == RunStatus::Completed => (r, true),
+            _ => {
+                *self.ran.borrow_mut() += 1;
+                (self.store.execute(&job, self.threads)?, false)
+            }
+        };
+        let score = objective(&self.targets.targets, |n| record.observables.get(n));
+        let e = Evaluation {
+            stage: stage.into(),
+            step,
+            params: params.clone(),
+            objective: score.objective,
+            score: Some(score),
+            status: match record.status {
+                RunStatus::Completed => "completed".into(),
+                RunStatus::Failed => format!(
+                    "failed: {}",
+                    record.error.as_deref().unwrap_or("(no message)")
+                ),
+            },
+            cached,
+            dir: Some(super::plan::run_dir_name(&fp)),
+        };
+        Ok(e)
+    }
+}
+
+/// Argmin's executor owns its problem; this lends it the refinement.
+struct Lend<'r, 'a>(&'r Refinement<'a>);
+
+impl CostFunction for Lend<'_, '_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+
+    fn cost(&self, x: &Self::Param) -> std::result::Result<f64, argmin::core::Error> {
+        let this = self.0;
+        this.cost_of(x)
+    }
+}
+
+impl Refinement<'_> {
+    fn cost_of(&self, x: &[f64]) -> Result<f64> {
+        let params = self.values(x);
+        let inside = self
+            .dims
+            .iter()
+            .zip(x)
+            .all(|((_, _, lo, hi), &u)| u >= lo - 1e-9 && u <= hi + 1e-9);
+        let e = if inside {
+            self.evaluate("refine", &params)?
+        } else {
+            let step = self
+                .log
+                .borrow()
+                .iter()
+                .filter(|e| e.stage == "refine")
+                .count();
+            Evaluation {
+                stage: "refine".into(),
+                step,
+                params: params.clone(),
+                score: None,
+                objective: OUTSIDE_COST,
+                status: "outside the grid's box: not run".into(),
+                cached: false,
+                dir: None,
+            }
+        };
+        if self.progress {
+            eprintln!(
+                "refine {:>2}: {}  J = {:.4}{}",
+                e.step,
+                fmt_params(&e.params),
+                e.objective,
+                if e.cached {
+                    " (cached)".to_string()
+                } else if e.status != "completed" {
+                    format!(" ({})", e.status)
+                } else {
+                    String::new()
+                }
+            );
+        }
+        let j = e.objective;
+        self.log.borrow_mut().push(e);
+        Ok(j)
+    }
+}
+
+fn fmt_params(p: &BTreeMap<String, f64>) -> String {
+    p.iter()
+        .map(|(k, v)| format!("{}={v:.4e}", k.rsplit('.').next().unwrap_or(k)))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn describe_eval(e: &Evaluation) -> String {
+    let mut s = format!("{}  J = {:.4}", fmt_params(&e.params), e.objective);
+    if let Some(score) = &e.score {
+        for t in &score.terms {
+            s.push_str(&format!(
+                "\n      {:<18} observed {:>12}  term {:.4} (weight {})",
+                t.name,
+                t.observed.map_or("n/a".to_string(), |v| format!("{v:.4e}")),
+                t.term,
+                t.weight
+            ));
+        }
+    }
+    s
+}
+
+/// `hvi-study calibrate`.
+pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
+    let (study, plan, out) = args.study.plan()?;
+    let cfg = CalibrateConfig::of(&study)?;
+    let base = study.path.parent().unwrap_or_else(|| Path::new("."));
+    let targets = Targets::load(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
+    let progress = !args.study.quiet;
+
+    // Which axes the refinement moves, and in which coordinates.
+    let refine_keys: Vec<String> = match &cfg.refine {
+        Some(k) => k.clone(),
+        None => plan
+            .axes
+            .iter()
+            .filter(|a| a.values.len() > 1)
+            .map(|a| a.key.clone())
+            .collect(),
+    };
+    let mut dims = Vec::new();
+    for k in &refine_keys {
+        let axis = plan
+            .axes
+            .iter()
+            .find(|a| &a.key == k)
+            .ok_or_else(|| anyhow!("study key `calibrate.refine`: `{k}` is not an axis"))?;
+        let log = cfg.log_axes.contains(k);
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        for v in &axis.values {
+            let x = as_num(v, k)?;
+            if log && x <= 0.0 {
+                bail!("axis `{k}` is refined in log10 but has the value {x} <= 0");
+            }
+            let u = if log { x.log10() } else { x };
+            lo = lo.min(u);
+            hi = hi.max(u);
+        }
+        dims.push((k.clone(), log, lo, hi));
+    }
+
+    // Stage 1: the grid.
+    let (mut table, report) = execute_plan(&plan, &out, &args.study.exec_options())?;
+    if progress {
+        eprintln!("grid: {}", report.line());
+    }
+    print_failures(&report.records);
+    let scores = score_table(&mut table, &report.records, &targets);
+    table.write(&out, "results")?;
+    let grid: Vec<Evaluation> = plan
+        .runs
+        .iter()
+        .zip(&report.records)
+        .zip(&scores)
+        .map(|((run, rec), score)| {
+            let params = plan
+                .axes
+                .iter()
+                .zip(&run.values)
+                .filter_map(|(a, v)| v.as_f64().map(|x| (a.key.clone(), x)))
+                .collect();
+            Evaluation {
+                stage: "grid".into(),
+                step: run.index,
+                params,
+                objective: score.objective,
+                score: Some(score.clone()),
+                status: match rec.status {
+                    RunStatus::Completed => "completed".into(),
+                    RunStatus::Failed => "failed".into(),
+                },
+                cached: true,
+                dir: Some(run.dir.clone()),
+            }
+        })
+        .collect();
+    let best_index = (0..grid.len())
+        .filter(|&i| grid[i].objective.is_finite())
+        .min_by(|&a, &b| grid[a].objective.total_cmp(&grid[b].objective))
+        .ok_or_else(|| anyhow!("no grid run has a score"))?;
+    let best_grid = grid[best_index].clone();
+    if progress {
+        eprintln!(
+            "best grid point (run {best_index}): {}",
+            describe_eval(&best_grid)
+        );
+    }
+
+    // Stage 2: Nelder-Mead from the best grid point.
+    let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
+    let best_run = plan.run(best_index)?;
+    let mut fixed = plan.set.clone();
+    for (a, v) in plan.axes.iter().zip(&best_run.values) {
+        if !refine_keys.contains(&a.key) {
+            fixed.push(format!("{}={}", a.key, json_to_override(v)?));
+        }
+    }
+    let store = Store::open(&out)?;
+    let problem = Refinement {
+        study: &study,
+        plan: &plan,
+        store: &store,
+        targets: &targets,
+        fixed,
+        dims: dims.clone(),
+        threads,
+        progress,
+        log: RefCell::new(Vec::new()),
+        ran: RefCell::new(0),
+    };
+    let max_iters = args.max_iters.unwrap_or(cfg.max_iters);
+    let termination = if args.no_refine || dims.is_empty() || max_iters == 0 {
+        if dims.is_empty() {
+            "skipped: no axis to refine".to_string()
+        } else {
+            "skipped (--no-refine or max_iters = 0)".to_string()
+        }
+    } else {
+        // Start simplex: the best grid point and one step along each refined axis (half the
+        // grid's spacing on that axis, towards the inside of the box).
+        let x0: Vec<f64> = dims
+            .iter()
+            .map(|(k, log, _, _)| {
+                let x = best_grid.params.get(k).copied().unwrap_or(f64::NAN);
+                if *log {
+                    x.log10()
+                } else {
+                    x
+                }
+            })
+            .collect();
+        let mut simplex = vec![x0.clone()];
+        for (d, (k, _, lo, hi)) in dims.iter().enumerate() {
+            let n = plan
+                .axes
+                .iter()
+                .find(|a| &a.key == k)
+                .map_or(2, |a| a.values.len());
+            let step = 0.5 * (hi - lo) / (n.max(2) - 1) as f64;
+            let mut v = x0.clone();
+            v[d] = if x0[d] + step <= *hi + 1e-12 {
+                x0[d] + step
+            } else {
+                x0[d] - step
+            };
+            simplex.push(v);
+        }
+        if progress {
+            eprintln!(
+                "refinement: Nelder-Mead over {} (log10 for {:?}), at most {max_iters} iterations, sd tolerance {}",
+                refine_keys.join(", "),
+                dims.iter().filter(|d| d.1).map(|d| d.0.as_str()).collect::<Vec<_>>(),
+                cfg.sd_tolerance
+            );
+        }
+        let solver = NelderMead::new(simplex)
+            .with_sd_tolerance(cfg.sd_tolerance)
+            .map_err(|e| anyhow!("{e}"))?;
+        let res = Executor::new(Lend(&problem), solver)
+            .configure(|s| s.max_iters(max_iters))
+            .run()
+            .map_err(|e| anyhow!("refinement: {e:#}"))?;
+        let st = res.state();
+        format!(
+            "{} after {} iterations",
+            st.get_termination_status(),
+            st.get_iter()
+        )
+    };
+
+    let refinement = problem.log.take();
+    let refinement_runs = *problem.ran.borrow();
+
+    // The paper's best fit at this tier, through the same store (a cache hit when the grid
+    // holds it).
+    let mut paper_params = BTreeMap::new();
+    for (k, v) in PAPER_BEST {
+        if plan.axes.iter().any(|a| a.key == k) {
+            paper_params.insert(k.to_string(), v);
+        }
+    }
+    let mut paper_fixed = plan.set.clone();
+    for (a, v) in plan.axes.iter().zip(&best_run.values) {
+        if !paper_params.contains_key(&a.key) {
+            paper_fixed.push(format!("{}={}", a.key, json_to_override(v)?));
+        }
+    }
+    let paper_problem = Refinement {
+        study: &study,
+        plan: &plan,
+        store: &store,
+        targets: &targets,
+        fixed: paper_fixed,
+        dims: Vec::new(),
+        threads,
+        progress,
+        log: RefCell::new(Vec::new()),
+        ran: RefCell::new(0),
+    };
+    let paper = paper_problem.evaluate("paper", &paper_params)?;
+
+    let best = std::iter::once(&best_grid)
+        .chain(refinement.iter())
+        .filter(|e| e.score.is_some() && e.objective.is_finite())
+        .min_by(|a, b| a.objective.total_cmp(&b.objective))
+        .cloned()
+        .unwrap_or_else(|| best_grid.clone());
+    let ratio_to_paper = best
+        .params
+        .iter()
+        .filter_map(|(k, v)| paper_params.get(k).map(|p| (k.clone(), v / p)))
+        .collect();
+    let particles = best
+        .dir
+        .as_ref()
+        .and_then(|d| {
+            std::fs::read_to_string(out.join(d).join("record.json"))
+                .ok()
+                .and_then(|t| serde_json::from_str::<Record>(&t).ok())
+        })
+        .and_then(|r| r.observables.particles);
+    let result = CalibrationResult {
+        study: plan.study.clone(),
+        tier: plan.tier.clone(),
+        particles,
+        targets_file: targets.path.clone(),
+        targets: targets.targets.clone(),
+        gaps: targets.gaps.clone(),
+        best,
+        best_grid,
+        paper,
+        ratio_to_paper,
+        termination,
+        refinement_runs,
+        refinement,
+    };
+    write_outputs(&out, &result, &grid)?;
+    if progress {
+        eprint!("{}", report_text(&result));
+    }
+    println!("{}", out.join("calibration.json").display());
+    Ok(result)
+}
+
+/// The human-readable report: best point, every term, the paper's point, the gaps.
+pub fn report_text(r: &CalibrationResult) -> String {
+    let mut s = String::new();
+    s.push_str(&format!(
+        "calibration of `{}` at tier `{}` ({} particles): refinement {} ({} new runs)\n",
+        r.study,
+        r.tier,
+        r.particles.map_or("?".into(), |n| format!("{n}")),
+        r.termination,
+        r.refinement_runs
+    ));
+    s.push_str(&format!("  best:        {}\n", describe_eval(&r.best)));
+    s.push_str(&format!("  best grid:   {}\n", describe_eval(&r.best_grid)));
+    s.push_str(&format!("  paper's fit: {}\n", describe_eval(&r.paper)));
+    for (k, v) in &r.ratio_to_paper {
+        s.push_str(&format!("  best / paper for {k}: {v:.3}\n"));
+    }
+    for g in &r.gaps {
+        s.push_str(&format!("  not scored (gap): {}: {}\n", g.name, g.source));
+    }
+    s
+}
+
+/// calibration.json, refinement.csv (every evaluation: grid, refinement, paper).
+fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluation]) -> Result<()> {
+    write_atomic_bytes(
+        &out.join("calibration.json"),
+        serde_json::to_string_pretty(r)?.as_bytes(),
+    )?;
+    let keys: Vec<String> = {
+        let mut k: Vec<String> = grid
+            .iter()
+            .chain(&r.refinement)
+            .flat_map(|e| e.params.keys().cloned())
+            .collect();
+        k.sort();
+        k.dedup();
+        k
+    };
+    let names: Vec<String> = r.targets.iter().map(|t| t.name.clone()).collect();
+    write_atomic(&out.join("evaluations.csv"), |w| {
+        let mut csv = csv::Writer::from_writer(w);
+        let mut header = vec!["stage".to_string(), "step".into()];
+        header.extend(keys.iter().cloned());
+        header.push("objective".into());
+        header.extend(names.iter().map(|n| format!("score_{n}")));
+        header.extend(["status", "cached", "dir"].map(String::from));
+        csv.write_record(&header)?;
+        for e in grid
+            .iter()
+            .chain(&r.refinement)
+            .chain(std::iter::once(&r.paper))
+        {
+            let mut row = vec![e.stage.clone(), e.step.to_string()];
+            row.extend(
+                keys.iter()
+                    .map(|k| e.params.get(k).map_or(String::new(), |v| v.to_string())),
+            );
+            row.push(e.objective.to_string());
+            for k in 0..names.len() {
+                row.push(
+                    e.score
+                        .as_ref()
+                        .map_or(String::new(), |s| s.terms[k].term.to_string()),
+                );
+            }
+            row.push(e.status.clone());
+            row.push(e.cached.to_string());
+            row.push(e.dir.clone().unwrap_or_default());
+            csv.write_record(&row)?;
+        }
+        csv.flush()?;
+        Ok(())
+    })
+}
