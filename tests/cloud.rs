@@ -534,12 +534,11 @@ fn sphere_scene(particles: f64, end_time_s: f64) -> SceneSpec {
 
 /// Runs a scene with a cloud observer as `hvi-study run` does.
 fn observed_run(spec: &SceneSpec) -> (Simulation, CloudResult) {
-    let setup = spec.build().expect("valid scene");
-    let rim = setup.rim_ids.clone();
-    let mut sim = Simulation::new(setup).expect("starts");
-    if sim.rim_ids.is_empty() {
-        sim.rim_ids = rim;
-    }
+    let mut sim = Simulation::new(spec.build().expect("valid scene")).expect("starts");
+    assert!(
+        !sim.rim_ids.is_empty(),
+        "Simulation::new keeps the plate's rim"
+    );
     let mut observer = CloudObserver::new(&sim, &spec.analysis, spec.run.end_time_s);
     observer.observe(&sim);
     while sim.step < sim.derived.steps {

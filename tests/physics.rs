@@ -272,3 +272,61 @@ fn blow_up_is_detected_with_a_diagnostic() {
         other => panic!("expected an instability, got {other:?}"),
     }
 }
+
+/// Free flight (the ballistic cut-off): fragments move rigidly, so kinetic and bond energy,
+/// momentum, bonds and every distance inside a fragment stay exactly as at the cut-off, while
+/// each fragment's centre of mass moves on at its velocity; and the gate refuses free flight
+/// while fragments still collide.
+#[test]
+fn free_flight_moves_fragments_rigidly_and_keeps_the_ledger() {
+    let spec = sphere_scene(3000.0, 4e-6);
+    let mut sim = Simulation::new(spec.build().expect("valid")).expect("starts");
+    sim.advance(sim.derived.steps / 2).expect("stable");
+    let labels = hvi_engine::cloud::label_fragments(&sim.particles);
+    let (e0, p0, broken0) = (sim.energy(), sim.momentum(), sim.bonds_broken);
+    let pos0 = sim.particles.pos.clone();
+    // The centre of mass of the impactor-holding fragment of particle 0's label.
+    let l = labels[0];
+    let members: Vec<usize> = (0..labels.len()).filter(|&i| labels[i] == l).collect();
+    let mass: f64 = members.iter().map(|&i| sim.particles.mass[i]).sum();
+    let masses = sim.particles.mass.clone();
+    let cm = |pos: &[DVec3]| {
+        members
+            .iter()
+            .fold(DVec3::ZERO, |a, &i| a + pos[i] * masses[i])
+            / mass
+    };
+    let v_cm = members.iter().fold(DVec3::ZERO, |a, &i| {
+        a + sim.particles.vel[i] * sim.particles.mass[i]
+    }) / mass;
+    let cm0 = cm(&pos0);
+    // 2 us after contact the debris is still colliding: the cut-off's gate says no.
+    assert!(!sim.fragments_separating(&labels));
+    sim.start_coasting(&labels);
+    let n = 500;
+    sim.advance(n).expect("free flight");
+    let e1 = sim.energy();
+    assert_eq!(sim.bonds_broken, broken0);
+    assert_eq!(hvi_engine::cloud::label_fragments(&sim.particles), labels);
+    assert_eq!(e1.kinetic_j, e0.kinetic_j);
+    // Bonds lie inside fragments, so their energy is kept; contact between different
+    // fragments is not (they were still touching: that is what the gate above refuses).
+    assert!(
+        (e1.bond_j - e0.bond_j).abs() <= 1e-9 * e0.bond_j,
+        "{e1:?} vs {e0:?}"
+    );
+    assert_eq!(e1.broken_j, e0.broken_j);
+    assert_eq!(sim.momentum(), p0);
+    let moved = cm(&sim.particles.pos) - cm0;
+    let expected = v_cm * (n as f64 * sim.dt);
+    assert!((moved - expected).length() <= 1e-9 * expected.length().max(1e-12));
+    // Rigid: distances inside the fragment are kept.
+    for w in members.windows(2).take(200) {
+        let before = (pos0[w[0]] - pos0[w[1]]).length();
+        let after = (sim.particles.pos[w[0]] - sim.particles.pos[w[1]]).length();
+        assert!(
+            (before - after).abs() <= 1e-12 * before.max(1e-6),
+            "{before} vs {after}"
+        );
+    }
+}

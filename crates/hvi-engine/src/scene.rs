@@ -242,6 +242,15 @@ pub struct RunSettings {
     pub max_energy_drift: f64,
     /// Abort when two particles come closer than this times sigma.
     pub min_distance_over_sigma: f64,
+    /// Ballistic cut-off: once the debris is in free flight, stop computing forces and move
+    /// each fragment rigidly with its centre-of-mass velocity (see `Simulation::start_coasting`).
+    pub ballistic_cutoff: bool,
+    /// The cut-off is considered only after this time since first contact, s.
+    pub cutoff_min_tau_s: f64,
+    /// ... and only when, over this long (s), ...
+    pub cutoff_quiet_s: f64,
+    /// ... the broken-bond count grew by at most this fraction (0: not a single break).
+    pub cutoff_break_fraction: f64,
 }
 
 impl Default for RunSettings {
@@ -256,6 +265,10 @@ impl Default for RunSettings {
             energy_every: 200,
             max_energy_drift: 0.05,
             min_distance_over_sigma: 0.35,
+            ballistic_cutoff: false,
+            cutoff_min_tau_s: 8e-6,
+            cutoff_quiet_s: 2e-6,
+            cutoff_break_fraction: 1e-3,
         }
     }
 }
@@ -642,6 +655,30 @@ impl SceneSpec {
             false,
             1.0,
             true,
+        )?;
+        check_range(
+            "run.cutoff_min_tau_s",
+            run.cutoff_min_tau_s,
+            0.0,
+            false,
+            f64::INFINITY,
+            true,
+        )?;
+        check_range(
+            "run.cutoff_quiet_s",
+            run.cutoff_quiet_s,
+            0.0,
+            true,
+            f64::INFINITY,
+            true,
+        )?;
+        check_range(
+            "run.cutoff_break_fraction",
+            run.cutoff_break_fraction,
+            0.0,
+            false,
+            1.0,
+            false,
         )?;
         self.analysis.validate(run.end_time_s)?;
         let stiffness = kappa.max(interaction.contact_stiffness_at_r_eq());

@@ -86,6 +86,8 @@ pub struct Simulation {
     pub bonds_initial: u64,
     /// Bonds broken so far.
     pub bonds_broken: u64,
+    coast_velocity: Vec<DVec3>,
+    coast_from_step: Option<u64>,
     broken_energy: f64,
     /// Energy at t = 0.
     pub energy_initial: Energy,
@@ -111,9 +113,11 @@ impl Simulation {
             derived,
             interaction,
             particles,
-            ..
+            rim_ids,
         } = setup;
-        Self::from_parts(particles, interaction, derived, &spec.run)
+        let mut sim = Self::from_parts(particles, interaction, derived, &spec.run)?;
+        sim.rim_ids = rim_ids;
+        Ok(sim)
     }
 
     /// Prepares a run from hand-made parts (tests and tools use this; scenes use [`Self::new`]).
@@ -138,6 +142,8 @@ impl Simulation {
             dt: derived.dt_s,
             bonds_initial,
             bonds_broken: 0,
+            coast_velocity: Vec::new(),
+            coast_from_step: None,
             broken_energy: 0.0,
             energy_initial: Energy::default(),
             momentum_initial: DVec3::ZERO,
@@ -324,8 +330,13 @@ impl Simulation {
         }
     }
 
-    /// Advances one velocity-Verlet step.
+    /// Advances one velocity-Verlet step (or one free-flight step after
+    /// [`Self::start_coasting`]).
     pub fn step_once(&mut self) -> Result<()> {
+        if self.coast_from_step.is_some() {
+            self.coast_step();
+            return Ok(());
+        }
         let t0 = Instant::now();
         let dt = self.dt;
         let half = 0.5 * dt;
@@ -447,6 +458,69 @@ impl Simulation {
         Ok(drift)
     }
 
+    /// Whether the debris is in free flight (the ballistic cut-off of issue 6): no pair of
+    /// particles of *different* fragments is in contact (closer than r_eq), and no such pair
+    /// within the neighbour-list radius is closing in, judged by the fragments' centre-of-mass
+    /// velocities. `labels[i]` is the fragment of particle i (any id below the particle count,
+    /// e.g. [`crate::cloud::label_fragments`]). Bonds breaking recently is the caller's check.
+    pub fn fragments_separating(&self, labels: &[u32]) -> bool {
+        let p = &self.particles;
+        let cm = fragment_velocities(p, labels);
+        let r_eq2 = self.interaction.r_eq2();
+        let nl = &self.neighbours;
+        (0..p.len()).into_par_iter().all(|i| {
+            let li = labels[i];
+            let touching = |j: usize| {
+                let lj = labels[j];
+                if lj == li {
+                    return false;
+                }
+                let d = p.pos[i] - p.pos[j];
+                d.length_squared() < r_eq2 || d.dot(cm[li as usize] - cm[lj as usize]) < 0.0
+            };
+            !nl.of(i).iter().any(|&j| touching(j as usize))
+                && !p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE]
+                    .iter()
+                    .any(|&s| s != NO_BOND && touching((s & INDEX_MASK) as usize))
+        })
+    }
+
+    /// Switches to free flight (the ballistic cut-off of issue 6): from now on every step
+    /// moves each fragment rigidly with its centre-of-mass velocity instead of computing
+    /// forces. Internal distances, hence contact and bond energy, the bonds and the fragments
+    /// themselves, are unchanged, and so is every particle's velocity: the energy ledger and
+    /// momentum stay exactly those at the cut-off. What is dropped is each fragment's rotation
+    /// and internal vibration, which moves a particle by at most its fragment's size times the
+    /// angle turned: far below the cloud's extent. Observables that are quantiles of particle
+    /// positions (front, La, Lr) and fragment counts are therefore unchanged to that order;
+    /// the benchmark shows it. `labels` as for [`Self::fragments_separating`].
+    pub fn start_coasting(&mut self, labels: &[u32]) {
+        let cm = fragment_velocities(&self.particles, labels);
+        self.coast_velocity = labels.iter().map(|&l| cm[l as usize]).collect();
+        self.coast_from_step = Some(self.step);
+    }
+
+    /// The step at which free flight began, if it did.
+    pub fn coasting_since(&self) -> Option<u64> {
+        self.coast_from_step
+    }
+
+    fn coast_step(&mut self) {
+        let t = Instant::now();
+        let dt = self.dt;
+        self.particles
+            .pos
+            .par_chunks_mut(CHUNK)
+            .zip(self.coast_velocity.par_chunks(CHUNK))
+            .for_each(|(x, v)| {
+                for (x, v) in x.iter_mut().zip(v) {
+                    *x += *v * dt;
+                }
+            });
+        self.step += 1;
+        self.timing.integrate += t.elapsed();
+    }
+
     /// Total momentum, kg m/s.
     pub fn momentum(&self) -> DVec3 {
         let p = &self.particles;
@@ -463,4 +537,20 @@ impl Simulation {
             .collect();
         partials.into_iter().fold(DVec3::ZERO, |a, b| a + b)
     }
+}
+
+/// Centre-of-mass velocity of each fragment label (indexed by label), summed in index order.
+fn fragment_velocities(p: &Particles, labels: &[u32]) -> Vec<DVec3> {
+    let n = p.len();
+    let mut momentum = vec![DVec3::ZERO; n];
+    let mut mass = vec![0.0f64; n];
+    for ((&l, &v), &m) in labels.iter().zip(&p.vel).zip(&p.mass) {
+        momentum[l as usize] += v * m;
+        mass[l as usize] += m;
+    }
+    momentum
+        .iter()
+        .zip(&mass)
+        .map(|(&q, &m)| if m > 0.0 { q / m } else { DVec3::ZERO })
+        .collect()
 }

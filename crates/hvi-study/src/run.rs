@@ -150,6 +150,9 @@ pub struct Summary {
     pub threads: usize,
     /// Neighbour-list builds.
     pub neighbour_builds: u64,
+    /// Time since first contact at which the ballistic cut-off began free flight, s (null when
+    /// it did not, or was off).
+    pub ballistic_cutoff_tau_s: Option<f64>,
     /// Energy ledger.
     pub energy: EnergySummary,
     /// Momentum.
@@ -269,12 +272,7 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         .iter()
         .filter(|b| **b == hvi_engine::state::Body::Impactor)
         .count();
-    let rim_ids = setup.rim_ids.clone();
     let mut sim = Simulation::new(setup)?;
-    if sim.rim_ids.is_empty() {
-        // `Simulation::new` leaves the rim to its caller: the residual plate needs it.
-        sim.rim_ids = rim_ids;
-    }
     let d = sim.derived;
     if opts.progress {
         eprintln!("{}", describe(&d, n, sim.bonds_initial));
@@ -345,6 +343,8 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     let energy_every = spec.run.energy_every;
     let step_wall0 = Instant::now();
     let mut failure: Option<EngineError> = None;
+    // Ballistic cut-off bookkeeping: broken-bond counts at the energy samples.
+    let mut break_history: Vec<(f64, u64)> = Vec::new();
     if dump_every > 0 {
         let t = Instant::now();
         write_xyz(&opts.out_dir.join(format!("dump_{:09}.xyz", 0)), &sim)?;
@@ -366,6 +366,36 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
                     failure = Some(err);
                     break;
                 }
+            }
+        }
+        if spec.run.ballistic_cutoff && sim.coasting_since().is_none() && s % energy_every == 0 {
+            let tau = sim.tau_s();
+            break_history.push((tau, sim.bonds_broken));
+            // Broken-bond count one quiet window ago.
+            let before = break_history
+                .iter()
+                .rev()
+                .find(|h| tau - h.0 >= spec.run.cutoff_quiet_s)
+                .map(|h| h.1);
+            let quiet = before.is_some_and(|b| {
+                (sim.bonds_broken - b) as f64
+                    <= spec.run.cutoff_break_fraction * sim.bonds_broken as f64
+            });
+            if tau >= spec.run.cutoff_min_tau_s && quiet {
+                let t = Instant::now();
+                let labels = hvi_engine::cloud::label_fragments(&sim.particles);
+                if sim.fragments_separating(&labels) {
+                    sim.start_coasting(&labels);
+                    if opts.progress {
+                        eprintln!(
+                            "ballistic cut-off at tau = {:.3} us: bonds broken grew by at most {} over {:.3} us and no fragments touch or close in; fragments now move rigidly",
+                            tau * 1e6,
+                            spec.run.cutoff_break_fraction,
+                            spec.run.cutoff_quiet_s * 1e6
+                        );
+                    }
+                }
+                output_time += t.elapsed();
             }
         }
         if let Some(o) = observer.as_mut() {
@@ -533,6 +563,9 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         particle_steps_per_second: n as f64 * sim.step as f64 / step_wall.max(1e-12),
         threads: rayon::current_num_threads(),
         neighbour_builds: sim.neighbour_builds(),
+        ballistic_cutoff_tau_s: sim
+            .coasting_since()
+            .map(|step| step as f64 * d.dt_s - d.contact_time_s),
         energy: EnergySummary {
             kinetic_j: final_energy.kinetic_j,
             contact_j: final_energy.contact_j,
