@@ -453,6 +453,15 @@ fn calibrate_scores_the_grid_refines_through_the_store_and_compares_with_the_pap
         .unwrap_or("")
         .contains("score_length_ratio"));
     assert!(out.join("evaluations.csv").exists());
+    for stem in ["map_R", "map_va", "map_objective"] {
+        for ext in ["png", "svg"] {
+            assert!(
+                out.join(format!("{stem}.{ext}")).exists(),
+                "{stem}.{ext} missing:\n{}",
+                stderr(&o)
+            );
+        }
+    }
 
     // Again: grid and refinement come from the store, the same result, no new run.
     let o = run();
@@ -461,4 +470,60 @@ fn calibrate_scores_the_grid_refines_through_the_store_and_compares_with_the_pap
     assert_eq!(c2["refinement_runs"], 0, "{}", stderr(&o));
     assert_eq!(c2["best"], c["best"]);
     assert_eq!(counts(&o).2, 0, "{}", stderr(&o));
+}
+
+#[test]
+fn validity_map_draws_f_with_the_cutoff_contour_and_exports_the_boundary() {
+    let dir = scratch("validity");
+    let study = write_study(
+        &dir,
+        "vm",
+        "[[axes]]\nkey = \"scene.v0_m_s\"\nrange = { from = 3000, to = 9000, count = 3 }\n\n[[axes]]\nkey = \"scene.t_over_d\"\nvalues = [0.3, 0.5]\n",
+        TINY,
+    );
+    let out = dir.join("out");
+    let o = bin()
+        .arg("validity-map")
+        .arg(&study)
+        .arg("--out")
+        .arg(&out)
+        .args(["--threads", "2", "--cutoff", "0.3"])
+        .output()
+        .expect("runs");
+    assert_ok(&o);
+    for f in [
+        "validity_map.png",
+        "validity_map.svg",
+        "validity_boundary.csv",
+        "results.csv",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing:\n{}", stderr(&o));
+    }
+    let boundary = std::fs::read_to_string(out.join("validity_boundary.csv")).expect("csv");
+    assert!(boundary.starts_with("polyline,point,scene.v0_m_s,scene.t_over_d\n"));
+    let rows = results(&out);
+    assert_eq!(rows.len(), 6);
+    let mut measured = 0;
+    for r in &rows {
+        // A run with no cloud yet (slow impact, thick plate, 2 us) has no F and no verdict.
+        match r["fragmentation"].as_f64() {
+            Some(f) => {
+                measured += 1;
+                assert_eq!(r["valid"].as_bool(), Some(f >= 0.3), "{r}");
+            }
+            None => assert!(r["valid"].is_null(), "{r}"),
+        }
+    }
+    assert!(measured >= 4, "{rows:?}");
+    let png = std::fs::read(out.join("validity_map.png")).expect("png");
+    assert_eq!(&png[1..4], b"PNG");
+    let o = bin()
+        .arg("validity-map")
+        .arg(&study)
+        .arg("--out")
+        .arg(&out)
+        .args(["--cutoff", "nan"])
+        .output()
+        .expect("runs");
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }

@@ -53,6 +53,9 @@ enum Command {
     /// Calibrate: the study's grid scored against experiments_data, then a Nelder-Mead
     /// refinement from the best grid point; writes calibration.json and evaluations.csv.
     Calibrate(hvi_study::study::calibrate::CalibrateArgs),
+    /// Validity map: the study's grid over (v0, t/D), F contour with the cut-off in red
+    /// (Fig. 16b), the boundary as validity_boundary.csv, runs marked valid in results.csv.
+    ValidityMap(hvi_study::study::validity::ValidityArgs),
     /// Run one run of a written plan.json by its index (for an external scheduler).
     RunUnit {
         /// The plan.json of a study's output directory.
@@ -142,6 +145,7 @@ fn main() -> ExitCode {
         Command::Plan(args) => hvi_study::study::cli::plan(&args),
         Command::Sweep(args) => hvi_study::study::cli::sweep(&args),
         Command::Calibrate(args) => hvi_study::study::calibrate::calibrate(&args).map(|_| ()),
+        Command::ValidityMap(args) => hvi_study::study::validity::validity_map(&args).map(|_| ()),
         Command::RunUnit {
             plan,
             index,

@@ -625,6 +625,15 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
         refinement,
     };
     write_outputs(&out, &result, &grid)?;
+    match super::figures::calibration_maps(&out, &plan, &report.records, &result, &cfg.log_axes) {
+        Ok(stems) if progress => {
+            for s in stems {
+                eprintln!("plot: {} (and .svg)", s.with_extension("png").display());
+            }
+        }
+        Ok(_) => {}
+        Err(e) => eprintln!("no maps drawn: {e:#}"),
+    }
     if progress {
         eprint!("{}", report_text(&result));
     }

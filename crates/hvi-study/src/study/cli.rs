@@ -16,7 +16,7 @@ use super::{default_out_dir, execute_plan, job_of};
 pub struct StudyArgs {
     /// Study file (TOML), e.g. studies/calibration.toml.
     pub study: PathBuf,
-    /// Resolution tier, as named in the study's [tiers] (default: its default_tier, `quick`).
+    /// Resolution tier, as named in the study's `[tiers]` (default: its default_tier, `quick`).
     #[arg(long)]
     pub tier: Option<String>,
     /// Override the tier's particle count (resolution.particles).
@@ -25,7 +25,7 @@ pub struct StudyArgs {
     /// Override a scene key in every run: section.key=value (not an axis key).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub sets: Vec<String>,
-    /// Output directory (default: runs/studies/<study>/<tier>).
+    /// Output directory (default: `runs/studies/<study>/<tier>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Worker threads in all (default: every core).

@@ -7,12 +7,16 @@
 
 pub mod calibrate;
 pub mod cli;
+pub mod contour;
 pub mod exec;
+pub mod figures;
 pub mod plan;
+pub mod plot;
 pub mod score;
 pub mod spec;
 pub mod store;
 pub mod table;
+pub mod validity;
 
 use std::path::{Path, PathBuf};
 

@@ -272,12 +272,23 @@ impl Plan {
             .with_context(|| format!("cannot create study directory {}", dir.display()))?;
         let path = dir.join("plan.json");
         if path.exists() {
-            let old = Plan::load(&path).with_context(|| {
-                format!(
-                    "{} holds a plan that cannot be read; move it away or use another --out",
-                    path.display()
-                )
-            })?;
+            // Only the study and tier matter here: an older plan (another engine version, its
+            // fingerprints stale) is replaced; its runs stay in the store under their own
+            // fingerprints and are simply not reused.
+            #[derive(Deserialize)]
+            struct Header {
+                study: String,
+                tier: String,
+            }
+            let old: Header = std::fs::read_to_string(&path)
+                .ok()
+                .and_then(|t| serde_json::from_str(&t).ok())
+                .ok_or_else(|| {
+                    anyhow!(
+                        "{} holds something that is not a plan; move it away or use another --out",
+                        path.display()
+                    )
+                })?;
             if old.study != self.study || old.tier != self.tier {
                 bail!(
                     "{} holds study `{}` at tier `{}`, not `{}` at `{}`: use another --out",

@@ -1,0 +1,408 @@
+//! Contour plots of study fields (Figs. 9, 10, 16b and the objective map), as PNG and SVG.
+//!
+//! The filled background is the field's bilinear interpolation between the runs (each grid cell
+//! drawn as small tiles), iso-lines come from [`super::contour`], the runs are black dots. A
+//! highlighted level (a target or the validity cut-off) is drawn in red. Log axes are drawn in
+//! log10 coordinates with the tick labels in the physical value. Shows numbers, derives none.
+
+use std::path::Path;
+use std::sync::OnceLock;
+
+use anyhow::{anyhow, Context, Result};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::contour::{Field, Point};
+use crate::output::write_atomic_bytes;
+
+/// DejaVu Sans, shared with `render` (same file; registered here too so plots do not depend
+/// on a picture having been drawn first).
+const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+const FAMILY: &str = "sans-serif";
+
+fn fonts() -> Result<()> {
+    static DONE: OnceLock<bool> = OnceLock::new();
+    let ok = *DONE
+        .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
+    if ok {
+        Ok(())
+    } else {
+        Err(anyhow!("the embedded font could not be loaded"))
+    }
+}
+
+/// A marked point with a label (the optimum, the paper's fit).
+#[derive(Debug, Clone)]
+pub struct Marker {
+    /// Position in physical units.
+    pub at: Point,
+    /// Legend text.
+    pub label: String,
+    /// Colour.
+    pub color: RGBColor,
+    /// A cross (true) or a circle.
+    pub cross: bool,
+}
+
+/// A contour plot.
+#[derive(Debug, Clone)]
+pub struct ContourPlot {
+    /// Title.
+    pub title: String,
+    /// Subtitle (one line under the title: the tier, the source of the highlighted level).
+    pub subtitle: String,
+    /// Axis labels.
+    pub x_label: String,
+    /// Axis labels.
+    pub y_label: String,
+    /// Draw x in log10.
+    pub x_log: bool,
+    /// Draw y in log10.
+    pub y_log: bool,
+    /// The field in physical coordinates.
+    pub field: Field,
+    /// The colour bar's label.
+    pub value_label: String,
+    /// Number of plain iso-lines.
+    pub levels: usize,
+    /// A level drawn in red, with its legend text.
+    pub highlight: Option<(f64, String)>,
+    /// Small hollow points (refinement evaluations), physical coordinates.
+    pub extra_points: Vec<Point>,
+    /// Marked points.
+    pub markers: Vec<Marker>,
+}
+
+fn tx(v: f64, log: bool) -> f64 {
+    if log {
+        v.log10()
+    } else {
+        v
+    }
+}
+
+/// Viridis-like colour map on [0, 1].
+pub fn colormap(t: f64) -> RGBColor {
+    const STOPS: [(f64, [f64; 3]); 5] = [
+        (0.0, [68.0, 1.0, 84.0]),
+        (0.25, [59.0, 82.0, 139.0]),
+        (0.5, [33.0, 145.0, 140.0]),
+        (0.75, [94.0, 201.0, 98.0]),
+        (1.0, [253.0, 231.0, 37.0]),
+    ];
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let k = STOPS
+        .windows(2)
+        .position(|w| t <= w[1].0)
+        .unwrap_or(STOPS.len() - 2);
+    let (a, b) = (STOPS[k], STOPS[k + 1]);
+    let s = (t - a.0) / (b.0 - a.0);
+    let c = |i: usize| (a.1[i] + s * (b.1[i] - a.1[i])).round() as u8;
+    RGBColor(c(0), c(1), c(2))
+}
+
+fn tick(v: f64, log: bool) -> String {
+    let x = if log { 10f64.powf(v) } else { v };
+    let a = x.abs();
+    if a != 0.0 && !(1e-2..1e4).contains(&a) {
+        let e = a.log10().floor();
+        let m = x / 10f64.powf(e);
+        if (m - m.round()).abs() < 1e-6 {
+            format!("{}e{}", m.round(), e)
+        } else {
+            format!("{m:.2}e{e}")
+        }
+    } else {
+        let s = format!("{x:.3}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    }
+}
+
+fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &ContourPlot) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE)?;
+    let f = &p.field;
+    let field = Field {
+        x: f.x.iter().map(|&v| tx(v, p.x_log)).collect(),
+        y: f.y.iter().map(|&v| tx(v, p.y_log)).collect(),
+        z: f.z.clone(),
+    };
+    let (x0, x1) = (field.x[0], field.x[field.x.len() - 1]);
+    let (y0, y1) = (field.y[0], field.y[field.y.len() - 1]);
+    let pad = |a: f64, b: f64| {
+        let d = if b > a { 0.04 * (b - a) } else { 0.5 };
+        (a - d, b + d)
+    };
+    let (xa, xb) = pad(x0, x1);
+    let (ya, yb) = pad(y0, y1);
+    // Room above the data for the legend, so it hides no run.
+    let yb = yb + 0.22 * (yb - ya);
+    let (zmin, zmax) = field.range().unwrap_or((0.0, 1.0));
+    let zspan = if zmax > zmin { zmax - zmin } else { 1.0 };
+    let norm = |z: f64| (z - zmin) / zspan;
+
+    let (main, bar) = root.split_horizontally(root.dim_in_pixel().0 - 150);
+    let mut chart = ChartBuilder::on(&main)
+        .caption(&p.title, (FAMILY, 26))
+        .margin(18)
+        .margin_bottom(44)
+        .x_label_area_size(70)
+        .y_label_area_size(95)
+        .build_cartesian_2d(xa..xb, ya..yb)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc(&p.x_label)
+        .y_desc(&p.y_label)
+        .label_style((FAMILY, 17))
+        .axis_desc_style((FAMILY, 19))
+        .x_label_formatter(&|v| tick(*v, p.x_log))
+        .y_label_formatter(&|v| tick(*v, p.y_log))
+        .draw()?;
+
+    // Filled field: tiles of each cell coloured by the interpolation at their centre.
+    const TILES: usize = 14;
+    let mut tiles = Vec::new();
+    for j in 0..field.y.len().saturating_sub(1) {
+        for i in 0..field.x.len().saturating_sub(1) {
+            let (cx0, cx1) = (field.x[i], field.x[i + 1]);
+            let (cy0, cy1) = (field.y[j], field.y[j + 1]);
+            for a in 0..TILES {
+                for b in 0..TILES {
+                    let u0 = cx0 + (cx1 - cx0) * a as f64 / TILES as f64;
+                    let u1 = cx0 + (cx1 - cx0) * (a + 1) as f64 / TILES as f64;
+                    let v0 = cy0 + (cy1 - cy0) * b as f64 / TILES as f64;
+                    let v1 = cy0 + (cy1 - cy0) * (b + 1) as f64 / TILES as f64;
+                    let color = field
+                        .at(0.5 * (u0 + u1), 0.5 * (v0 + v1))
+                        .map_or(RGBColor(200, 200, 200), |z| colormap(norm(z)));
+                    tiles.push(Rectangle::new([(u0, v0), (u1, v1)], color.filled()));
+                }
+            }
+        }
+    }
+    chart.draw_series(tiles)?;
+
+    // Iso-lines.
+    let line_color = RGBColor(40, 40, 40);
+    for k in 1..=p.levels {
+        let level = zmin + zspan * k as f64 / (p.levels + 1) as f64;
+        for line in field.contour(level) {
+            chart.draw_series(std::iter::once(PathElement::new(
+                line,
+                line_color.mix(0.55).stroke_width(1),
+            )))?;
+        }
+    }
+    if let Some((level, label)) = &p.highlight {
+        let lines = field.contour(*level);
+        let mut first = true;
+        for line in lines {
+            let s =
+                chart.draw_series(std::iter::once(PathElement::new(line, RED.stroke_width(4))))?;
+            if first {
+                s.label(label.clone()).legend(|(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 22, y)], RED.stroke_width(4))
+                });
+                first = false;
+            }
+        }
+    }
+
+    // Runs as black dots, refinement points hollow, markers.
+    let mut dots = Vec::new();
+    for (j, &y) in field.y.iter().enumerate() {
+        for (i, &x) in field.x.iter().enumerate() {
+            let missing = !field.z[j][i].is_finite();
+            dots.push(Circle::new(
+                (x, y),
+                5,
+                if missing {
+                    RED.stroke_width(2)
+                } else {
+                    BLACK.filled()
+                },
+            ));
+        }
+    }
+    chart
+        .draw_series(dots)?
+        .label("simulations")
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, BLACK.filled()));
+    if !p.extra_points.is_empty() {
+        chart
+            .draw_series(p.extra_points.iter().map(|&(x, y)| {
+                Circle::new((tx(x, p.x_log), tx(y, p.y_log)), 4, WHITE.stroke_width(2))
+            }))?
+            .label("refinement runs")
+            .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.stroke_width(2)));
+    }
+    for m in &p.markers {
+        let at = (tx(m.at.0, p.x_log), tx(m.at.1, p.y_log));
+        let color = m.color;
+        let s = if m.cross {
+            chart.draw_series(std::iter::once(Cross::new(at, 11, color.stroke_width(4))))?
+        } else {
+            chart.draw_series(std::iter::once(Circle::new(at, 11, color.stroke_width(4))))?
+        };
+        let s = s.label(m.label.clone());
+        if m.cross {
+            s.legend(move |(x, y)| Cross::new((x + 10, y), 7, color.stroke_width(3)));
+        } else {
+            // A light marker needs a dark outline in the white legend box.
+            s.legend(move |(x, y)| Circle::new((x + 10, y), 6, BLACK.stroke_width(3)));
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FAMILY, 15))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()?;
+    main.draw(&Text::new(
+        p.subtitle.clone(),
+        (20, main.dim_in_pixel().1 as i32 - 26),
+        (FAMILY, 15).into_font().color(&RGBColor(60, 60, 60)),
+    ))?;
+
+    // Colour bar.
+    let (bw, bh) = bar.dim_in_pixel();
+    let (top, bottom) = (70i32, bh as i32 - 110);
+    let left = 20i32;
+    let steps = 120;
+    for s in 0..steps {
+        let t0 = s as f64 / steps as f64;
+        let ya_px = bottom - ((bottom - top) as f64 * (s + 1) as f64 / steps as f64) as i32;
+        let yb_px = bottom - ((bottom - top) as f64 * t0) as i32;
+        bar.draw(&Rectangle::new(
+            [(left, ya_px), (left + 28, yb_px)],
+            colormap(t0 + 0.5 / steps as f64).filled(),
+        ))?;
+    }
+    bar.draw(&Rectangle::new([(left, top), (left + 28, bottom)], BLACK))?;
+    for k in 0..=4 {
+        let z = zmin + zspan * k as f64 / 4.0;
+        let y = bottom - ((bottom - top) as f64 * k as f64 / 4.0) as i32;
+        bar.draw(&Text::new(
+            tick(z, false),
+            (left + 34, y - 8),
+            (FAMILY, 15).into_font(),
+        ))?;
+    }
+    if let Some((level, _)) = &p.highlight {
+        if *level >= zmin && *level <= zmax {
+            let y = bottom - ((bottom - top) as f64 * norm(*level)) as i32;
+            bar.draw(&PathElement::new(
+                vec![(left - 4, y), (left + 32, y)],
+                RED.stroke_width(3),
+            ))?;
+        }
+    }
+    bar.draw(&Text::new(
+        p.value_label.clone(),
+        (left, top - 30),
+        (FAMILY, 16).into_font(),
+    ))?;
+    let _ = bw;
+    root.present()?;
+    Ok(())
+}
+
+/// Writes `<stem>.png` and `<stem>.svg`.
+pub fn contour_plot(stem: &Path, p: &ContourPlot) -> Result<()> {
+    fonts()?;
+    if p.field.x.len() < 2 || p.field.y.len() < 2 {
+        return Err(anyhow!(
+            "a contour plot needs at least 2 x 2 grid points (got {} x {})",
+            p.field.x.len(),
+            p.field.y.len()
+        ));
+    }
+    let (w, h) = (1150u32, 860u32);
+    let mut rgb = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        draw(&root, p)?;
+    }
+    let png_path = stem.with_extension("png");
+    let mut bytes = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut bytes, w, h);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut writer = enc.write_header().context("PNG header")?;
+        writer.write_image_data(&rgb).context("PNG data")?;
+        writer.finish().context("PNG end")?;
+    }
+    write_atomic_bytes(&png_path, &bytes)?;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
+        draw(&root, p)?;
+    }
+    write_atomic_bytes(&stem.with_extension("svg"), svg.as_bytes())?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn colormap_ends_and_ticks() {
+        assert_eq!(colormap(0.0), RGBColor(68, 1, 84));
+        assert_eq!(colormap(1.0), RGBColor(253, 231, 37));
+        assert_eq!(colormap(f64::NAN), RGBColor(68, 1, 84));
+        assert_eq!(tick(6.0, true), "1e6");
+        assert_eq!(tick(-2.0, true), "0.01");
+        assert_eq!(tick(0.5, false), "0.5");
+        assert_eq!(tick(6500.0, false), "6500");
+    }
+
+    #[test]
+    fn writes_png_and_svg() {
+        let field = Field::new(
+            vec![0.01, 0.1, 1.0],
+            vec![1e6, 2e6, 4e6],
+            vec![
+                vec![1.0, 1.2, 1.4],
+                vec![1.1, 1.5, f64::NAN],
+                vec![1.3, 1.6, 1.8],
+            ],
+        )
+        .expect("field");
+        let p = ContourPlot {
+            title: "R".into(),
+            subtitle: "test".into(),
+            x_label: "eps".into(),
+            y_label: "kappa".into(),
+            x_log: true,
+            y_log: true,
+            field,
+            value_label: "R".into(),
+            levels: 5,
+            highlight: Some((1.55, "target".into())),
+            extra_points: vec![(0.05, 3e6)],
+            markers: vec![Marker {
+                at: (0.1, 2e6),
+                label: "best".into(),
+                color: RED,
+                cross: true,
+            }],
+        };
+        let dir = std::env::temp_dir().join(format!("hvi-plot-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        contour_plot(&dir.join("r"), &p).expect("draws");
+        let png = std::fs::read(dir.join("r.png")).expect("png");
+        assert_eq!(&png[1..4], b"PNG");
+        let svg = std::fs::read_to_string(dir.join("r.svg")).expect("svg");
+        assert!(svg.starts_with("<svg"), "{}", &svg[..40.min(svg.len())]);
+    }
+}

@@ -1,0 +1,205 @@
+//! `hvi-study validity-map`: fragmentation F over two axes (v0, t/D), the F = cut-off contour
+//! as the boundary of the model's validity (Fig. 16b; the paper takes F = 0.3), exported as a
+//! CSV polyline, and each run marked valid or not in the results table.
+//!
+//! The study's optional `[validity]` section:
+//!
+//! ```toml
+//! [validity]
+//! observable = "fragmentation"   # any run observable (default F)
+//! cutoff = 0.3                   # default 0.3; the --cutoff flag overrides
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Result};
+use clap::Args;
+use serde::Deserialize;
+use serde_json::Value;
+
+use super::cli::{print_failures, StudyArgs};
+use super::contour::Point;
+use super::execute_plan;
+use super::figures::{field_of, map_axes};
+use super::plot::{contour_plot, ContourPlot};
+use super::store::{RunStatus, OBSERVABLE_NAMES};
+use crate::output::write_atomic;
+
+/// The paper's cut-off of the validity region (section 5, Fig. 16): F = 0.3.
+pub const PAPER_CUTOFF: f64 = 0.3;
+
+fn default_observable() -> String {
+    "fragmentation".into()
+}
+fn default_cutoff() -> f64 {
+    PAPER_CUTOFF
+}
+
+/// `[validity]` of a study file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ValidityConfig {
+    /// The observable mapped (default `fragmentation`).
+    #[serde(default = "default_observable")]
+    pub observable: String,
+    /// The cut-off level (default 0.3).
+    #[serde(default = "default_cutoff")]
+    pub cutoff: f64,
+}
+
+impl Default for ValidityConfig {
+    fn default() -> Self {
+        ValidityConfig {
+            observable: default_observable(),
+            cutoff: default_cutoff(),
+        }
+    }
+}
+
+/// `hvi-study validity-map` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct ValidityArgs {
+    /// The study, tier, output and threads.
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// The cut-off of the observable (default: the study's, else the paper's F = 0.3).
+    #[arg(long)]
+    pub cutoff: Option<f64>,
+}
+
+/// Writes the boundary polylines as CSV: `polyline, point, <x key>, <y key>`.
+pub fn write_boundary(path: &Path, keys: (&str, &str), lines: &[Vec<Point>]) -> Result<()> {
+    write_atomic(path, |w| {
+        writeln!(w, "polyline,point,{},{}", keys.0, keys.1)?;
+        for (k, line) in lines.iter().enumerate() {
+            for (i, (x, y)) in line.iter().enumerate() {
+                writeln!(w, "{k},{i},{x},{y}")?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// What `validity-map` produced.
+#[derive(Debug, Clone)]
+pub struct ValidityMap {
+    /// The boundary polylines in physical units (x, y as the map's axes).
+    pub boundary: Vec<Vec<Point>>,
+    /// Runs at or above the cut-off.
+    pub valid: usize,
+    /// Completed runs below it.
+    pub invalid: usize,
+    /// The plot's stem (`.png`, `.svg`).
+    pub plot: PathBuf,
+}
+
+/// `hvi-study validity-map`.
+pub fn validity_map(args: &ValidityArgs) -> Result<ValidityMap> {
+    let (study, plan, out) = args.study.plan()?;
+    let cfg: ValidityConfig = match &study.validity {
+        Some(v) => serde_path_to_error::deserialize(v.clone()).map_err(|e| {
+            let p = e.path().to_string();
+            anyhow!(
+                "study key `validity.{p}`: {}",
+                e.into_inner().message().trim()
+            )
+        })?,
+        None => ValidityConfig::default(),
+    };
+    if !OBSERVABLE_NAMES.contains(&cfg.observable.as_str()) {
+        bail!(
+            "study key `validity.observable`: `{}` (allowed: {OBSERVABLE_NAMES:?})",
+            cfg.observable
+        );
+    }
+    let cutoff = args.cutoff.unwrap_or(cfg.cutoff);
+    if !cutoff.is_finite() {
+        bail!("invalid value for `--cutoff`: {cutoff} (allowed: a finite number)");
+    }
+    let axes = map_axes(&plan)?;
+
+    let (mut table, report) = execute_plan(&plan, &out, &args.study.exec_options())?;
+    if !args.study.quiet {
+        eprintln!("{}", report.line());
+    }
+    print_failures(&report.records);
+    let value = |r: &super::store::Record| r.observables.get(&cfg.observable);
+    let valid_col: Vec<Value> = report
+        .records
+        .iter()
+        .map(|r| match (r.status, value(r)) {
+            (RunStatus::Completed, Some(v)) => Value::Bool(v >= cutoff),
+            _ => Value::Null,
+        })
+        .collect();
+    let valid = valid_col
+        .iter()
+        .filter(|v| **v == Value::Bool(true))
+        .count();
+    let invalid = valid_col
+        .iter()
+        .filter(|v| **v == Value::Bool(false))
+        .count();
+    table.push_column("valid", valid_col);
+    table.write(&out, "results")?;
+
+    let field = field_of(&plan, &report.records, axes, 0, |r| value(r))?;
+    let boundary = field.contour(cutoff);
+    let (kx, ky) = (&plan.axes[axes.0].key, &plan.axes[axes.1].key);
+    write_boundary(&out.join("validity_boundary.csv"), (kx, ky), &boundary)?;
+    let particles = report
+        .records
+        .iter()
+        .filter_map(|r| r.observables.particles)
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), n| {
+            (lo.min(n), hi.max(n))
+        });
+    let plot = ContourPlot {
+        title: format!(
+            "{} over ({}, {}) (Fig. 16b)",
+            if cfg.observable == "fragmentation" {
+                "Fragmentation F"
+            } else {
+                cfg.observable.as_str()
+            },
+            plan.axes[axes.0].label,
+            plan.axes[axes.1].label
+        ),
+        subtitle: format!(
+            "tier `{}`, {}-{} particles; red: {} = {cutoff} (validity cut-off; the paper's is 0.3); {valid} runs valid, {invalid} not",
+            plan.tier, particles.0, particles.1, cfg.observable
+        ),
+        x_label: plan.axes[axes.0].label.clone(),
+        y_label: plan.axes[axes.1].label.clone(),
+        x_log: false,
+        y_log: false,
+        field,
+        value_label: if cfg.observable == "fragmentation" {
+            "F".into()
+        } else {
+            cfg.observable.clone()
+        },
+        levels: 6,
+        highlight: Some((cutoff, format!("{} = {cutoff}", cfg.observable))),
+        extra_points: Vec::new(),
+        markers: Vec::new(),
+    };
+    let stem = out.join("validity_map");
+    contour_plot(&stem, &plot)?;
+    if !args.study.quiet {
+        eprintln!(
+            "validity: {valid} runs with {} >= {cutoff}, {invalid} below; boundary: {} polyline(s) in {}",
+            cfg.observable,
+            boundary.len(),
+            out.join("validity_boundary.csv").display()
+        );
+        eprintln!("plot: {}", stem.with_extension("png").display());
+    }
+    println!("{}", out.join("results.csv").display());
+    Ok(ValidityMap {
+        boundary,
+        valid,
+        invalid,
+        plot: stem,
+    })
+}
