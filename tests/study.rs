@@ -453,6 +453,7 @@ fn calibrate_scores_the_grid_refines_through_the_store_and_compares_with_the_pap
         .unwrap_or("")
         .contains("score_length_ratio"));
     assert!(out.join("evaluations.csv").exists());
+    assert!(out.join("snapshots.png").exists(), "{}", stderr(&o));
     for stem in ["map_R", "map_va", "map_objective"] {
         for ext in ["png", "svg"] {
             assert!(
@@ -494,6 +495,7 @@ fn validity_map_draws_f_with_the_cutoff_contour_and_exports_the_boundary() {
     for f in [
         "validity_map.png",
         "validity_map.svg",
+        "snapshots.png",
         "validity_boundary.csv",
         "results.csv",
     ] {

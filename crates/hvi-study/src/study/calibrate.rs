@@ -634,6 +634,11 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
         Ok(_) => {}
         Err(e) => eprintln!("no maps drawn: {e:#}"),
     }
+    match calibration_snapshots(&out, &plan, &report.records, &result) {
+        Ok(path) if progress => eprintln!("snapshots: {}", path.display()),
+        Ok(_) => {}
+        Err(e) => eprintln!("no snapshot matrix: {e:#}"),
+    }
     if progress {
         eprint!("{}", report_text(&result));
     }
@@ -715,4 +720,47 @@ fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluation]) -> Resu
         csv.flush()?;
         Ok(())
     })
+}
+
+/// The snapshot matrix of the grid (Fig. 7): each run's side view at the end, captioned with
+/// F and R and the objective; the best grid point framed red.
+fn calibration_snapshots(
+    out: &Path,
+    plan: &Plan,
+    records: &[Record],
+    result: &CalibrationResult,
+) -> Result<PathBuf> {
+    let axes = super::figures::map_axes(plan)?;
+    let slice = result.best_grid.step;
+    let (cols, rows, tiles) = super::snapshots::plan_tiles(plan, out, axes, slice, |i| {
+        let r = &records[i];
+        let f = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.2}"));
+        let j = objective(&result.targets, |n| r.observables.get(n)).objective;
+        (
+            (i == slice).then_some(plotters::style::RED),
+            format!(
+                "F = {}, R = {}, J = {j:.2}",
+                f(r.observables.fragmentation),
+                f(r.observables.length_ratio)
+            ),
+        )
+    })?;
+    let tau = records
+        .iter()
+        .find_map(|r| r.observables.tau_s)
+        .map_or("the end".to_string(), |t| {
+            format!("\u{3c4} = {:.1} \u{b5}s", t * 1e6)
+        });
+    let path = out.join("snapshots.png");
+    super::snapshots::snapshot_matrix(
+        &path,
+        &format!(
+            "Debris clouds at {tau} over ({}, {}) (Fig. 7), tier `{}`; red frame: best grid point",
+            plan.axes[axes.0].label, plan.axes[axes.1].label, plan.tier
+        ),
+        (&plan.axes[axes.0].label, &cols),
+        (&plan.axes[axes.1].label, &rows),
+        &tiles,
+    )?;
+    Ok(path)
 }

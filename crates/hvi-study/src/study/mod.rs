@@ -13,6 +13,7 @@ pub mod figures;
 pub mod plan;
 pub mod plot;
 pub mod score;
+pub mod snapshots;
 pub mod spec;
 pub mod store;
 pub mod table;

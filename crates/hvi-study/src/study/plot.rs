@@ -20,7 +20,8 @@ use crate::output::write_atomic_bytes;
 const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
 const FAMILY: &str = "sans-serif";
 
-fn fonts() -> Result<()> {
+/// Registers the embedded font with plotters once (every study picture calls it).
+pub fn fonts() -> Result<()> {
     static DONE: OnceLock<bool> = OnceLock::new();
     let ok = *DONE
         .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
@@ -108,7 +109,7 @@ pub fn colormap(t: f64) -> RGBColor {
 fn tick(v: f64, log: bool) -> String {
     let x = if log { 10f64.powf(v) } else { v };
     let a = x.abs();
-    if a != 0.0 && !(1e-2..1e4).contains(&a) {
+    if a != 0.0 && !(1e-2..=1e5).contains(&a) {
         let e = a.log10().floor();
         let m = x / 10f64.powf(e);
         if (m - m.round()).abs() < 1e-6 {
@@ -364,6 +365,7 @@ mod tests {
         assert_eq!(tick(-2.0, true), "0.01");
         assert_eq!(tick(0.5, false), "0.5");
         assert_eq!(tick(6500.0, false), "6500");
+        assert_eq!(tick(1e4, false), "10000");
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! runs/<first 16 hex digits of the fingerprint>/
 //!     record.json      the run's record: fingerprint, status, error, observables (written last)
 //!     summary.json     the engine run's summary (hvi_study::run::run_scene)
-//!     energy.csv, cloud_track.csv, fragments.csv
+//!     energy.csv, cloud_track.csv, fragments.csv, cloud_side.png and the other pictures
 //! runs/.tmp-<digits>-<pid>-<n>/   a run in progress
 //! ```
 //!
@@ -322,9 +322,11 @@ impl Store {
             .num_threads(threads.max(1))
             .build()
             .context("cannot start worker threads")?;
+        // Pictures too (cloud_side.png feeds the snapshot matrices): about 1 % of a run.
         let opts = RunOptions {
             out_dir: tmp.clone(),
             progress: false,
+            render: true,
             ..RunOptions::default()
         };
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {

@@ -22,8 +22,10 @@ use super::contour::Point;
 use super::execute_plan;
 use super::figures::{field_of, map_axes};
 use super::plot::{contour_plot, ContourPlot};
+use super::snapshots::{plan_tiles, snapshot_matrix};
 use super::store::{RunStatus, OBSERVABLE_NAMES};
 use crate::output::write_atomic;
+use plotters::style::{BLUE, RED};
 
 /// The paper's cut-off of the validity region (section 5, Fig. 16): F = 0.3.
 pub const PAPER_CUTOFF: f64 = 0.3;
@@ -186,6 +188,28 @@ pub fn validity_map(args: &ValidityArgs) -> Result<ValidityMap> {
     };
     let stem = out.join("validity_map");
     contour_plot(&stem, &plot)?;
+    // Fig. 17: the runs' side views, valid framed red, invalid blue.
+    let (cols, rows, tiles) = plan_tiles(&plan, &out, axes, 0, |i| {
+        let r = &report.records[i];
+        let v = value(r);
+        (
+            v.map(|v| if v >= cutoff { RED } else { BLUE }),
+            v.map_or("no cloud".to_string(), |v| {
+                format!("{} = {v:.3}", cfg.observable)
+            }),
+        )
+    })?;
+    let snapshots = out.join("snapshots.png");
+    snapshot_matrix(
+        &snapshots,
+        &format!(
+            "Debris clouds over ({}, {}) (Fig. 17), tier `{}`: red {} >= {cutoff} (valid), blue below",
+            plan.axes[axes.0].label, plan.axes[axes.1].label, plan.tier, cfg.observable
+        ),
+        (&plan.axes[axes.0].label, &cols),
+        (&plan.axes[axes.1].label, &rows),
+        &tiles,
+    )?;
     if !args.study.quiet {
         eprintln!(
             "validity: {valid} runs with {} >= {cutoff}, {invalid} below; boundary: {} polyline(s) in {}",
@@ -194,6 +218,7 @@ pub fn validity_map(args: &ValidityArgs) -> Result<ValidityMap> {
             out.join("validity_boundary.csv").display()
         );
         eprintln!("plot: {}", stem.with_extension("png").display());
+        eprintln!("snapshots: {}", snapshots.display());
     }
     println!("{}", out.join("results.csv").display());
     Ok(ValidityMap {

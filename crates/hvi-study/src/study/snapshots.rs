@@ -1,0 +1,274 @@
+//! Snapshot matrices (Figs. 7 and 17): each run's side view (the left panel of the
+//! `cloud_side.png` that `hvi_study::render` draws for it) tiled over two axes of the study,
+//! optionally framed by a verdict (Fig. 17: valid red, invalid blue). Pictures only; the
+//! numbers come from the runs.
+
+use std::io::BufReader;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+use plotters::prelude::*;
+
+use super::plan::Plan;
+use crate::output::write_atomic_bytes;
+
+/// An RGB image.
+#[derive(Debug, Clone)]
+pub struct Image {
+    /// Width, px.
+    pub w: usize,
+    /// Height, px.
+    pub h: usize,
+    /// RGB bytes, row-major.
+    pub rgb: Vec<u8>,
+}
+
+impl Image {
+    /// Reads an 8-bit RGB or RGBA PNG.
+    pub fn read_png(path: &Path) -> Result<Image> {
+        let file =
+            std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
+        let mut reader = png::Decoder::new(BufReader::new(file))
+            .read_info()
+            .with_context(|| format!("{} is not a PNG", path.display()))?;
+        let size = reader
+            .output_buffer_size()
+            .ok_or_else(|| anyhow!("{}: image too large", path.display()))?;
+        let mut buf = vec![0u8; size];
+        let info = reader.next_frame(&mut buf)?;
+        let (w, h) = (info.width as usize, info.height as usize);
+        let channels = match info.color_type {
+            png::ColorType::Rgb => 3,
+            png::ColorType::Rgba => 4,
+            other => bail!(
+                "{}: colour type {other:?} (want RGB or RGBA)",
+                path.display()
+            ),
+        };
+        if info.bit_depth != png::BitDepth::Eight {
+            bail!("{}: not 8 bits per channel", path.display());
+        }
+        let mut rgb = Vec::with_capacity(w * h * 3);
+        for row in buf.chunks(info.line_size).take(h) {
+            for px in row.chunks(channels).take(w) {
+                rgb.extend_from_slice(&px[..3]);
+            }
+        }
+        Ok(Image { w, h, rgb })
+    }
+
+    /// The part [x0, x1) x [y0, y1), scaled by box averaging to width `tw` (aspect kept).
+    pub fn crop_scaled(
+        &self,
+        (x0, x1): (usize, usize),
+        (y0, y1): (usize, usize),
+        tw: usize,
+    ) -> Image {
+        let (x1, y1) = (x1.min(self.w), y1.min(self.h));
+        let (cw, ch) = (x1.saturating_sub(x0).max(1), y1.saturating_sub(y0).max(1));
+        let th = ((ch as f64) * tw as f64 / cw as f64).round().max(1.0) as usize;
+        let mut rgb = vec![255u8; tw * th * 3];
+        for ty in 0..th {
+            let sy0 = y0 + ty * ch / th;
+            let sy1 = (y0 + (ty + 1) * ch / th).max(sy0 + 1).min(y1);
+            for tx in 0..tw {
+                let sx0 = x0 + tx * cw / tw;
+                let sx1 = (x0 + (tx + 1) * cw / tw).max(sx0 + 1).min(x1);
+                let mut acc = [0u32; 3];
+                let mut n = 0u32;
+                for sy in sy0..sy1 {
+                    for sx in sx0..sx1 {
+                        let k = (sy * self.w + sx) * 3;
+                        for (a, &v) in acc.iter_mut().zip(&self.rgb[k..k + 3]) {
+                            *a += v as u32;
+                        }
+                        n += 1;
+                    }
+                }
+                let k = (ty * tw + tx) * 3;
+                for (o, a) in rgb[k..k + 3].iter_mut().zip(acc) {
+                    *o = (a / n.max(1)) as u8;
+                }
+            }
+        }
+        Image { w: tw, h: th, rgb }
+    }
+}
+
+/// One tile of a matrix: the run's picture (None when the run has none) and its frame colour.
+pub struct Tile {
+    /// Column (x-axis value index, ascending).
+    pub col: usize,
+    /// Row (y-axis value index, ascending; drawn bottom-up so larger values are on top).
+    pub row: usize,
+    /// The run's `cloud_side.png`.
+    pub picture: Option<std::path::PathBuf>,
+    /// Frame colour (None: thin grey).
+    pub frame: Option<RGBColor>,
+    /// A short caption under the picture (e.g. `F = 0.42`).
+    pub caption: String,
+}
+
+/// Draws the matrix into `path` (PNG). `cols`/`rows` are the axis labels of the columns and
+/// rows (ascending). Returns how many tiles had a picture.
+pub fn snapshot_matrix(
+    path: &Path,
+    title: &str,
+    (x_label, cols): (&str, &[String]),
+    (y_label, rows): (&str, &[String]),
+    tiles: &[Tile],
+) -> Result<usize> {
+    super::plot::fonts()?;
+    let tw = if cols.len() > 4 { 260 } else { 380 };
+    // The side view's left panel: the projection along y (render::side_view's layout).
+    let crop =
+        |img: &Image| img.crop_scaled((0, img.w / 2), (img.h * 6 / 100, img.h * 84 / 100), tw);
+    let mut pictures = Vec::new();
+    let mut th = (tw as f64 * 0.9) as usize;
+    for t in tiles {
+        let img = match &t.picture {
+            Some(p) if p.exists() => Some(crop(&Image::read_png(p)?)),
+            _ => None,
+        };
+        if let Some(i) = &img {
+            th = i.h;
+        }
+        pictures.push(img);
+    }
+    let (left, top, gap, cap) = (150usize, 120usize, 14usize, 24usize);
+    let cell_w = tw + gap;
+    let cell_h = th + gap + cap;
+    let (w, h) = (
+        left + cols.len() * cell_w + 20,
+        top + rows.len() * cell_h + 60,
+    );
+    let mut rgb = vec![255u8; w * h * 3];
+    let origin = |t: &Tile| {
+        let x = left + t.col * cell_w + gap / 2;
+        let y = top + (rows.len() - 1 - t.row) * cell_h + gap / 2;
+        (x, y)
+    };
+    for (t, img) in tiles.iter().zip(&pictures) {
+        if let Some(img) = img {
+            let (x0, y0) = origin(t);
+            for y in 0..img.h.min(th) {
+                let src = &img.rgb[y * img.w * 3..(y + 1) * img.w * 3];
+                let k = ((y0 + y) * w + x0) * 3;
+                rgb[k..k + img.w * 3].copy_from_slice(src);
+            }
+        }
+    }
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (w as u32, h as u32)).into_drawing_area();
+        let font = |size: u32| ("sans-serif", size).into_font();
+        root.draw(&Text::new(title.to_string(), (20, 20), font(28)))?;
+        root.draw(&Text::new(
+            format!("columns: {x_label}; rows: {y_label}"),
+            (20, 60),
+            font(18),
+        ))?;
+        for (c, label) in cols.iter().enumerate() {
+            root.draw(&Text::new(
+                label.clone(),
+                ((left + c * cell_w + tw / 2 - 30) as i32, (top - 30) as i32),
+                font(18),
+            ))?;
+        }
+        for (r, label) in rows.iter().enumerate() {
+            let y = top + (rows.len() - 1 - r) * cell_h + th / 2;
+            root.draw(&Text::new(label.clone(), (12, y as i32), font(18)))?;
+        }
+        for (t, img) in tiles.iter().zip(&pictures) {
+            let (x0, y0) = origin(t);
+            let (x0, y0) = (x0 as i32, y0 as i32);
+            let (x1, y1) = (x0 + tw as i32, y0 + th as i32);
+            if img.is_none() {
+                root.draw(&Text::new("no picture", (x0 + 20, y0 + 40), font(16)))?;
+            }
+            let style = match t.frame {
+                Some(c) => c.stroke_width(5),
+                None => RGBColor(170, 170, 170).stroke_width(1),
+            };
+            root.draw(&Rectangle::new([(x0 - 2, y0 - 2), (x1 + 2, y1 + 2)], style))?;
+            root.draw(&Text::new(t.caption.clone(), (x0 + 4, y1 + 9), font(16)))?;
+        }
+        root.present()?;
+    }
+    let mut bytes = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut bytes, w as u32, h as u32);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.set_compression(png::Compression::Fast);
+        let mut writer = enc.write_header().context("PNG header")?;
+        writer.write_image_data(&rgb).context("PNG data")?;
+        writer.finish().context("PNG end")?;
+    }
+    write_atomic_bytes(path, &bytes)?;
+    Ok(pictures.iter().filter(|p| p.is_some()).count())
+}
+
+/// The tiles of a plan's runs over axes (ax, ay) at run `slice_run`'s other axis values.
+pub fn plan_tiles(
+    plan: &Plan,
+    dir: &Path,
+    (ax, ay): (usize, usize),
+    slice_run: usize,
+    verdict: impl Fn(usize) -> (Option<RGBColor>, String),
+) -> Result<(Vec<String>, Vec<String>, Vec<Tile>)> {
+    let sorted = |k: usize| -> Vec<usize> {
+        let mut idx: Vec<usize> = (0..plan.axes[k].values.len()).collect();
+        idx.sort_by(|&a, &b| {
+            let f = |i: usize| plan.axes[k].values[i].as_f64().unwrap_or(f64::NAN);
+            f(a).total_cmp(&f(b))
+        });
+        idx
+    };
+    let (xs, ys) = (sorted(ax), sorted(ay));
+    let label = |k: usize, i: usize| format!("{}", plan.axes[k].values[i]);
+    let cols = xs.iter().map(|&i| label(ax, i)).collect();
+    let rows = ys.iter().map(|&i| label(ay, i)).collect();
+    let slice = &plan.run(slice_run)?.coords;
+    let mut tiles = Vec::new();
+    for run in &plan.runs {
+        let others = run
+            .coords
+            .iter()
+            .enumerate()
+            .all(|(k, &c)| k == ax || k == ay || c == slice[k]);
+        if !others {
+            continue;
+        }
+        let col = xs.iter().position(|&i| i == run.coords[ax]).unwrap_or(0);
+        let row = ys.iter().position(|&i| i == run.coords[ay]).unwrap_or(0);
+        let (frame, caption) = verdict(run.index);
+        tiles.push(Tile {
+            col,
+            row,
+            picture: Some(dir.join(&run.dir).join("cloud_side.png")),
+            frame,
+            caption,
+        });
+    }
+    Ok((cols, rows, tiles))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn box_scaling_averages() {
+        let img = Image {
+            w: 4,
+            h: 2,
+            rgb: vec![
+                0, 0, 0, 255, 255, 255, 10, 10, 10, 30, 30, 30, //
+                0, 0, 0, 255, 255, 255, 10, 10, 10, 30, 30, 30,
+            ],
+        };
+        let s = img.crop_scaled((0, 4), (0, 2), 2);
+        assert_eq!((s.w, s.h), (2, 1));
+        assert_eq!(&s.rgb, &[127, 127, 127, 20, 20, 20]);
+    }
+}
