@@ -12,11 +12,8 @@ use hvi_engine::cloud::{
     extent, find_cloud, label_fragments, measure, size_distribution, CloudObserver, CloudReference,
     CloudResult,
 };
-use hvi_engine::paper;
 use hvi_engine::potential::{ContactForm, Interaction};
-use hvi_engine::scene::{
-    Analysis, Derived, Geometry, Material, Resolution, RunSettings, SceneSpec,
-};
+use hvi_engine::scene::{Analysis, Derived, RunSettings, SceneSpec};
 use hvi_engine::sim::Simulation;
 use hvi_engine::state::{Body, Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, NO_BOND};
 
@@ -510,26 +507,7 @@ fn front_moving_at_a_known_speed_gives_va() {
 }
 
 fn sphere_scene(particles: f64, end_time_s: f64) -> SceneSpec {
-    SceneSpec {
-        scene: Geometry::SphereOnPlate {
-            diameter_m: paper::IMPACTOR_DIAMETER_M,
-            t_over_d: paper::CALIBRATION_T_OVER_D,
-            width_over_d: paper::DEFAULT_WIDTH_OVER_D,
-            v0_m_s: paper::CALIBRATION_V0_M_S,
-            density_kg_m3: paper::ALUMINIUM_DENSITY_KG_M3,
-            standoff_m: 0.0,
-        },
-        resolution: Resolution {
-            particles: Some(particles),
-            particles_across_d: None,
-        },
-        material: Material::default(),
-        run: RunSettings {
-            end_time_s,
-            ..RunSettings::default()
-        },
-        analysis: Analysis::default(),
-    }
+    SceneSpec::calibration(particles, end_time_s)
 }
 
 /// Runs a scene with a cloud observer as `hvi-study run` does.

@@ -11,26 +11,7 @@ use hvi_engine::state::{Body, Particles, BONDS_PER_PARTICLE, NO_BOND};
 use hvi_engine::{paper, EngineError};
 
 fn sphere_scene(particles: f64, end_time_s: f64) -> SceneSpec {
-    SceneSpec {
-        scene: Geometry::SphereOnPlate {
-            diameter_m: paper::IMPACTOR_DIAMETER_M,
-            t_over_d: paper::CALIBRATION_T_OVER_D,
-            width_over_d: paper::DEFAULT_WIDTH_OVER_D,
-            v0_m_s: paper::CALIBRATION_V0_M_S,
-            density_kg_m3: paper::ALUMINIUM_DENSITY_KG_M3,
-            standoff_m: 0.0,
-        },
-        resolution: Resolution {
-            particles: Some(particles),
-            particles_across_d: None,
-        },
-        material: Material::default(),
-        run: RunSettings {
-            end_time_s,
-            ..RunSettings::default()
-        },
-        analysis: Analysis::default(),
-    }
+    SceneSpec::calibration(particles, end_time_s)
 }
 
 fn pool(threads: usize) -> rayon::ThreadPool {

@@ -1,7 +1,7 @@
 //! Steps a sphere-on-plate scene and prints throughput: `cargo run --release -p hvi-engine
 //! --example steps -- PARTICLES STEPS DT_FACTOR`.
 use hvi_engine::paper;
-use hvi_engine::scene::{Geometry, Material, Resolution, RunSettings, SceneSpec};
+use hvi_engine::scene::SceneSpec;
 use hvi_engine::sim::Simulation;
 
 fn main() {
@@ -14,26 +14,8 @@ fn main() {
         args.get(1).copied().unwrap_or(2000.0),
         args.get(2).copied().unwrap_or(1.0),
     );
-    let spec = SceneSpec {
-        scene: Geometry::SphereOnPlate {
-            diameter_m: paper::IMPACTOR_DIAMETER_M,
-            t_over_d: paper::CALIBRATION_T_OVER_D,
-            width_over_d: paper::DEFAULT_WIDTH_OVER_D,
-            v0_m_s: paper::CALIBRATION_V0_M_S,
-            density_kg_m3: paper::ALUMINIUM_DENSITY_KG_M3,
-            standoff_m: 0.0,
-        },
-        resolution: Resolution {
-            particles: Some(n),
-            particles_across_d: None,
-        },
-        material: Material::default(),
-        run: RunSettings {
-            dt_factor: f,
-            ..RunSettings::default()
-        },
-        analysis: Default::default(),
-    };
+    let mut spec = SceneSpec::calibration(n, paper::ANALYSIS_TIME_S);
+    spec.run.dt_factor = f;
     let mut sim = Simulation::new(spec.build().expect("valid")).expect("starts");
     let t = std::time::Instant::now();
     sim.advance(steps as u64).expect("stable");

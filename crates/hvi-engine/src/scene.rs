@@ -456,6 +456,31 @@ fn require(key: &str, value: Option<f64>) -> Result<f64> {
 }
 
 impl SceneSpec {
+    /// The paper's calibration scene (MODEL.md 1: 9.53 mm sphere at 6.7 km/s, t/D = 0.425,
+    /// W = 3 D, the best-fit material) at `particles` particles, run to `end_time_s`.
+    pub fn calibration(particles: f64, end_time_s: f64) -> SceneSpec {
+        SceneSpec {
+            scene: Geometry::SphereOnPlate {
+                diameter_m: paper::IMPACTOR_DIAMETER_M,
+                t_over_d: paper::CALIBRATION_T_OVER_D,
+                width_over_d: paper::DEFAULT_WIDTH_OVER_D,
+                v0_m_s: paper::CALIBRATION_V0_M_S,
+                density_kg_m3: paper::ALUMINIUM_DENSITY_KG_M3,
+                standoff_m: 0.0,
+            },
+            resolution: Resolution {
+                particles: Some(particles),
+                particles_across_d: None,
+            },
+            material: Material::default(),
+            run: RunSettings {
+                end_time_s,
+                ..RunSettings::default()
+            },
+            analysis: Default::default(),
+        }
+    }
+
     /// Validates the spec and lays out the scene.
     pub fn build(&self) -> Result<Setup> {
         let geometry = &self.scene;

@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use hvi_engine::scene::SceneSpec;
 use serde::Serialize;
 
-use crate::output::write_atomic;
+use crate::output::write_csv_atomic;
 use crate::run::{run_scene, RunOptions};
 
 /// One row of the benchmark table.
@@ -112,13 +112,6 @@ pub fn bench(spec: &SceneSpec, threads: &[usize], out: &Path) -> Result<(Vec<Ben
         table,
         "identical physics at every thread count: yes (final energy and bonds broken bit-equal)"
     );
-    write_atomic(&out.join("bench.csv"), |w| {
-        let mut csv = csv::Writer::from_writer(w);
-        for r in &rows {
-            csv.serialize(r)?;
-        }
-        csv.flush()?;
-        Ok(())
-    })?;
+    write_csv_atomic(&out.join("bench.csv"), &rows)?;
     Ok((rows, table))
 }

@@ -37,6 +37,21 @@ pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
     })
 }
 
+/// Writes serialisable rows as a CSV file (header from the field names), atomically.
+pub fn write_csv_atomic<T: serde::Serialize>(
+    path: &Path,
+    rows: impl IntoIterator<Item = T>,
+) -> Result<()> {
+    write_atomic(path, |w| {
+        let mut csv = csv::Writer::from_writer(w);
+        for r in rows {
+            csv.serialize(r)?;
+        }
+        csv.flush()?;
+        Ok(())
+    })
+}
+
 /// Order of particles by id (id 0 first), so files list particles stably across re-sorts.
 fn by_id(p: &Particles) -> Vec<u32> {
     p.index_of_id()

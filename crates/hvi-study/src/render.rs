@@ -32,8 +32,8 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 use crate::output::write_atomic_bytes;
 
 /// DejaVu Sans (Bitstream Vera licence, see `assets/fonts/LICENSE-DejaVu.txt`).
-const FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
-const FAMILY: &str = "sans-serif";
+pub(crate) const FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
+pub(crate) const FAMILY: &str = "sans-serif";
 
 const IMPACTOR_RGB: [u8; 3] = [214, 39, 40];
 const PLATE_RGB: [u8; 3] = [31, 96, 196];
@@ -44,8 +44,8 @@ const MIN_DOT_PX: i32 = 2;
 const GUIDE: RGBColor = RGBColor(90, 90, 90);
 const MEASURE: RGBColor = RGBColor(0, 130, 60);
 
-/// Registers the embedded font with plotters once.
-fn fonts() -> Result<()> {
+/// Registers the embedded font with plotters once (every picture of the crate calls it).
+pub(crate) fn fonts() -> Result<()> {
     static DONE: OnceLock<bool> = OnceLock::new();
     let ok = *DONE
         .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());

@@ -18,7 +18,7 @@ use hvi_engine::EngineError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 
-use crate::output::{write_atomic, write_atomic_bytes, write_lammps_data, write_xyz};
+use crate::output::{write_atomic_bytes, write_csv_atomic, write_lammps_data, write_xyz};
 use crate::render::{self, Frame, SceneInfo};
 
 /// How to run and what to write besides the summary.
@@ -460,33 +460,15 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     let track = track.map(|t| t.0).unwrap_or_default();
 
     let t = Instant::now();
-    write_atomic(&opts.out_dir.join("energy.csv"), |w| {
-        let mut csv = csv::Writer::from_writer(w);
-        for r in &rows {
-            csv.serialize(r)?;
-        }
-        csv.flush()?;
-        Ok(())
-    })?;
+    write_csv_atomic(&opts.out_dir.join("energy.csv"), &rows)?;
     if !track.is_empty() {
-        write_atomic(&opts.out_dir.join("cloud_track.csv"), |w| {
-            let mut csv = csv::Writer::from_writer(w);
-            for r in &track {
-                csv.serialize(r)?;
-            }
-            csv.flush()?;
-            Ok(())
-        })?;
+        write_csv_atomic(&opts.out_dir.join("cloud_track.csv"), &track)?;
     }
     if let Some(c) = &cloud {
-        write_atomic(&opts.out_dir.join("fragments.csv"), |w| {
-            let mut csv = csv::Writer::from_writer(w);
-            for r in size_distribution(&c.fragments) {
-                csv.serialize(r)?;
-            }
-            csv.flush()?;
-            Ok(())
-        })?;
+        write_csv_atomic(
+            &opts.out_dir.join("fragments.csv"),
+            size_distribution(&c.fragments),
+        )?;
     }
     output_time += t.elapsed();
 

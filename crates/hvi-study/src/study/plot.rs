@@ -6,7 +6,6 @@
 //! log10 coordinates with the tick labels in the physical value. Shows numbers, derives none.
 
 use std::path::Path;
-use std::sync::OnceLock;
 
 use anyhow::{anyhow, Context, Result};
 use plotters::coord::Shift;
@@ -17,20 +16,8 @@ use crate::output::write_atomic_bytes;
 
 /// DejaVu Sans, shared with `render` (same file; registered here too so plots do not depend
 /// on a picture having been drawn first).
-const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
-const FAMILY: &str = "sans-serif";
-
-/// Registers the embedded font with plotters once (every study picture calls it).
-pub fn fonts() -> Result<()> {
-    static DONE: OnceLock<bool> = OnceLock::new();
-    let ok = *DONE
-        .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
-    if ok {
-        Ok(())
-    } else {
-        Err(anyhow!("the embedded font could not be loaded"))
-    }
-}
+pub(crate) use crate::render::fonts;
+use crate::render::FAMILY;
 
 /// A marked point with a label (the optimum, the paper's fit).
 #[derive(Debug, Clone)]
