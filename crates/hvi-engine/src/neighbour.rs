@@ -8,14 +8,31 @@
 //! consecutive keys, so they are one contiguous range of particles; the start of each range is
 //! found by nine pointers that only move forward while the cells are walked in key order.
 //!
+//! When to rebuild (`NeighbourList::stale`): the classic rule rebuilds once some particle has
+//! moved half the skin, so a cloud flying at 7 km/s rebuilds every few steps although its
+//! neighbouring particles hardly move relative to each other. Here each particle's
+//! displacement is measured in the frame of its *block* (a cube of side `block` on a coarse
+//! grid), moving with the block's mean velocity at the build. For a pair not on the list (farther
+//! than the list radius at the build) to come within the contact radius, its separation must
+//! shrink by more than the skin; the separation changes by at most
+//! |e_i| + |e_j| + |u_a - u_b| t (e the displacements relative to the frames, u_a, u_b the two
+//! frames' velocities, t the time since the build). Pairs in the same or adjacent blocks are
+//! covered by the largest |u_a - u_b| among adjacent blocks (`near_dv`); pairs in blocks that
+//! are not adjacent were at least one block side apart, and are covered by a bound on
+//! |u_a - u_b| over all blocks (`far_dv`) against the block side less the contact radius. The
+//! rule is exact (no pair is ever missed); with `block = 0` every frame is at rest and it is the
+//! classic rule.
+//!
 //! The list is full (each pair appears on both particles' lists) so forces are gathered per
 //! particle and the result does not depend on the thread count. Pairs joined by an intact bond
 //! are left out: the bond kernel handles their repulsion as well.
 
+use std::collections::HashMap;
+
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::state::{Particles, PermuteScratch, BONDS_PER_PARTICLE};
+use crate::state::{Particles, PermuteScratch, BONDS_PER_PARTICLE, BROKEN_FLAG};
 
 const COORD_BITS: u32 = 21;
 const COORD_OFFSET: i64 = 1 << (COORD_BITS - 1);
@@ -32,6 +49,14 @@ pub struct NeighbourList {
     pub neighbours: Vec<u32>,
     /// Positions at the last build.
     pub pos_at_build: Vec<DVec3>,
+    /// Velocity of each particle's frame (its block's mean velocity at the last build), m/s.
+    pub frame_vel: Vec<DVec3>,
+    /// Largest |u_a - u_b| between a block's frame and an adjacent block's, m/s.
+    pub near_dv: f64,
+    /// Upper bound on |u_a - u_b| between any two blocks' frames, m/s.
+    pub far_dv: f64,
+    /// Block side, m (0: one frame at rest, the classic criterion).
+    pub block: f64,
     /// List radius r_eq + skin, m.
     pub radius: f64,
     /// Number of builds so far.
@@ -72,9 +97,85 @@ fn cell_key(p: DVec3, inv_h: f64) -> (u64, bool) {
 }
 
 impl NeighbourList {
+    /// Whether the list may miss a contact now: `max_e` is the largest displacement of a
+    /// particle relative to its frame since the build, `since_build_s` the time since the build,
+    /// `contact_radius` the range of the contact force (see the module's rule).
+    pub fn stale(&self, max_e: f64, since_build_s: f64, contact_radius: f64) -> bool {
+        let two_e = 2.0 * max_e;
+        if two_e + self.near_dv * since_build_s >= self.radius - contact_radius {
+            return true;
+        }
+        self.block > 0.0 && two_e + self.far_dv * since_build_s >= self.block - contact_radius
+    }
+
+    /// The frames: each particle's block (side `block`) and its mean velocity; `near_dv` and
+    /// `far_dv`. Sums run in the (sorted) particle order, so they do not depend on threads.
+    fn build_frames(&mut self, p: &Particles, block: f64) {
+        let n = p.len();
+        self.block = block;
+        self.frame_vel.clear();
+        if block <= 0.0 {
+            self.frame_vel.resize(n, DVec3::ZERO);
+            self.near_dv = 0.0;
+            self.far_dv = 0.0;
+            return;
+        }
+        let inv_b = 1.0 / block;
+        let keys: Vec<u64> = p.pos.par_iter().map(|&x| cell_key(x, inv_b).0).collect();
+        let mut blocks: HashMap<u64, (DVec3, f64)> = HashMap::new();
+        let mut i = 0;
+        while i < n {
+            // Runs of one block are common in cell order: one map update per run.
+            let mut j = i;
+            let mut sum = DVec3::ZERO;
+            while j < n && keys[j] == keys[i] {
+                sum += p.vel[j];
+                j += 1;
+            }
+            let e = blocks.entry(keys[i]).or_insert((DVec3::ZERO, 0.0));
+            e.0 += sum;
+            e.1 += (j - i) as f64;
+            i = j;
+        }
+        for v in blocks.values_mut() {
+            v.0 /= v.1;
+        }
+        self.frame_vel.extend(
+            keys.iter()
+                .map(|k| blocks.get(k).map_or(DVec3::ZERO, |b| b.0)),
+        );
+        let row = 1i64 << COORD_BITS;
+        let plane = 1i64 << (2 * COORD_BITS);
+        let mut near: f64 = 0.0;
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for (&k, &(u, _)) in &blocks {
+            lo = lo.min(u);
+            hi = hi.max(u);
+            for dz in -1..=1i64 {
+                for dy in -1..=1i64 {
+                    for dx in -1..=1i64 {
+                        let kb = k as i64 + dz * plane + dy * row + dx;
+                        if kb != k as i64 {
+                            if let Some(&(ub, _)) = blocks.get(&(kb as u64)) {
+                                near = near.max((u - ub).length());
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        self.near_dv = near;
+        self.far_dv = if blocks.is_empty() {
+            0.0
+        } else {
+            (hi - lo).length()
+        };
+    }
+
     /// Rebuilds the list: clears bond slots broken since the last build (those pairs join the
-    /// ordinary list now), re-sorts the particles by cell and searches neighbouring cells.
-    pub fn build(&mut self, p: &mut Particles, radius: f64) {
+    /// ordinary list now), re-sorts the particles by cell, searches neighbouring cells and
+    /// sets the frames of the rebuild rule (blocks of side `block`, 0 for the classic rule).
+    pub fn build(&mut self, p: &mut Particles, radius: f64, block: f64) {
         self.radius = radius;
         self.builds += 1;
         let n = p.len();
@@ -218,9 +319,55 @@ impl NeighbourList {
         self.fill = fill;
         self.pos_at_build.clear();
         self.pos_at_build.extend_from_slice(&p.pos);
+        self.build_frames(p, block);
         (self.order, self.perm, self.cell_start, self.cell_keys) =
             (order, perm, cell_start, cell_key_list);
         (self.xs, self.ys, self.zs) = (xs, ys, zs);
+    }
+
+    /// Pairs closer than `contact_radius` that are neither joined by a bond slot (intact, or
+    /// broken since the build and still repelling through it) nor on the list: a check of the
+    /// rebuild rule for tests and diagnostics (a grid search over all particles; not for the
+    /// step loop). Zero whenever the rule holds.
+    pub fn missing_pairs(&self, p: &Particles, contact_radius: f64) -> usize {
+        let inv = 1.0 / contact_radius;
+        let cell = |x: DVec3| {
+            (
+                (x.x * inv).floor() as i64,
+                (x.y * inv).floor() as i64,
+                (x.z * inv).floor() as i64,
+            )
+        };
+        let mut grid: HashMap<(i64, i64, i64), Vec<usize>> = HashMap::new();
+        for (i, &x) in p.pos.iter().enumerate() {
+            grid.entry(cell(x)).or_default().push(i);
+        }
+        let r2 = contact_radius * contact_radius;
+        let mut missing = 0;
+        for (i, &x) in p.pos.iter().enumerate() {
+            let (cx, cy, cz) = cell(x);
+            for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        let Some(js) = grid.get(&(cx + dx, cy + dy, cz + dz)) else {
+                            continue;
+                        };
+                        for &j in js {
+                            if j <= i || (p.pos[j] - x).length_squared() >= r2 {
+                                continue;
+                            }
+                            let slots =
+                                &p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
+                            let bonded = slots.iter().any(|&s| s & !BROKEN_FLAG == j as u32);
+                            if !bonded && !self.of(i).contains(&(j as u32)) {
+                                missing += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        missing
     }
 
     /// Neighbours of particle i.
@@ -264,7 +411,7 @@ mod tests {
         );
         let radius = 1.3;
         let mut nl = NeighbourList::default();
-        nl.build(&mut p, radius);
+        nl.build(&mut p, radius, 0.0);
         let mut brute = 0;
         for i in 0..n {
             let mut got: Vec<u32> = nl.of(i).to_vec();
@@ -285,5 +432,54 @@ mod tests {
             brute > n,
             "the test must exercise real neighbours ({brute})"
         );
+        assert_eq!(nl.missing_pairs(&p, radius), 0);
+        // A particle moved next to another without a rebuild is a missed pair, and the
+        // rebuild rule sees it: displacement beyond the skin.
+        let (a, b) = (0..n)
+            .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+            .find(|&(a, b)| {
+                (p.pos[a] - p.pos[b]).length() > 2.0 * radius
+                    && !p.intact_partners_of(a).any(|x| x == b)
+            })
+            .expect("a distant pair");
+        p.pos[a] = p.pos[b] + DVec3::new(0.5, 0.0, 0.0);
+        assert!(nl.missing_pairs(&p, 1.0) >= 1);
+        let moved = (p.pos[a] - nl.pos_at_build[a]).length();
+        assert!(nl.stale(moved, 0.0, 1.0));
+    }
+
+    /// Frames: a block's mean velocity, the near and far bounds; block 0 is the classic rule.
+    #[test]
+    fn frames_bound_relative_motion() {
+        // Two clumps 20 apart moving towards each other at 1 and -1 along x.
+        let mut pos = Vec::new();
+        let mut vel = Vec::new();
+        for k in 0..8 {
+            let o = DVec3::new((k % 2) as f64, ((k / 2) % 2) as f64, (k / 4) as f64) * 0.9;
+            pos.push(o);
+            vel.push(DVec3::X);
+            pos.push(o + DVec3::new(20.0, 0.0, 0.0));
+            vel.push(-DVec3::X);
+        }
+        let n = pos.len();
+        let mut p = Particles::new(
+            pos,
+            vel,
+            vec![1.0; n],
+            vec![Body::Target; n],
+            vec![NO_BOND; n * BONDS_PER_PARTICLE],
+        );
+        let mut nl = NeighbourList::default();
+        nl.build(&mut p, 1.3, 4.0);
+        assert!(nl.frame_vel.iter().all(|u| (u.x.abs() - 1.0).abs() < 1e-12));
+        assert_eq!(nl.near_dv, 0.0, "the clumps' blocks are not adjacent");
+        assert!((nl.far_dv - 2.0).abs() < 1e-12);
+        // Moving with their frames, nothing is stale until the far bound: 2 t >= 4 - 1.
+        assert!(!nl.stale(0.0, 1.4, 1.0));
+        assert!(nl.stale(0.0, 1.6, 1.0));
+        nl.build(&mut p, 1.3, 0.0);
+        assert!(nl.frame_vel.iter().all(|u| *u == DVec3::ZERO));
+        assert!(nl.stale(0.16, 0.0, 1.0));
+        assert!(!nl.stale(0.14, 0.0, 1.0));
     }
 }

@@ -76,6 +76,8 @@ pub struct Simulation {
     pub derived: Derived,
     neighbours: NeighbourList,
     skin_m: f64,
+    block_m: f64,
+    since_build_s: f64,
     min_distance2: f64,
     max_energy_drift: f64,
     /// Current step number.
@@ -136,6 +138,8 @@ impl Simulation {
             derived,
             neighbours: NeighbourList::default(),
             skin_m: run.skin_over_sigma * derived.sigma_m,
+            block_m: run.frame_block_over_sigma * derived.sigma_m,
+            since_build_s: 0.0,
             min_distance2: (run.min_distance_over_sigma * derived.sigma_m).powi(2),
             max_energy_drift: run.max_energy_drift,
             step: 0,
@@ -171,6 +175,11 @@ impl Simulation {
         self.time_s() - self.derived.contact_time_s
     }
 
+    /// The neighbour list (for checks such as [`NeighbourList::missing_pairs`]).
+    pub fn neighbour_list(&self) -> &NeighbourList {
+        &self.neighbours
+    }
+
     /// Number of neighbour-list builds so far.
     pub fn neighbour_builds(&self) -> u64 {
         self.neighbours.builds
@@ -179,7 +188,9 @@ impl Simulation {
     fn rebuild(&mut self) {
         let t = Instant::now();
         let radius = self.interaction.r_eq_m + self.skin_m;
-        self.neighbours.build(&mut self.particles, radius);
+        self.neighbours
+            .build(&mut self.particles, radius, self.block_m);
+        self.since_build_s = 0.0;
         self.timing.neighbour += t.elapsed();
     }
 
@@ -342,6 +353,8 @@ impl Simulation {
         let half = 0.5 * dt;
         let p = &mut self.particles;
         let built = &self.neighbours.pos_at_build;
+        let frame = &self.neighbours.frame_vel;
+        let since = self.since_build_s + dt;
         p.pos
             .par_chunks_mut(CHUNK)
             .zip(p.vel.par_chunks_mut(CHUNK))
@@ -356,7 +369,8 @@ impl Simulation {
                     vel[k] = v;
                     let x = pos[k] + v * dt;
                     pos[k] = x;
-                    let d2 = (x - built[i]).length_squared();
+                    // Displacement relative to the particle's frame (see `neighbour`).
+                    let d2 = (x - built[i] - frame[i] * since).length_squared();
                     // NaN fails every comparison: make it win the max so it is caught below.
                     max_d2 = if d2 <= max_d2 {
                         max_d2
@@ -371,11 +385,14 @@ impl Simulation {
         let max_d2 = self.disp_partials.iter().fold(0.0f64, |a, &b| a.max(b));
         self.timing.integrate += t0.elapsed();
         self.step += 1;
+        self.since_build_s = since;
         if !max_d2.is_finite() {
             return Err(self.unstable("non-finite or runaway particle position".into()));
         }
-        let half_skin = 0.5 * self.skin_m;
-        if max_d2 > half_skin * half_skin {
+        if self
+            .neighbours
+            .stale(max_d2.sqrt(), since, self.interaction.r_eq_m)
+        {
             self.rebuild();
             if self.neighbours.out_of_range > 0 {
                 return Err(self.unstable(format!(
