@@ -159,7 +159,11 @@ fn bad_inputs_name_the_key_and_the_allowed_range() {
         (&["--set", "scene.t_over_d=0.001"], "one particle thick"),
         (&["--set", "scene.standoff_m=-0.002"], "overlap"),
         (&["--set", "run.dt_s=1e-6"], "run.dt_s"),
-        (&["--set", "run.dt_factor=500"], "run.dt_factor"),
+        (&["--set", "run.dt_factor=5000"], "run.dt_factor"),
+        (
+            &["--set", "run.frame_block_over_sigma=1"],
+            "run.frame_block_over_sigma",
+        ),
         (&["--set", "run.end_time_s=-1"], "run.end_time_s"),
         (&["--set", "run.thermal_ratio=-0.1"], "run.thermal_ratio"),
         (&["--set", "run.dt_s=fast"], "dt_s"),

@@ -226,7 +226,8 @@ impl<'de> Deserialize<'de> for TimeStep {
 pub struct RunSettings {
     /// Simulated time from first contact to the end of the run, s.
     pub end_time_s: f64,
-    /// Time step, s, or "auto": the paper's 1e-10 s at sigma_ref, scaled with sigma.
+    /// Time step, s, or "auto": the paper's 1e-10 s at sigma_ref, scaled with sigma, times
+    /// `dt_factor`, capped at [`AUTO_STEP_SAFETY`] times the stability bound.
     pub dt_s: TimeStep,
     /// Multiplier on the automatic step.
     pub dt_factor: f64,
@@ -236,6 +237,10 @@ pub struct RunSettings {
     pub thermal_ratio: f64,
     /// Neighbour-list skin over sigma.
     pub skin_over_sigma: f64,
+    /// Side of the blocks whose mean velocity is the frame of the list's rebuild rule, over
+    /// sigma (0: the classic rule, rebuild once any particle moved half the skin). Exact for
+    /// any value; larger blocks let a fast cloud go longer between builds (`neighbour`).
+    pub frame_block_over_sigma: f64,
     /// Steps between energy-ledger samples.
     pub energy_every: u64,
     /// Abort when |E_total - E_0| / E_0 exceeds this (a blow-up guard, not the accuracy bound).
@@ -262,6 +267,7 @@ impl Default for RunSettings {
             seed: 1,
             thermal_ratio: 1e-3,
             skin_over_sigma: 0.3,
+            frame_block_over_sigma: 8.0,
             energy_every: 200,
             max_energy_drift: 0.05,
             min_distance_over_sigma: 0.35,
@@ -450,6 +456,10 @@ pub const MAX_STEP_DISPLACEMENT_OVER_SIGMA: f64 = 0.05;
 /// contact stiffness at r_eq (velocity Verlet is unstable beyond 2/omega_max = sqrt(m/k) on a
 /// chain).
 pub const MAX_STEP_OVER_SQRT_M_K: f64 = 0.5;
+/// The automatic step is at most this fraction of that bound: a margin of two on every scene,
+/// whatever its velocity or stiffness (the stability map in `reports/stability` shows the
+/// bound itself is stable).
+pub const AUTO_STEP_SAFETY: f64 = 0.5;
 
 fn require(key: &str, value: Option<f64>) -> Result<f64> {
     value.ok_or_else(|| EngineError::invalid(key, "missing", "a finite number > 0"))
@@ -658,6 +668,14 @@ impl SceneSpec {
             2.0,
             false,
         )?;
+        let b = run.frame_block_over_sigma;
+        if !(b == 0.0 || (2.0..=1e3).contains(&b)) {
+            return Err(EngineError::invalid(
+                "run.frame_block_over_sigma",
+                b,
+                "0 (off) or a number in [2, 1000]",
+            ));
+        }
         if run.energy_every == 0 {
             return Err(EngineError::invalid(
                 "run.energy_every",
@@ -709,32 +727,27 @@ impl SceneSpec {
         let stiffness = kappa.max(interaction.contact_stiffness_at_r_eq());
         let dt_max = (MAX_STEP_DISPLACEMENT_OVER_SIGMA * sigma / v0)
             .min(MAX_STEP_OVER_SQRT_M_K * (mass_imp.min(mass_tgt) / stiffness).sqrt());
+        // "auto" never exceeds AUTO_STEP_SAFETY of the bound (fast impacts, stiff springs); a
+        // fixed step beyond the bound is refused.
         let dt = match run.dt_s {
-            TimeStep::Auto => paper::TIME_STEP_S * (sigma / sigma_ref) * run.dt_factor,
+            TimeStep::Auto => (paper::TIME_STEP_S * (sigma / sigma_ref) * run.dt_factor)
+                .min(AUTO_STEP_SAFETY * dt_max),
             TimeStep::Fixed(dt) => {
                 check_positive("run.dt_s", dt)?;
+                if dt > dt_max {
+                    return Err(EngineError::invalid(
+                        "run.dt_s",
+                        format!("{dt:e} s"),
+                        format!(
+                            "a step of at most {dt_max:.3e} s at sigma = {sigma:.3e} m: \
+                             v0 dt <= {MAX_STEP_DISPLACEMENT_OVER_SIGMA} sigma and \
+                             dt <= {MAX_STEP_OVER_SQRT_M_K} sqrt(m / k)"
+                        ),
+                    ));
+                }
                 dt
             }
         };
-        if dt > dt_max {
-            let key = match run.dt_s {
-                TimeStep::Fixed(_) => "run.dt_s",
-                TimeStep::Auto => "run.dt_factor",
-            };
-            let value = match run.dt_s {
-                TimeStep::Fixed(dt) => format!("{dt:e} s"),
-                TimeStep::Auto => format!("{} (dt = {dt:.3e} s)", run.dt_factor),
-            };
-            return Err(EngineError::invalid(
-                key,
-                value,
-                format!(
-                    "a step of at most {dt_max:.3e} s at sigma = {sigma:.3e} m: \
-                     v0 dt <= {MAX_STEP_DISPLACEMENT_OVER_SIGMA} sigma and \
-                     dt <= {MAX_STEP_OVER_SQRT_M_K} sqrt(m / k)"
-                ),
-            ));
-        }
 
         // Standoff shifts the impactor back; first contact happens at standoff / v0.
         if standoff < 0.0 {
