@@ -87,6 +87,34 @@ enum Command {
         #[arg(long, default_value = "runs/bench")]
         out: PathBuf,
     },
+    /// Run time against error: a reference run at the paper's step, other seeds (the noise
+    /// floor) and variants of the accuracy knobs, each run to the analysis time; writes
+    /// accuracy.csv/json/md and pareto.png and names the cheapest setting within tolerance.
+    ///
+    /// Finished runs are stored (fingerprinted) and reused, so a rerun or a killed benchmark
+    /// picks up where it stopped.
+    Accuracy {
+        /// Scene file.
+        #[arg(default_value = "studies/scenes/default.toml")]
+        scene: PathBuf,
+        /// Override a scene key on every run: section.key=value.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
+        /// A candidate NAME:key=value[;key=value...] (repeatable); replaces the default
+        /// candidates (dt_factor 2..16, skin, ballistic cut-off). The reference and the
+        /// noise-floor seeds always run.
+        #[arg(long = "variant", value_name = "NAME:KEY=VALUE[;...]")]
+        variants: Vec<String>,
+        /// Worker threads per run (default: every core).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Report directory (default: reports/accuracy/<scene file stem>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Run store (default: runs/accuracy/<scene file stem>).
+        #[arg(long)]
+        store: Option<PathBuf>,
+    },
 }
 
 fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
@@ -140,6 +168,34 @@ fn main() -> ExitCode {
             let (_, table) = hvi_study::bench::bench(&spec, &threads, &out)?;
             print!("{table}");
             println!("table: {}", out.join("bench.csv").display());
+            Ok(())
+        })(),
+        Command::Accuracy {
+            scene,
+            sets,
+            variants,
+            threads,
+            out,
+            store,
+        } => (|| {
+            use hvi_study::accuracy::{self, Role, Variant};
+            let mut list: Vec<Variant> = accuracy::default_variants();
+            if !variants.is_empty() {
+                list.retain(|v| v.role != Role::Candidate);
+                for v in &variants {
+                    list.push(Variant::parse(v)?);
+                }
+            }
+            let report_dir = out.unwrap_or_else(|| accuracy::default_report_dir(&scene));
+            let stem = report_dir
+                .file_name()
+                .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+            let store = store.unwrap_or_else(|| PathBuf::from("runs/accuracy").join(stem));
+            let pool = thread_pool(threads)?;
+            let threads = pool.current_num_threads();
+            let report = accuracy::accuracy(&scene, &sets, &list, threads, &store, &report_dir)?;
+            print!("{}", accuracy::markdown(&report));
+            println!("report: {}", report_dir.join("accuracy.md").display());
             Ok(())
         })(),
         Command::Plan(args) => hvi_study::study::cli::plan(&args),

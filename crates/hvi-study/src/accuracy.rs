@@ -1,0 +1,738 @@
+//! `hvi-study accuracy`: run time against error.
+//!
+//! One scene, a reference run and a list of variants, each a set of `--set` overrides of the
+//! accuracy knobs (time step, skin, shortcuts). The reference is the paper's step (1e-10 s at
+//! sigma_ref, scaled with sigma: `run.dt_factor = 1`), f64, the full run to the analysis time.
+//! Every variant runs to the same analysis time, and its observables are compared with the
+//! reference's: the relative error in R, va/v0, F and the largest fragment, and its energy
+//! drift. The dynamics of fragmentation are chaotic (a round-off difference grows into a
+//! different crack), so two runs that differ only in the thermal seed also differ: the
+//! *noise-floor* runs (other seeds at the reference step) measure that spread, and an error
+//! below it cannot be told from zero.
+//!
+//! Tolerances (one place: [`TOLERANCES`]): a variant is *within tolerance* when, for each
+//! observable, |error| <= max(tolerance, noise floor), and its energy drift stays within
+//! [`ENERGY_DRIFT_BOUND`]. The *recommended* setting is the cheapest variant within tolerance.
+//!
+//! Runs go through the study store (fingerprinted, complete-or-absent directories), so a
+//! second invocation reuses every finished run and a killed benchmark resumes. Runs execute
+//! one after another on all threads, so their wall times compare.
+//!
+//! Writes `accuracy.csv`, `accuracy.json`, `accuracy.md` and `pareto.png` into the report
+//! directory.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Context, Result};
+use plotters::prelude::*;
+use serde::Serialize;
+
+use crate::output::{write_atomic_bytes, write_csv_atomic};
+use crate::render::{fonts, write_png, FAMILY};
+use crate::scene_file::parse_scene;
+use crate::study::plan::fingerprint;
+use crate::study::store::{Job, Observables, RunStatus, Store};
+
+/// Observables compared with the reference, with their relative tolerance.
+pub const TOLERANCES: [(&str, &str, f64); 4] = [
+    ("length_ratio", "R", 0.01),
+    ("front_velocity_ratio", "va/v0", 0.01),
+    ("fragmentation", "F", 0.01),
+    ("largest_fragment_mass_fraction", "largest fragment", 0.01),
+];
+
+/// Largest |relative energy-ledger drift| over the run that a variant may have.
+pub const ENERGY_DRIFT_BOUND: f64 = 1e-4;
+
+/// What a variant is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Role {
+    /// The reference: the paper's step.
+    Reference,
+    /// Another seed at the reference step: measures the chaotic spread.
+    NoiseFloor,
+    /// A setting to judge.
+    Candidate,
+}
+
+/// One variant: a name and the overrides that make it.
+#[derive(Debug, Clone)]
+pub struct Variant {
+    /// Name in tables and plots.
+    pub name: String,
+    /// `section.key=value` overrides on top of the scene.
+    pub sets: Vec<String>,
+    /// Its role.
+    pub role: Role,
+}
+
+impl Variant {
+    fn new(name: &str, sets: &[&str], role: Role) -> Self {
+        Variant {
+            name: name.into(),
+            sets: sets.iter().map(|s| s.to_string()).collect(),
+            role,
+        }
+    }
+
+    /// Parses `NAME:key=value[;key=value...]` (a candidate).
+    pub fn parse(text: &str) -> Result<Variant> {
+        let (name, sets) = text.split_once(':').ok_or_else(|| {
+            anyhow!("--variant `{text}`: expected NAME:section.key=value[;section.key=value...], e.g. dt8:run.dt_factor=8")
+        })?;
+        let name = name.trim();
+        if name.is_empty() || name == "reference" {
+            bail!("--variant `{text}`: the name must be non-empty and not `reference`");
+        }
+        let sets: Vec<String> = sets
+            .split(';')
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .map(String::from)
+            .collect();
+        if sets.is_empty() {
+            bail!("--variant `{text}`: no overrides after `:`");
+        }
+        Ok(Variant {
+            name: name.into(),
+            sets,
+            role: Role::Candidate,
+        })
+    }
+}
+
+/// The reference, two noise-floor seeds, and the default candidates: the time step from 2 to
+/// 16 times the paper's, the skin at the larger steps, and the ballistic cut-off.
+pub fn default_variants() -> Vec<Variant> {
+    use Role::*;
+    vec![
+        Variant::new("reference", &["run.dt_factor=1"], Reference),
+        Variant::new("seed2", &["run.dt_factor=1", "run.seed=2"], NoiseFloor),
+        Variant::new("seed3", &["run.dt_factor=1", "run.seed=3"], NoiseFloor),
+        Variant::new("dt2", &["run.dt_factor=2"], Candidate),
+        Variant::new("dt4", &["run.dt_factor=4"], Candidate),
+        Variant::new("dt6", &["run.dt_factor=6"], Candidate),
+        Variant::new("dt8", &["run.dt_factor=8"], Candidate),
+        Variant::new("dt12", &["run.dt_factor=12"], Candidate),
+        Variant::new("dt16", &["run.dt_factor=16"], Candidate),
+        Variant::new(
+            "dt8-skin0.5",
+            &["run.dt_factor=8", "run.skin_over_sigma=0.5"],
+            Candidate,
+        ),
+        Variant::new(
+            "dt8-skin0.2",
+            &["run.dt_factor=8", "run.skin_over_sigma=0.2"],
+            Candidate,
+        ),
+        Variant::new(
+            "dt8-cutoff",
+            &["run.dt_factor=8", "run.ballistic_cutoff=true"],
+            Candidate,
+        ),
+    ]
+}
+
+/// One row of `accuracy.csv`.
+#[derive(Debug, Clone, Serialize)]
+pub struct AccuracyRow {
+    /// Variant name.
+    pub variant: String,
+    /// Its role.
+    pub role: Role,
+    /// Its overrides, `;`-separated.
+    pub sets: String,
+    /// Run status.
+    pub status: String,
+    /// Time step, s.
+    pub dt_s: Option<f64>,
+    /// Steps.
+    pub steps: Option<u64>,
+    /// Wall time of the stepping loop, s.
+    pub wall_s: Option<f64>,
+    /// Particles times steps per second.
+    pub particle_steps_per_s: Option<f64>,
+    /// Reference wall time over this one.
+    pub speedup: Option<f64>,
+    /// R.
+    pub length_ratio: Option<f64>,
+    /// va / v0.
+    pub front_velocity_ratio: Option<f64>,
+    /// F.
+    pub fragmentation: Option<f64>,
+    /// Largest fragment's share of the impactor mass.
+    pub largest_fragment_mass_fraction: Option<f64>,
+    /// Largest |relative ledger drift| over the run.
+    pub energy_max_drift: Option<f64>,
+    /// Relative error in R against the reference.
+    pub err_length_ratio: Option<f64>,
+    /// Relative error in va/v0.
+    pub err_front_velocity_ratio: Option<f64>,
+    /// Relative error in F.
+    pub err_fragmentation: Option<f64>,
+    /// Relative error in the largest fragment.
+    pub err_largest_fragment_mass_fraction: Option<f64>,
+    /// Largest of the relative errors of R, va/v0 and F.
+    pub max_err_rvf: Option<f64>,
+    /// Every observable within max(tolerance, noise floor) and the drift within its bound.
+    pub within_tolerance: bool,
+    /// Whether this invocation reused a stored run.
+    pub cached: bool,
+}
+
+/// What one run gave.
+#[derive(Debug, Clone)]
+struct Measured {
+    status: RunStatus,
+    error: Option<String>,
+    obs: Observables,
+    dt_s: Option<f64>,
+    steps: Option<u64>,
+    wall_s: Option<f64>,
+    rate: Option<f64>,
+    max_drift: Option<f64>,
+    cached: bool,
+}
+
+fn measured(store: &Store, fp: &str, cached: bool) -> Result<Measured> {
+    let rec = store
+        .lookup(fp)?
+        .ok_or_else(|| anyhow!("run {} vanished from the store", &fp[..16]))?;
+    let summary: Option<serde_json::Value> =
+        std::fs::read_to_string(store.dir(fp).join("summary.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok());
+    let num = |k: &[&str]| {
+        let mut v = summary.as_ref()?;
+        for key in k {
+            v = v.get(*key)?;
+        }
+        v.as_f64()
+    };
+    Ok(Measured {
+        status: rec.status,
+        error: rec.error.clone(),
+        obs: rec.observables.clone(),
+        dt_s: num(&["dt_s"]),
+        steps: num(&["steps"]).map(|s| s as u64),
+        wall_s: num(&["wall_seconds"]),
+        rate: num(&["particle_steps_per_second"]),
+        max_drift: num(&["energy", "max_abs_relative_drift"]),
+        cached,
+    })
+}
+
+/// The benchmark's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct AccuracyReport {
+    /// The scene file.
+    pub scene: String,
+    /// Overrides applied to every variant.
+    pub sets: Vec<String>,
+    /// Threads per run.
+    pub threads: usize,
+    /// Noise floor per observable: the largest |relative difference| of a noise-floor run
+    /// from the reference.
+    pub noise_floor: Vec<(String, f64)>,
+    /// Tolerance per observable (relative).
+    pub tolerances: Vec<(String, f64)>,
+    /// Energy drift bound.
+    pub energy_drift_bound: f64,
+    /// The rows.
+    pub rows: Vec<AccuracyRow>,
+    /// The cheapest candidate within tolerance.
+    pub recommended: Option<String>,
+}
+
+fn rel_err(v: Option<f64>, r: Option<f64>) -> Option<f64> {
+    match (v, r) {
+        (Some(v), Some(r)) if r != 0.0 => Some(((v - r) / r).abs()),
+        _ => None,
+    }
+}
+
+/// Runs (or reuses) every variant of `scene_text` and compares it with the reference.
+pub fn accuracy(
+    scene_path: &Path,
+    common_sets: &[String],
+    variants: &[Variant],
+    threads: usize,
+    store_dir: &Path,
+    report_dir: &Path,
+) -> Result<AccuracyReport> {
+    let text = std::fs::read_to_string(scene_path)
+        .with_context(|| format!("cannot read scene file {}", scene_path.display()))?;
+    if variants
+        .iter()
+        .filter(|v| v.role == Role::Reference)
+        .count()
+        != 1
+    {
+        bail!("the variants must hold exactly one reference");
+    }
+    // Validate every variant before running anything.
+    let mut jobs = Vec::new();
+    for v in variants {
+        let mut sets = common_sets.to_vec();
+        sets.extend(v.sets.iter().cloned());
+        let spec = parse_scene(&text, &sets).with_context(|| format!("variant `{}`", v.name))?;
+        spec.build()
+            .with_context(|| format!("variant `{}`", v.name))?;
+        if !spec.analysis.cloud {
+            bail!(
+                "variant `{}`: analysis.cloud = false, but the benchmark compares cloud observables",
+                v.name
+            );
+        }
+        let fp = fingerprint(&spec, "accuracy")?;
+        let params = serde_json::Map::from_iter([(
+            "variant".to_string(),
+            serde_json::Value::String(v.name.clone()),
+        )]);
+        jobs.push(Job {
+            fingerprint: fp,
+            scene: spec,
+            study: "accuracy".into(),
+            tier: "accuracy".into(),
+            params,
+        });
+    }
+    let store = Store::open(store_dir)?;
+    let mut results: Vec<Measured> = Vec::with_capacity(jobs.len());
+    for (k, (job, v)) in jobs.iter().zip(variants).enumerate() {
+        let prior = store.lookup(&job.fingerprint)?;
+        let cached = matches!(&prior, Some(r) if r.status == RunStatus::Completed);
+        if !cached {
+            eprintln!(
+                "accuracy [{}/{}] {} ({}) ...",
+                k + 1,
+                jobs.len(),
+                v.name,
+                v.sets.join(" ")
+            );
+            store.execute(job, threads)?;
+        }
+        let m = measured(&store, &job.fingerprint, cached)?;
+        eprintln!(
+            "accuracy [{}/{}] {}: {}{}",
+            k + 1,
+            jobs.len(),
+            v.name,
+            match (m.status, m.wall_s) {
+                (RunStatus::Completed, Some(w)) => format!("{w:.1} s"),
+                (RunStatus::Completed, None) => "done".into(),
+                (RunStatus::Failed, _) =>
+                    format!("failed: {}", m.error.clone().unwrap_or_default()),
+            },
+            if cached { " (stored)" } else { "" }
+        );
+        results.push(m);
+    }
+    let reference_index = variants
+        .iter()
+        .position(|v| v.role == Role::Reference)
+        .unwrap_or(0);
+    let reference = results[reference_index].clone();
+    if reference.status != RunStatus::Completed {
+        bail!(
+            "the reference run failed: {}",
+            reference.error.unwrap_or_default()
+        );
+    }
+    let noise_floor: Vec<(String, f64)> = TOLERANCES
+        .iter()
+        .map(|(key, _, _)| {
+            let spread = variants
+                .iter()
+                .zip(&results)
+                .filter(|(v, _)| v.role == Role::NoiseFloor)
+                .filter_map(|(_, m)| rel_err(m.obs.get(key), reference.obs.get(key)))
+                .fold(0.0f64, f64::max);
+            (key.to_string(), spread)
+        })
+        .collect();
+    let mut rows: Vec<AccuracyRow> = Vec::new();
+    for (v, m) in variants.iter().zip(&results) {
+        let err = |key: &str| rel_err(m.obs.get(key), reference.obs.get(key));
+        let errs: Vec<Option<f64>> = TOLERANCES.iter().map(|(k, _, _)| err(k)).collect();
+        let completed = m.status == RunStatus::Completed;
+        let within = completed
+            && TOLERANCES
+                .iter()
+                .zip(&errs)
+                .zip(&noise_floor)
+                .all(|(((_, _, tol), e), (_, floor))| e.is_some_and(|e| e <= tol.max(*floor)))
+            && m.max_drift.is_some_and(|d| d <= ENERGY_DRIFT_BOUND);
+        rows.push(AccuracyRow {
+            variant: v.name.clone(),
+            role: v.role,
+            sets: v.sets.join(";"),
+            status: if completed { "completed" } else { "failed" }.into(),
+            dt_s: m.dt_s,
+            steps: m.steps,
+            wall_s: m.wall_s,
+            particle_steps_per_s: m.rate,
+            speedup: match (reference.wall_s, m.wall_s) {
+                (Some(r), Some(w)) if w > 0.0 => Some(r / w),
+                _ => None,
+            },
+            length_ratio: m.obs.length_ratio,
+            front_velocity_ratio: m.obs.front_velocity_ratio,
+            fragmentation: m.obs.fragmentation,
+            largest_fragment_mass_fraction: m.obs.largest_fragment_mass_fraction,
+            energy_max_drift: m.max_drift,
+            err_length_ratio: errs[0],
+            err_front_velocity_ratio: errs[1],
+            err_fragmentation: errs[2],
+            err_largest_fragment_mass_fraction: errs[3],
+            max_err_rvf: errs[..3]
+                .iter()
+                .try_fold(0.0f64, |a, e| e.map(|e| a.max(e))),
+            within_tolerance: within,
+            cached: m.cached,
+        });
+    }
+    let recommended = rows
+        .iter()
+        .filter(|r| r.role == Role::Candidate && r.within_tolerance)
+        .filter_map(|r| r.wall_s.map(|w| (w, r)))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, r)| r.variant.clone());
+    let report = AccuracyReport {
+        scene: scene_path.display().to_string(),
+        sets: common_sets.to_vec(),
+        threads,
+        noise_floor,
+        tolerances: TOLERANCES
+            .iter()
+            .map(|(k, _, t)| (k.to_string(), *t))
+            .collect(),
+        energy_drift_bound: ENERGY_DRIFT_BOUND,
+        rows,
+        recommended,
+    };
+    std::fs::create_dir_all(report_dir)
+        .with_context(|| format!("cannot create {}", report_dir.display()))?;
+    write_csv_atomic(&report_dir.join("accuracy.csv"), &report.rows)?;
+    write_atomic_bytes(
+        &report_dir.join("accuracy.json"),
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
+    write_atomic_bytes(
+        &report_dir.join("accuracy.md"),
+        markdown(&report).as_bytes(),
+    )?;
+    pareto_plot(&report_dir.join("pareto.png"), &report)?;
+    Ok(report)
+}
+
+fn pct(v: Option<f64>) -> String {
+    v.map_or("-".into(), |v| format!("{:.2}", 100.0 * v))
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or("-".into(), |v| format!("{v:.digits$}"))
+}
+
+/// The report as Markdown: the table, the noise floor, the rule and the recommendation.
+pub fn markdown(r: &AccuracyReport) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Run time against error: {}\n", r.scene);
+    if !r.sets.is_empty() {
+        let _ = writeln!(s, "Overrides on every run: `{}`\n", r.sets.join(" "));
+    }
+    let _ = writeln!(
+        s,
+        "Reference: the paper's step (run.dt_factor = 1), f64, to the analysis time. {} thread(s) per run, runs one after another. Errors are relative to the reference, in %.\n",
+        r.threads
+    );
+    let _ = writeln!(
+        s,
+        "| variant | role | dt (s) | steps | wall (s) | speed-up | particle-steps/s | R | va/v0 | F | largest frag. | max drift | err R % | err va % | err F % | err largest % | within |"
+    );
+    let _ = writeln!(s, "|{}", "---|".repeat(17));
+    for row in &r.rows {
+        let _ = writeln!(
+            s,
+            "| {} | {:?} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            row.variant,
+            row.role,
+            row.dt_s.map_or("-".into(), |v| format!("{v:.2e}")),
+            row.steps.map_or("-".into(), |v| v.to_string()),
+            opt(row.wall_s, 1),
+            opt(row.speedup, 2),
+            row.particle_steps_per_s
+                .map_or("-".into(), |v| format!("{v:.3e}")),
+            opt(row.length_ratio, 4),
+            opt(row.front_velocity_ratio, 4),
+            opt(row.fragmentation, 4),
+            opt(row.largest_fragment_mass_fraction, 4),
+            row.energy_max_drift
+                .map_or("-".into(), |v| format!("{v:.1e}")),
+            pct(row.err_length_ratio),
+            pct(row.err_front_velocity_ratio),
+            pct(row.err_fragmentation),
+            pct(row.err_largest_fragment_mass_fraction),
+            if row.role == Role::Candidate {
+                if row.within_tolerance {
+                    "yes"
+                } else {
+                    "no"
+                }
+            } else {
+                ""
+            }
+        );
+    }
+    let _ = writeln!(s, "\n## Tolerances and noise floor\n");
+    let _ = writeln!(s, "| observable | tolerance % | noise floor % (other seeds at the reference step) | applied % |");
+    let _ = writeln!(s, "|---|---|---|---|");
+    for ((k, t), (_, f)) in r.tolerances.iter().zip(&r.noise_floor) {
+        let label = TOLERANCES
+            .iter()
+            .find(|x| x.0 == k)
+            .map_or(k.as_str(), |x| x.1);
+        let _ = writeln!(
+            s,
+            "| {label} | {:.2} | {:.2} | {:.2} |",
+            100.0 * t,
+            100.0 * f,
+            100.0 * t.max(*f)
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nA candidate is within tolerance when every observable's error is at most max(tolerance, noise floor) and its largest energy-ledger drift is at most {:.0e}. Fragmentation is chaotic: runs that differ only in the thermal seed differ by the noise floor, so an error below it cannot be told from zero.\n",
+        r.energy_drift_bound
+    );
+    match &r.recommended {
+        Some(v) => {
+            let row = r.rows.iter().find(|x| &x.variant == v);
+            let _ = writeln!(
+                s,
+                "**Recommended: `{v}`** ({}), the cheapest candidate within tolerance{}.",
+                row.map_or(String::new(), |x| x.sets.replace(';', " ")),
+                row.and_then(|x| x.speedup)
+                    .map_or(String::new(), |x| format!(
+                        ": {x:.1}x faster than the reference"
+                    ))
+            );
+        }
+        None => {
+            let _ = writeln!(s, "No candidate is within tolerance.");
+        }
+    }
+    s
+}
+
+/// Wall time against error: left, the largest error in R, va/v0 and F per variant (the
+/// Pareto front joined); right, each observable's error. Tolerance and noise floor drawn.
+pub fn pareto_plot(path: &Path, r: &AccuracyReport) -> Result<()> {
+    fonts()?;
+    let (w, h) = (1600u32, 760u32);
+    let mut rgb = vec![255u8; (w * h * 3) as usize];
+    let rows: Vec<&AccuracyRow> = r.rows.iter().filter(|x| x.wall_s.is_some()).collect();
+    let walls: Vec<f64> = rows.iter().filter_map(|x| x.wall_s).collect();
+    let (w_lo, w_hi) = walls
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
+    if !w_lo.is_finite() {
+        bail!("no completed run to plot");
+    }
+    let x_range = (w_lo * 0.7).max(1e-3).log10()..(w_hi * 1.4).log10();
+    // Errors of 0 (the reference) are drawn at the floor of the axis.
+    let e_floor = 1e-5f64;
+    let tol = TOLERANCES[0].2;
+    let y_range = e_floor.log10()..1.0f64.log10();
+    let ly = |e: f64| e.max(e_floor).log10();
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let (left, right) = root.split_horizontally(w / 2);
+        let floor_rvf = r.noise_floor[..3].iter().map(|x| x.1).fold(0.0, f64::max);
+        for (panel, area) in [(0, &left), (1, &right)] {
+            let mut chart = ChartBuilder::on(area)
+                .caption(
+                    if panel == 0 {
+                        "largest error in R, va/v0, F against wall time".to_string()
+                    } else {
+                        "error per observable".to_string()
+                    },
+                    (FAMILY, 22),
+                )
+                .margin(18)
+                .x_label_area_size(55)
+                .y_label_area_size(75)
+                .build_cartesian_2d(x_range.clone(), y_range.clone())?;
+            chart
+                .configure_mesh()
+                .light_line_style(RGBColor(235, 235, 235))
+                .x_desc("wall time of the run (s)")
+                .y_desc("relative error vs reference")
+                .label_style((FAMILY, 16))
+                .axis_desc_style((FAMILY, 18))
+                .x_label_formatter(&|v| format!("{:.3}", 10f64.powf(*v)))
+                .y_label_formatter(&|v| {
+                    let p = 100.0 * 10f64.powf(*v);
+                    if p >= 1.0 {
+                        format!("{p:.0} %")
+                    } else {
+                        format!("{p} %")
+                    }
+                })
+                .draw()?;
+            chart
+                .draw_series(LineSeries::new(
+                    vec![(x_range.start, tol.log10()), (x_range.end, tol.log10())],
+                    RED.stroke_width(2),
+                ))?
+                .label(format!("tolerance {:.0} %", 100.0 * tol))
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
+            if panel == 0 && floor_rvf > 0.0 {
+                chart
+                    .draw_series(std::iter::once(Rectangle::new(
+                        [(x_range.start, y_range.start), (x_range.end, ly(floor_rvf))],
+                        RGBColor(200, 200, 200).mix(0.4).filled(),
+                    )))?
+                    .label(format!(
+                        "noise floor (other seeds): {:.2} %",
+                        100.0 * floor_rvf
+                    ))
+                    .legend(|(x, y)| {
+                        Rectangle::new(
+                            [(x, y - 6), (x + 20, y + 6)],
+                            RGBColor(200, 200, 200).filled(),
+                        )
+                    });
+            }
+            if panel == 0 {
+                let pts: Vec<(f64, f64, &AccuracyRow)> = rows
+                    .iter()
+                    .filter(|x| x.role == Role::Candidate)
+                    .filter_map(|x| Some((x.wall_s?.log10(), ly(x.max_err_rvf?), *x)))
+                    .collect();
+                // Pareto front: sorted by wall time, keep each point better than all before.
+                let mut sorted = pts.clone();
+                sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+                let mut front: Vec<(f64, f64)> = Vec::new();
+                let mut best = f64::INFINITY;
+                for p in sorted.iter().rev() {
+                    if p.1 < best {
+                        best = p.1;
+                        front.push((p.0, p.1));
+                    }
+                }
+                front.reverse();
+                chart
+                    .draw_series(LineSeries::new(front, BLUE.stroke_width(1)))?
+                    .label("Pareto front")
+                    .legend(|(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(1))
+                    });
+                for (x, y, row) in &pts {
+                    let color = if row.within_tolerance {
+                        RGBColor(0, 140, 0)
+                    } else {
+                        RGBColor(200, 0, 0)
+                    };
+                    chart.draw_series(std::iter::once(Circle::new((*x, *y), 6, color.filled())))?;
+                    chart.draw_series(std::iter::once(Text::new(
+                        row.variant.clone(),
+                        (*x, *y),
+                        (FAMILY, 15).into_font().color(&BLACK),
+                    )))?;
+                }
+                for row in rows.iter().filter(|x| x.role != Role::Candidate) {
+                    let (Some(wv), e) = (row.wall_s, row.max_err_rvf.unwrap_or(0.0)) else {
+                        continue;
+                    };
+                    chart.draw_series(std::iter::once(TriangleMarker::new(
+                        (wv.log10(), ly(e)),
+                        7,
+                        BLACK.filled(),
+                    )))?;
+                    chart.draw_series(std::iter::once(Text::new(
+                        row.variant.clone(),
+                        (wv.log10(), ly(e)),
+                        (FAMILY, 15).into_font().color(&RGBColor(80, 80, 80)),
+                    )))?;
+                }
+            } else {
+                let colors = [
+                    RGBColor(31, 119, 180),
+                    RGBColor(255, 127, 14),
+                    RGBColor(44, 160, 44),
+                    RGBColor(148, 103, 189),
+                ];
+                for (k, (key, label, _)) in TOLERANCES.iter().enumerate() {
+                    let c = colors[k % colors.len()];
+                    let pts: Vec<(f64, f64)> = rows
+                        .iter()
+                        .filter(|x| x.role == Role::Candidate)
+                        .filter_map(|x| {
+                            let e = match *key {
+                                "length_ratio" => x.err_length_ratio,
+                                "front_velocity_ratio" => x.err_front_velocity_ratio,
+                                "fragmentation" => x.err_fragmentation,
+                                _ => x.err_largest_fragment_mass_fraction,
+                            }?;
+                            Some((x.wall_s?.log10(), ly(e)))
+                        })
+                        .collect();
+                    chart
+                        .draw_series(pts.iter().map(|p| Circle::new(*p, 5, c.filled())))?
+                        .label(format!(
+                            "{label} (noise floor {:.2} %)",
+                            100.0 * r.noise_floor[k].1
+                        ))
+                        .legend(move |(x, y)| Circle::new((x + 10, y), 5, c.filled()));
+                }
+            }
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::LowerLeft)
+                .background_style(WHITE.mix(0.9))
+                .border_style(BLACK)
+                .label_font((FAMILY, 15))
+                .draw()?;
+        }
+        root.present()?;
+    }
+    write_png(path, &rgb, w, h)
+}
+
+/// Default report directory for a scene: `reports/accuracy/<scene file stem>`.
+pub fn default_report_dir(scene: &Path) -> PathBuf {
+    let stem = scene
+        .file_stem()
+        .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+    Path::new("reports").join("accuracy").join(stem)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn variants_parse_and_reject() {
+        let v = Variant::parse("dt8:run.dt_factor=8;run.skin_over_sigma=0.4").expect("parses");
+        assert_eq!(v.name, "dt8");
+        assert_eq!(v.sets, vec!["run.dt_factor=8", "run.skin_over_sigma=0.4"]);
+        assert!(Variant::parse("dt8").is_err());
+        assert!(Variant::parse("reference:run.dt_factor=2").is_err());
+        assert!(Variant::parse("x:").is_err());
+        let d = default_variants();
+        assert_eq!(d.iter().filter(|v| v.role == Role::Reference).count(), 1);
+    }
+
+    #[test]
+    fn relative_error() {
+        assert_eq!(
+            rel_err(Some(1.01), Some(1.0)).map(|e| (e * 1e6).round()),
+            Some(1e4)
+        );
+        assert_eq!(rel_err(None, Some(1.0)), None);
+        assert_eq!(rel_err(Some(1.0), Some(0.0)), None);
+    }
+}
