@@ -50,8 +50,8 @@ pub struct CollectArgs {
     /// plan.json).
     #[command(flatten)]
     pub study: StudyArgs,
-    /// Write what this command writes (default: `calibrate` for a study with [calibrate],
-    /// `validity-map` for one with [validity], else `sweep`).
+    /// Write what this command writes (default: `calibrate` for a study with `[calibrate]`,
+    /// `validity-map` for one with `[validity]`, else `sweep`).
     #[arg(long = "as", value_enum, value_name = "COMMAND")]
     pub kind: Option<CollectAs>,
     /// The validity cut-off (with `--as validity-map`; default: the study's, else 0.3).
