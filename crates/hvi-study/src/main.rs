@@ -166,17 +166,13 @@ fn main() -> ExitCode {
             index,
             threads,
             study_dir,
-        } => hvi_study::study::cli::run_unit(&plan, index, threads, study_dir.as_deref()).and_then(
-            |ok| {
-                if ok {
-                    Ok(())
-                } else {
-                    Err(anyhow::anyhow!(
-                        "run {index} failed (recorded in its directory)"
-                    ))
-                }
-            },
-        ),
+        } => match hvi_study::study::cli::run_unit(&plan, index, threads, study_dir.as_deref()) {
+            Ok(true) => Ok(()),
+            Ok(false) => Err(anyhow::anyhow!(
+                "run {index} failed (recorded in its directory)"
+            )),
+            Err(e) => Err(e),
+        },
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

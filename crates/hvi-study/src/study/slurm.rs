@@ -597,10 +597,10 @@ pub fn submit(args: &SubmitArgs) -> Result<()> {
     if let Some(note) = &queue.note {
         eprintln!("note: {note}");
     }
-    let mut in_queue: Vec<(usize, &ActiveTask)> = Vec::new();
+    let mut in_queue: Vec<&ActiveTask> = Vec::new();
     todo.retain(|&i| match queue.active.get(&plan.runs[i].fingerprint) {
         Some(t) => {
-            in_queue.push((i, t));
+            in_queue.push(t);
             false
         }
         None => true,
@@ -614,7 +614,7 @@ pub fn submit(args: &SubmitArgs) -> Result<()> {
         let _ = write!(status_line, ", {failed} failed (submitted again)");
     }
     if !in_queue.is_empty() {
-        let mut jobs: Vec<&str> = in_queue.iter().map(|(_, t)| t.job_id.as_str()).collect();
+        let mut jobs: Vec<&str> = in_queue.iter().map(|t| t.job_id.as_str()).collect();
         jobs.sort();
         jobs.dedup();
         let _ = write!(
