@@ -65,7 +65,19 @@ enum Command {
         /// Worker threads (default: every core).
         #[arg(long)]
         threads: Option<usize>,
+        /// The study directory whose run store receives the result (default: the plan's
+        /// directory; `submit --slurm` runs frozen copies of the plan kept beside its scripts).
+        #[arg(long, value_name = "DIR")]
+        study_dir: Option<PathBuf>,
     },
+    /// Submit the runs a study lacks to a Slurm cluster as one job array (one task per run,
+    /// each `hvi-study run-unit`); prints the job id.
+    Submit(hvi_study::study::slurm::SubmitArgs),
+    /// A study's progress: done, failed, running and pending runs, from its run store (and
+    /// Slurm's queue for its submissions).
+    Status(hvi_study::study::collect::StatusArgs),
+    /// Write a study's tables (and figures) from its run store, running nothing.
+    Collect(hvi_study::study::collect::CollectArgs),
     /// Engine throughput: run a scene at several thread counts and print particle-steps/s.
     ///
     /// Defaults to the paper's calibration scene (2.7e5 particles) through the first 1 us of
@@ -202,19 +214,21 @@ fn main() -> ExitCode {
         Command::Sweep(args) => hvi_study::study::cli::sweep(&args),
         Command::Calibrate(args) => hvi_study::study::calibrate::calibrate(&args).map(|_| ()),
         Command::ValidityMap(args) => hvi_study::study::validity::validity_map(&args).map(|_| ()),
+        Command::Submit(args) => hvi_study::study::slurm::submit(&args),
+        Command::Status(args) => hvi_study::study::collect::status(&args),
+        Command::Collect(args) => hvi_study::study::collect::collect(&args),
         Command::RunUnit {
             plan,
             index,
             threads,
-        } => hvi_study::study::cli::run_unit(&plan, index, threads).and_then(|ok| {
-            if ok {
-                Ok(())
-            } else {
-                Err(anyhow::anyhow!(
-                    "run {index} failed (recorded in its directory)"
-                ))
-            }
-        }),
+            study_dir,
+        } => match hvi_study::study::cli::run_unit(&plan, index, threads, study_dir.as_deref()) {
+            Ok(true) => Ok(()),
+            Ok(false) => Err(anyhow::anyhow!(
+                "run {index} failed (recorded in its directory)"
+            )),
+            Err(e) => Err(e),
+        },
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -42,6 +42,14 @@ pub struct StudyArgs {
 impl StudyArgs {
     /// Loads the study, builds and validates its plan, and writes `plan.json`.
     pub fn plan(&self) -> Result<(Study, Plan, PathBuf)> {
+        let (study, plan, out) = self.build_plan()?;
+        plan.write(&out)?;
+        Ok((study, plan, out))
+    }
+
+    /// Loads the study and builds and validates its plan; returns it with the output
+    /// directory, writing nothing.
+    pub fn build_plan(&self) -> Result<(Study, Plan, PathBuf)> {
         if self.threads == Some(0) {
             anyhow::bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
         }
@@ -61,7 +69,6 @@ impl StudyArgs {
             .out
             .clone()
             .unwrap_or_else(|| default_out_dir(&plan.study, &plan.tier, self.particles));
-        plan.write(&out)?;
         Ok((study, plan, out))
     }
 
@@ -125,16 +132,24 @@ pub fn print_failures(records: &[super::store::Record]) {
 }
 
 /// `hvi-study run-unit PLAN INDEX`: executes one run of a written plan (for an external
-/// scheduler). A finished run is not repeated. Returns whether the run completed.
-pub fn run_unit(plan_path: &std::path::Path, index: usize, threads: Option<usize>) -> Result<bool> {
+/// scheduler). A finished run is not repeated. The result goes into the run store of
+/// `study_dir`, by default the plan's directory. Returns whether the run completed.
+pub fn run_unit(
+    plan_path: &std::path::Path,
+    index: usize,
+    threads: Option<usize>,
+    study_dir: Option<&std::path::Path>,
+) -> Result<bool> {
     if threads == Some(0) {
         anyhow::bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
     }
     let plan = Plan::load(plan_path)?;
-    let dir = plan_path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or_else(|| std::path::Path::new("."));
+    let dir = study_dir.unwrap_or_else(|| {
+        plan_path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or_else(|| std::path::Path::new("."))
+    });
     let job = job_of(&plan, index)?;
     let store = Store::open(dir)?;
     let record = match store.lookup(&job.fingerprint)? {

@@ -7,12 +7,14 @@
 
 pub mod calibrate;
 pub mod cli;
+pub mod collect;
 pub mod contour;
 pub mod exec;
 pub mod figures;
 pub mod plan;
 pub mod plot;
 pub mod score;
+pub mod slurm;
 pub mod snapshots;
 pub mod spec;
 pub mod store;

@@ -7,18 +7,21 @@
 //!     record.json      the run's record: fingerprint, status, error, observables (written last)
 //!     summary.json     the engine run's summary (hvi_study::run::run_scene)
 //!     energy.csv, cloud_track.csv, fragments.csv, cloud_side.png and the other pictures
-//! runs/.tmp-<digits>-<pid>-<n>/   a run in progress
+//! runs/.tmp-<digits>-<pid>-<n>-<host>/   a run in progress
 //! ```
 //!
 //! A run works in a temporary directory and, once `record.json` is written and synced, renames
 //! it to its final name. A process killed at any moment (even SIGKILL) therefore leaves either a
 //! complete run directory or a temporary one, which the next execution removes (when the process
-//! that made it is gone) and redoes. A directory whose `record.json` names another fingerprint
+//! that made it is gone) and redoes. On a filesystem shared between machines (a cluster) a
+//! process id only means something on the host that made the directory, so only that host's
+//! leftovers are judged and removed. A directory whose `record.json` names another fingerprint
 //! is refused, never reused.
 
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::OnceLock;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -213,6 +216,76 @@ fn process_alive(pid: u32) -> bool {
     Path::new(&format!("/proc/{pid}")).exists()
 }
 
+/// This machine's name as it appears in in-progress directory names (characters other than
+/// letters, digits, `.`, `-` and `_` become `_`).
+pub fn host_name() -> &'static str {
+    static HOST: OnceLock<String> = OnceLock::new();
+    HOST.get_or_init(|| {
+        let raw = ["/proc/sys/kernel/hostname", "/etc/hostname"]
+            .iter()
+            .find_map(|p| fs::read_to_string(p).ok())
+            .or_else(|| std::env::var("HOSTNAME").ok())
+            .unwrap_or_default();
+        let name: String = raw
+            .trim()
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        if name.is_empty() {
+            "unknown".into()
+        } else {
+            name
+        }
+    })
+}
+
+/// A run in progress (or abandoned): a temporary directory of the store.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InProgress {
+    /// The fingerprint's first [`DIR_DIGITS`] hex digits.
+    pub digits: String,
+    /// The process that works in it.
+    pub pid: u32,
+    /// The host it runs on (`None` for directories named before hosts were recorded).
+    pub host: Option<String>,
+    /// Whether that process is alive: `None` when it runs on another host (unknowable here).
+    pub alive: Option<bool>,
+    /// The directory.
+    pub path: PathBuf,
+}
+
+impl InProgress {
+    /// Parses a temporary directory's name, `.tmp-<digits>-<pid>-<n>[-<host>]` (or `.old-`).
+    fn parse(path: PathBuf) -> Option<InProgress> {
+        let name = path.file_name()?.to_string_lossy().into_owned();
+        let rest = name
+            .strip_prefix(".tmp-")
+            .or_else(|| name.strip_prefix(".old-"))?;
+        let mut parts = rest.splitn(4, '-');
+        let digits = parts.next()?.to_string();
+        let pid = parts.next()?.parse::<u32>().ok()?;
+        let _n = parts.next()?;
+        let host = parts.next().map(str::to_string);
+        let here = match host.as_deref() {
+            Some(h) => h == host_name(),
+            None => true,
+        };
+        Some(InProgress {
+            digits,
+            pid,
+            alive: here.then(|| pid == std::process::id() || process_alive(pid)),
+            host,
+            path,
+        })
+    }
+}
+
 fn sync_dir(dir: &Path) {
     // Makes a rename durable; not every platform can open a directory, so errors are ignored.
     if let Ok(f) = fs::File::open(dir) {
@@ -231,30 +304,28 @@ impl Store {
         Ok(store)
     }
 
-    /// Removes temporary directories whose process is gone. Returns how many.
+    /// Removes temporary directories whose process is gone (on this host: another host's
+    /// process cannot be checked from here). Returns how many.
     pub fn sweep_stale(&self) -> Result<usize> {
         let mut n = 0;
-        for entry in fs::read_dir(&self.runs)? {
-            let entry = entry?;
-            let name = entry.file_name().to_string_lossy().into_owned();
-            let Some(rest) = name
-                .strip_prefix(".tmp-")
-                .or_else(|| name.strip_prefix(".old-"))
-            else {
-                continue;
-            };
-            // rest = <digits>-<pid>-<n>
-            let pid = rest.split('-').nth(1).and_then(|p| p.parse::<u32>().ok());
-            if let Some(pid) = pid {
-                if pid != std::process::id() && !process_alive(pid) {
-                    fs::remove_dir_all(entry.path()).with_context(|| {
-                        format!("cannot remove stale {}", entry.path().display())
-                    })?;
-                    n += 1;
-                }
+        for t in self.in_progress()? {
+            if t.alive == Some(false) {
+                fs::remove_dir_all(&t.path)
+                    .with_context(|| format!("cannot remove stale {}", t.path.display()))?;
+                n += 1;
             }
         }
         Ok(n)
+    }
+
+    /// The temporary directories: runs in progress, or left by killed processes.
+    pub fn in_progress(&self) -> Result<Vec<InProgress>> {
+        let mut v = Vec::new();
+        for entry in fs::read_dir(&self.runs)? {
+            v.extend(InProgress::parse(entry?.path()));
+        }
+        v.sort_by(|a, b| a.path.cmp(&b.path));
+        Ok(v)
     }
 
     /// The directory of a run.
@@ -309,9 +380,10 @@ impl Store {
     pub fn execute(&self, job: &Job, threads: usize) -> Result<Record> {
         let digits = &job.fingerprint[..DIR_DIGITS.min(job.fingerprint.len())];
         let tmp = self.runs.join(format!(
-            ".tmp-{digits}-{}-{}",
+            ".tmp-{digits}-{}-{}-{}",
             std::process::id(),
-            TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+            TMP_COUNTER.fetch_add(1, Ordering::Relaxed),
+            host_name()
         ));
         if tmp.exists() {
             fs::remove_dir_all(&tmp)?;
@@ -391,10 +463,11 @@ impl Store {
                 Err(e) => return Err(e),
             }
             let old = self.runs.join(format!(
-                ".old-{}-{}-{}",
+                ".old-{}-{}-{}-{}",
                 &fingerprint[..DIR_DIGITS.min(fingerprint.len())],
                 std::process::id(),
-                TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+                TMP_COUNTER.fetch_add(1, Ordering::Relaxed),
+                host_name()
             ));
             fs::rename(&dest, &old)
                 .with_context(|| format!("cannot move {} aside", dest.display()))?;
@@ -414,6 +487,30 @@ impl Store {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn in_progress_names_judge_only_this_hosts_processes() {
+        let me = std::process::id();
+        let here = InProgress::parse(PathBuf::from(format!(
+            "runs/.tmp-0123456789abcdef-{me}-3-{}",
+            host_name()
+        )))
+        .expect("parses");
+        assert_eq!(here.digits, "0123456789abcdef");
+        assert_eq!(here.pid, me);
+        assert_eq!(here.alive, Some(true));
+        // A host name with dashes, a process of another machine: left alone.
+        let there = InProgress::parse(PathBuf::from(".tmp-0123456789abcdef-1-0-node-17.cluster"))
+            .expect("parses");
+        assert_eq!(there.host.as_deref(), Some("node-17.cluster"));
+        assert_eq!(there.alive, None);
+        // The old naming (no host) is this host's.
+        let old =
+            InProgress::parse(PathBuf::from(".old-0123456789abcdef-4000000000-0")).expect("parses");
+        assert_eq!((old.host, old.alive), (None, Some(false)));
+        assert!(InProgress::parse(PathBuf::from("0123456789abcdef")).is_none());
+        assert!(InProgress::parse(PathBuf::from(".tmp-x-notapid-0")).is_none());
+    }
 
     #[test]
     fn observables_read_flat_and_nested_cloud_blocks() {

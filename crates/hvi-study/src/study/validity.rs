@@ -21,9 +21,11 @@ use super::cli::{print_failures, StudyArgs};
 use super::contour::Point;
 use super::execute_plan;
 use super::figures::{field_of, map_axes};
+use super::plan::Plan;
 use super::plot::{contour_plot, ContourPlot};
 use super::snapshots::{plan_tiles, snapshot_matrix};
-use super::store::{RunStatus, OBSERVABLE_NAMES};
+use super::store::{Record, RunStatus, OBSERVABLE_NAMES};
+use super::table::Table;
 use crate::output::write_atomic;
 use plotters::style::{BLUE, RED};
 
@@ -47,6 +49,38 @@ pub struct ValidityConfig {
     /// The cut-off level (default 0.3).
     #[serde(default = "default_cutoff")]
     pub cutoff: f64,
+}
+
+impl ValidityConfig {
+    /// Reads `[validity]` of a study (the defaults without one) and checks the observable.
+    pub fn of(study: &super::spec::Study) -> Result<ValidityConfig> {
+        let cfg: ValidityConfig = match &study.validity {
+            Some(v) => serde_path_to_error::deserialize(v.clone()).map_err(|e| {
+                let p = e.path().to_string();
+                anyhow!(
+                    "study key `validity.{p}`: {}",
+                    e.into_inner().message().trim()
+                )
+            })?,
+            None => ValidityConfig::default(),
+        };
+        if !OBSERVABLE_NAMES.contains(&cfg.observable.as_str()) {
+            bail!(
+                "study key `validity.observable`: `{}` (allowed: {OBSERVABLE_NAMES:?})",
+                cfg.observable
+            );
+        }
+        Ok(cfg)
+    }
+
+    /// The cut-off: `--cutoff` when given, else the study's.
+    pub fn cutoff(&self, flag: Option<f64>) -> Result<f64> {
+        let cutoff = flag.unwrap_or(self.cutoff);
+        if !cutoff.is_finite() {
+            bail!("invalid value for `--cutoff`: {cutoff} (allowed: a finite number)");
+        }
+        Ok(cutoff)
+    }
 }
 
 impl Default for ValidityConfig {
@@ -98,36 +132,41 @@ pub struct ValidityMap {
 /// `hvi-study validity-map`.
 pub fn validity_map(args: &ValidityArgs) -> Result<ValidityMap> {
     let (study, plan, out) = args.study.plan()?;
-    let cfg: ValidityConfig = match &study.validity {
-        Some(v) => serde_path_to_error::deserialize(v.clone()).map_err(|e| {
-            let p = e.path().to_string();
-            anyhow!(
-                "study key `validity.{p}`: {}",
-                e.into_inner().message().trim()
-            )
-        })?,
-        None => ValidityConfig::default(),
-    };
-    if !OBSERVABLE_NAMES.contains(&cfg.observable.as_str()) {
-        bail!(
-            "study key `validity.observable`: `{}` (allowed: {OBSERVABLE_NAMES:?})",
-            cfg.observable
-        );
-    }
-    let cutoff = args.cutoff.unwrap_or(cfg.cutoff);
-    if !cutoff.is_finite() {
-        bail!("invalid value for `--cutoff`: {cutoff} (allowed: a finite number)");
-    }
-    let axes = map_axes(&plan)?;
+    let cfg = ValidityConfig::of(&study)?;
+    let cutoff = cfg.cutoff(args.cutoff)?;
+    map_axes(&plan)?;
 
-    let (mut table, report) = execute_plan(&plan, &out, &args.study.exec_options())?;
+    let (table, report) = execute_plan(&plan, &out, &args.study.exec_options())?;
     if !args.study.quiet {
         eprintln!("{}", report.line());
     }
     print_failures(&report.records);
-    let value = |r: &super::store::Record| r.observables.get(&cfg.observable);
-    let valid_col: Vec<Value> = report
-        .records
+    validity_outputs(
+        &plan,
+        &out,
+        &cfg.observable,
+        cutoff,
+        table,
+        &report.records,
+        args.study.quiet,
+    )
+}
+
+/// The validity map's files from a plan's results table and records (one per run, in plan
+/// order; a run without a result is a failed record without observables): the `valid` column
+/// of results.csv/json, validity_boundary.csv, validity_map.png/.svg and snapshots.png.
+pub fn validity_outputs(
+    plan: &Plan,
+    out: &Path,
+    observable: &str,
+    cutoff: f64,
+    mut table: Table,
+    records: &[Record],
+    quiet: bool,
+) -> Result<ValidityMap> {
+    let axes = map_axes(plan)?;
+    let value = |r: &Record| r.observables.get(observable);
+    let valid_col: Vec<Value> = records
         .iter()
         .map(|r| match (r.status, value(r)) {
             (RunStatus::Completed, Some(v)) => Value::Bool(v >= cutoff),
@@ -143,14 +182,13 @@ pub fn validity_map(args: &ValidityArgs) -> Result<ValidityMap> {
         .filter(|v| **v == Value::Bool(false))
         .count();
     table.push_column("valid", valid_col);
-    table.write(&out, "results")?;
+    table.write(out, "results")?;
 
-    let field = field_of(&plan, &report.records, axes, 0, |r| value(r))?;
+    let field = field_of(plan, records, axes, 0, |r| value(r))?;
     let boundary = field.contour(cutoff);
     let (kx, ky) = (&plan.axes[axes.0].key, &plan.axes[axes.1].key);
     write_boundary(&out.join("validity_boundary.csv"), (kx, ky), &boundary)?;
-    let particles = report
-        .records
+    let particles = records
         .iter()
         .filter_map(|r| r.observables.particles)
         .fold((f64::INFINITY, 0.0f64), |(lo, hi), n| {
@@ -159,43 +197,43 @@ pub fn validity_map(args: &ValidityArgs) -> Result<ValidityMap> {
     let plot = ContourPlot {
         title: format!(
             "{} over ({}, {}) (Fig. 16b)",
-            if cfg.observable == "fragmentation" {
+            if observable == "fragmentation" {
                 "Fragmentation F"
             } else {
-                cfg.observable.as_str()
+                observable
             },
             plan.axes[axes.0].label,
             plan.axes[axes.1].label
         ),
         subtitle: format!(
             "tier `{}`, {}-{} particles; red: {} = {cutoff} (validity cut-off; the paper's is 0.3); {valid} runs valid, {invalid} not",
-            plan.tier, particles.0, particles.1, cfg.observable
+            plan.tier, particles.0, particles.1, observable
         ),
         x_label: plan.axes[axes.0].label.clone(),
         y_label: plan.axes[axes.1].label.clone(),
         x_log: false,
         y_log: false,
         field,
-        value_label: if cfg.observable == "fragmentation" {
+        value_label: if observable == "fragmentation" {
             "F".into()
         } else {
-            cfg.observable.clone()
+            observable.to_string()
         },
         levels: 6,
-        highlight: Some((cutoff, format!("{} = {cutoff}", cfg.observable))),
+        highlight: Some((cutoff, format!("{} = {cutoff}", observable))),
         extra_points: Vec::new(),
         markers: Vec::new(),
     };
     let stem = out.join("validity_map");
     contour_plot(&stem, &plot)?;
     // Fig. 17: the runs' side views, valid framed red, invalid blue.
-    let (cols, rows, tiles) = plan_tiles(&plan, &out, axes, 0, |i| {
-        let r = &report.records[i];
+    let (cols, rows, tiles) = plan_tiles(plan, out, axes, 0, |i| {
+        let r = &records[i];
         let v = value(r);
         (
             v.map(|v| if v >= cutoff { RED } else { BLUE }),
             v.map_or("no cloud".to_string(), |v| {
-                format!("{} = {v:.3}", cfg.observable)
+                format!("{} = {v:.3}", observable)
             }),
         )
     })?;
@@ -204,16 +242,16 @@ pub fn validity_map(args: &ValidityArgs) -> Result<ValidityMap> {
         &snapshots,
         &format!(
             "Debris clouds over ({}, {}) (Fig. 17), tier `{}`: red {} >= {cutoff} (valid), blue below",
-            plan.axes[axes.0].label, plan.axes[axes.1].label, plan.tier, cfg.observable
+            plan.axes[axes.0].label, plan.axes[axes.1].label, plan.tier, observable
         ),
         (&plan.axes[axes.0].label, &cols),
         (&plan.axes[axes.1].label, &rows),
         &tiles,
     )?;
-    if !args.study.quiet {
+    if !quiet {
         eprintln!(
             "validity: {valid} runs with {} >= {cutoff}, {invalid} below; boundary: {} polyline(s) in {}",
-            cfg.observable,
+            observable,
             boundary.len(),
             out.join("validity_boundary.csv").display()
         );

@@ -1,0 +1,400 @@
+//! `hvi-study status` and `hvi-study collect`: a study directory's progress and tables read
+//! from its run store, running nothing. They serve a study run anywhere (locally, on a Slurm
+//! cluster through [`super::slurm`], or both): the store is the one place results live.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Result};
+use clap::{Args, ValueEnum};
+use serde_json::Value;
+
+use super::calibrate::{score_table, CalibrateConfig};
+use super::cli::{print_failures, StudyArgs};
+use super::plan::{describe_values, Plan, DIR_DIGITS};
+use super::score::Targets;
+use super::slurm::{QueueView, TaskState};
+use super::spec::Study;
+use super::store::{Observables, Record, RunStatus, Store};
+use super::table::results_table;
+use super::validity::{validity_outputs, ValidityConfig};
+
+/// `hvi-study status` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct StatusArgs {
+    /// The study (a study file with the flags `sweep` takes, or a study directory or its
+    /// plan.json).
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// One line per run: its state, where it runs, its directory.
+    #[arg(long, short)]
+    pub verbose: bool,
+}
+
+/// Which command's outputs `collect` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CollectAs {
+    /// results.csv / results.json, as `sweep`.
+    Sweep,
+    /// The results with the objective and each target's score, as the grid stage of
+    /// `calibrate` (the refinement needs new runs: `hvi-study calibrate` does it).
+    Calibrate,
+    /// The results with `valid`, the map, its boundary and the snapshots, as `validity-map`.
+    ValidityMap,
+}
+
+/// `hvi-study collect` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct CollectArgs {
+    /// The study (a study file with the flags `sweep` takes, or a study directory or its
+    /// plan.json).
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// Write what this command writes (default: `calibrate` for a study with `[calibrate]`,
+    /// `validity-map` for one with `[validity]`, else `sweep`).
+    #[arg(long = "as", value_enum, value_name = "COMMAND")]
+    pub kind: Option<CollectAs>,
+    /// The validity cut-off (with `--as validity-map`; default: the study's, else 0.3).
+    #[arg(long)]
+    pub cutoff: Option<f64>,
+}
+
+/// Reads a plan and its study directory: a study directory or its `plan.json` as is, or a
+/// study file planned like every other command (which writes plan.json).
+pub fn open_plan(args: &StudyArgs) -> Result<(Plan, PathBuf)> {
+    let p = &args.study;
+    let plan_path = if p.is_dir() {
+        Some(p.join("plan.json"))
+    } else if p.extension().is_some_and(|e| e == "json") {
+        Some(p.clone())
+    } else {
+        None
+    };
+    let Some(path) = plan_path else {
+        let (_, plan, out) = args.plan()?;
+        return Ok((plan, out));
+    };
+    if args.tier.is_some()
+        || args.particles.is_some()
+        || !args.sets.is_empty()
+        || args.out.is_some()
+    {
+        bail!(
+            "{} is a study directory's plan: --tier, --particles, --set and --out apply to a \
+             study file",
+            p.display()
+        );
+    }
+    if !path.exists() {
+        bail!(
+            "{} has no plan.json: give the study file (with its --tier/--out), or plan it first \
+             (`hvi-study plan`)",
+            p.display()
+        );
+    }
+    let plan = Plan::load(&path)?;
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or_else(|| Path::new("."))
+        .to_path_buf();
+    Ok((plan, dir))
+}
+
+/// Where a run stands.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RunState {
+    /// Completed: its result is in the store.
+    Done,
+    /// Failed (recorded; a new sweep or submission runs it again).
+    Failed(String),
+    /// Running: in Slurm (job, task), or in progress in the store (process, host).
+    Running(String),
+    /// Not done: queued in Slurm, or not started (with a note where a submitted task ended
+    /// without a result).
+    Pending {
+        /// Queued in Slurm (job and task).
+        queued: Option<String>,
+        /// Anything worth knowing (a Slurm task that ended without a result).
+        note: Option<String>,
+    },
+}
+
+impl RunState {
+    fn word(&self) -> &'static str {
+        match self {
+            RunState::Done => "done",
+            RunState::Failed(_) => "failed",
+            RunState::Running(_) => "running",
+            RunState::Pending { .. } => "pending",
+        }
+    }
+}
+
+/// A study directory's state: one entry per plan run, and what the queue said.
+#[derive(Debug, Clone)]
+pub struct Survey {
+    /// Per run: its record and state.
+    pub runs: Vec<(Option<Record>, RunState)>,
+    /// Slurm's view of the directory's submissions.
+    pub queue: QueueView,
+}
+
+/// Surveys a study directory: records from the store, running and queued runs from Slurm (when
+/// the directory has submissions and squeue answers) and from the store's in-progress
+/// directories.
+pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
+    let store = Store::open(dir)?;
+    let queue = QueueView::of(dir)?;
+    let markers = store.in_progress()?;
+    let mut runs = Vec::with_capacity(plan.runs.len());
+    for run in &plan.runs {
+        let record = store.lookup(&run.fingerprint)?;
+        let digits = &run.fingerprint[..DIR_DIGITS.min(run.fingerprint.len())];
+        let marker = markers
+            .iter()
+            .filter(|m| m.digits == digits && m.alive != Some(false))
+            .map(|m| match (&m.host, m.alive) {
+                (Some(h), None) => {
+                    format!("in progress on {h}, process {} (not checkable here)", m.pid)
+                }
+                _ => format!("in progress here, process {}", m.pid),
+            })
+            .next();
+        let active = queue.active.get(&run.fingerprint);
+        let state = if matches!(&record, Some(r) if r.status == RunStatus::Completed) {
+            RunState::Done
+        } else if let Some(t) = active.filter(|t| t.state == TaskState::Running) {
+            RunState::Running(format!("Slurm job {} task {}", t.job_id, t.task))
+        } else if let Some(m) = marker {
+            RunState::Running(m)
+        } else if let Some(t) = active {
+            RunState::Pending {
+                queued: Some(format!("queued in Slurm job {} task {}", t.job_id, t.task)),
+                note: None,
+            }
+        } else if let Some(r) = &record {
+            RunState::Failed(r.error.clone().unwrap_or_default())
+        } else {
+            RunState::Pending {
+                queued: None,
+                note: queue.ended_task(&run.fingerprint).map(|(job, task, log)| {
+                    format!(
+                        "Slurm job {job} task {task} ended without a result: see {}",
+                        log.display()
+                    )
+                }),
+            }
+        };
+        runs.push((record, state));
+    }
+    Ok(Survey { runs, queue })
+}
+
+impl Survey {
+    /// (done, failed, running, pending, of which queued in Slurm).
+    pub fn counts(&self) -> (usize, usize, usize, usize, usize) {
+        let mut c = (0, 0, 0, 0, 0);
+        for (_, s) in &self.runs {
+            match s {
+                RunState::Done => c.0 += 1,
+                RunState::Failed(_) => c.1 += 1,
+                RunState::Running(_) => c.2 += 1,
+                RunState::Pending { queued, .. } => {
+                    c.3 += 1;
+                    c.4 += usize::from(queued.is_some());
+                }
+            }
+        }
+        c
+    }
+}
+
+/// `hvi-study status`: counts on the first line (`... N runs: D done, F failed, R running, P
+/// pending (Q queued in Slurm)`), then the Slurm jobs, then with --verbose one line per run.
+pub fn status(args: &StatusArgs) -> Result<()> {
+    let (plan, dir) = open_plan(&args.study)?;
+    let survey = survey(&plan, &dir)?;
+    let (done, failed, running, pending, queued) = survey.counts();
+    let mut s = format!(
+        "study `{}` at tier `{}` in {}: {} runs: {done} done, {failed} failed, {running} running, {pending} pending",
+        plan.study,
+        plan.tier,
+        dir.display(),
+        plan.runs.len()
+    );
+    if queued > 0 {
+        let _ = write!(s, " ({queued} queued in Slurm)");
+    }
+    s.push('\n');
+    let q = &survey.queue;
+    for sub in &q.submissions {
+        let mut n = (0, 0, 0);
+        for r in &sub.runs {
+            match q.active.get(&r.fingerprint) {
+                Some(t) if t.job_id == sub.job_id && t.state == TaskState::Running => n.0 += 1,
+                Some(t) if t.job_id == sub.job_id => n.1 += 1,
+                _ => n.2 += 1,
+            }
+        }
+        let _ = write!(
+            s,
+            "Slurm job {} (submitted {}, {} runs)",
+            sub.job_id,
+            sub.submitted_utc,
+            sub.runs.len()
+        );
+        if q.known {
+            let _ = write!(s, ": {} running, {} queued, {} finished", n.0, n.1, n.2);
+        }
+        s.push('\n');
+    }
+    if let Some(note) = &q.note {
+        let _ = writeln!(
+            s,
+            "note: {note}; running runs are those in progress in the store"
+        );
+    }
+    if args.verbose {
+        for (run, (rec, state)) in plan.runs.iter().zip(&survey.runs) {
+            let detail = match state {
+                RunState::Done => rec
+                    .as_ref()
+                    .map(|r| format!("{:.1} s", r.wall_seconds))
+                    .unwrap_or_default(),
+                RunState::Failed(e) => e.clone(),
+                RunState::Running(w) => w.clone(),
+                RunState::Pending { queued, note } => queued
+                    .clone()
+                    .or_else(|| note.clone())
+                    .unwrap_or_else(|| "not started".into()),
+            };
+            let _ = writeln!(
+                s,
+                "{:>5}  {:<8} {}  {}  {}",
+                run.index,
+                state.word(),
+                run.dir,
+                describe_values(&plan.axes, &run.values),
+                detail
+            );
+        }
+    }
+    print!("{s}");
+    Ok(())
+}
+
+/// A stand-in record for a run without a result, so the figures draw a gap there.
+fn missing_record(plan: &Plan, i: usize) -> Record {
+    Record {
+        format: super::plan::STUDY_FORMAT_VERSION,
+        fingerprint: plan.runs[i].fingerprint.clone(),
+        study: plan.study.clone(),
+        tier: plan.tier.clone(),
+        params: serde_json::Map::new(),
+        status: RunStatus::Failed,
+        error: Some("missing: no result in the store".into()),
+        observables: Observables::default(),
+        wall_seconds: f64::NAN,
+        threads: 0,
+        engine_version: plan.engine_version.clone(),
+    }
+}
+
+/// `hvi-study collect`: the tables (and figures) of a local run from the store, running
+/// nothing. Runs without a result are rows with status `missing` (and gaps in the figures),
+/// listed on stderr; the command still writes everything and exits 0, so a partial study can
+/// be looked at while the rest runs.
+pub fn collect(args: &CollectArgs) -> Result<()> {
+    let (plan, dir) = open_plan(&args.study)?;
+    let store = Store::open(&dir)?;
+    let records: Vec<Option<Record>> = plan
+        .runs
+        .iter()
+        .map(|r| store.lookup(&r.fingerprint))
+        .collect::<Result<_>>()?;
+    let study = || Study::load(&plan.study_file);
+    let kind = match args.kind {
+        Some(k) => k,
+        None => match study() {
+            Ok(s) if s.calibrate.is_some() => CollectAs::Calibrate,
+            Ok(s) if s.validity.is_some() => CollectAs::ValidityMap,
+            _ => CollectAs::Sweep,
+        },
+    };
+    if args.cutoff.is_some() && kind != CollectAs::ValidityMap {
+        bail!("--cutoff applies to `--as validity-map`");
+    }
+    let missing: Vec<usize> = (0..plan.runs.len())
+        .filter(|&i| records[i].is_none())
+        .collect();
+    let filled: Vec<Record> = records
+        .iter()
+        .enumerate()
+        .map(|(i, r)| r.clone().unwrap_or_else(|| missing_record(&plan, i)))
+        .collect();
+    let mut table = results_table(&plan, &records);
+    let quiet = args.study.quiet;
+    let done = records.iter().flatten().cloned().collect::<Vec<_>>();
+    print_failures(&done);
+    match kind {
+        CollectAs::Sweep => {
+            table.write(&dir, "results")?;
+            println!("{}", dir.join("results.csv").display());
+        }
+        CollectAs::Calibrate => {
+            let study = study()?;
+            let cfg = CalibrateConfig::of(&study)?;
+            let base = study.path.parent().unwrap_or_else(|| Path::new("."));
+            let targets = Targets::load(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
+            score_table(&mut table, &filled, &targets);
+            // A run without a result has no score (a failed run scores as it does locally).
+            let scored: Vec<usize> = (0..table.columns.len())
+                .filter(|&c| {
+                    table.columns[c] == "objective" || table.columns[c].starts_with("score_")
+                })
+                .collect();
+            for &i in &missing {
+                for &c in &scored {
+                    table.rows[i][c] = Value::Null;
+                }
+            }
+            table.write(&dir, "results")?;
+            if !quiet {
+                eprintln!(
+                    "the grid scored; the refinement runs new simulations one after another: \
+                     `hvi-study calibrate` does it (locally, or inside one Slurm job), reusing \
+                     these runs"
+                );
+            }
+            println!("{}", dir.join("results.csv").display());
+        }
+        CollectAs::ValidityMap => {
+            let cfg = ValidityConfig::of(&study()?)?;
+            let cutoff = cfg.cutoff(args.cutoff)?;
+            validity_outputs(&plan, &dir, &cfg.observable, cutoff, table, &filled, quiet)?;
+        }
+    }
+    if !missing.is_empty() {
+        let shown: Vec<String> = missing
+            .iter()
+            .take(10)
+            .map(|&i| {
+                format!(
+                    "run {i} ({})",
+                    describe_values(&plan.axes, &plan.runs[i].values)
+                )
+            })
+            .collect();
+        eprintln!(
+            "incomplete: {} of {} runs have no result yet (status `missing` in results.csv): {}{}",
+            missing.len(),
+            plan.runs.len(),
+            shown.join(", "),
+            if missing.len() > 10 { ", ..." } else { "" }
+        );
+    } else if !quiet {
+        eprintln!("all {} runs collected; nothing was run", plan.runs.len());
+    }
+    Ok(())
+}
