@@ -34,9 +34,8 @@ fn run(spec: &SceneSpec) -> (Simulation, Vec<Energy>) {
     (sim, samples)
 }
 
-/// The bound this project states for the energy ledger at the default step: the relative
-/// drift of kinetic + contact + bond + broken stays below 1e-3 through an impact.
-const ENERGY_DRIFT_BOUND: f64 = 1e-3;
+/// The bound this project states for the energy ledger at the default step.
+const ENERGY_DRIFT_BOUND: f64 = hvi_engine::sim::LEDGER_DRIFT_BOUND;
 
 #[test]
 fn impact_conserves_momentum_to_round_off_and_energy_within_bound() {

@@ -7,7 +7,7 @@
 
 use glam::DVec3;
 use hvi_engine::potential::ContactForm;
-use hvi_engine::scene::{Geometry, Resolution, SceneSpec};
+use hvi_engine::scene::{Geometry, Resolution, SceneSpec, TimeStep};
 use hvi_engine::sim::Simulation;
 use hvi_engine::EngineError;
 use proptest::prelude::*;
@@ -107,13 +107,10 @@ proptest! {
     }
 }
 
-/// The step's margin this project states: the default step is stable at this multiple of it
-/// everywhere on the paper's grids.
-const MARGIN: f64 = 1.5;
-
 /// The defaults are stable with margin where the paper works: at the corners of the paper's
-/// grids (eps 0.01..1, kappa 1.14e6..9.12e6, v0 3..10 km/s, t/D 0.05..0.6) a run at
-/// [`MARGIN`] times the default step completes with the ledger within 1e-3.
+/// grids (eps 0.01..1, kappa 1.14e6..9.12e6, v0 3..10 km/s, t/D 0.05..0.6) the automatic step
+/// is at most half the stability bound, and a run *at* the bound completes with the ledger
+/// within the project's bound.
 #[test]
 fn defaults_have_margin_at_the_paper_grid_corners() {
     let default_dt = hvi_engine::scene::RunSettings::default().dt_factor;
@@ -124,25 +121,22 @@ fn defaults_have_margin_at_the_paper_grid_corners() {
         (10000.0, 0.425, 1.0, 9.12e6),
         (6700.0, 0.425, 0.01, 4.56e6),
     ] {
+        let case = format!("v0 {v0} t/D {t_over_d} eps {eps} kappa {kappa}");
         // Thin plates need more particles across D to be one particle thick.
         let across = if t_over_d < 0.1 { 20.0 } else { 8.0 };
-        let spec = scene(
-            v0,
-            t_over_d,
-            eps,
-            kappa,
-            MARGIN * default_dt,
-            1,
-            false,
-            across,
+        let mut spec = scene(v0, t_over_d, eps, kappa, default_dt, 1, false, across);
+        let d = spec.build().expect("valid").derived;
+        assert!(
+            d.dt_s <= 0.5 * d.dt_max_s * (1.0 + 1e-12),
+            "{case}: auto step above half the bound"
         );
-        let mut sim = run(&spec)
-            .unwrap_or_else(|e| panic!("v0 {v0} t/D {t_over_d} eps {eps} kappa {kappa}: {e}"));
+        spec.run.dt_s = TimeStep::Fixed(d.dt_max_s);
+        let mut sim = run(&spec).unwrap_or_else(|e| panic!("{case} at the bound: {e}"));
         let e = sim.energy();
         let drift = (e.total_j() - sim.energy_initial.total_j()) / sim.energy_initial.total_j();
         assert!(
-            drift.abs() < 1e-3,
-            "v0 {v0} t/D {t_over_d} eps {eps} kappa {kappa}: drift {drift:e}"
+            drift.abs() < hvi_engine::sim::LEDGER_DRIFT_BOUND,
+            "{case} at the bound: drift {drift:e}"
         );
     }
 }

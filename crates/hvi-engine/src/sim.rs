@@ -20,6 +20,11 @@ use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BO
 
 /// Particles per work unit and per partial sum.
 pub const CHUNK: usize = 1024;
+
+/// The bound this project states for the energy ledger (kinetic + contact + bond + broken):
+/// its relative drift stays below this through a run at the default step. Tested in
+/// `tests/physics.rs` and applied by `hvi-study accuracy` to every candidate setting.
+pub const LEDGER_DRIFT_BOUND: f64 = 1e-3;
 /// Owned bonds per vectorised block of the bond kernel.
 const BLOCK_BONDS: usize = 192;
 
