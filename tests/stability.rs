@@ -140,3 +140,68 @@ fn defaults_have_margin_at_the_paper_grid_corners() {
         );
     }
 }
+
+/// `hvi-study stability` on a 2 x 2 slice: the maps, table and summary are written, a step at
+/// four times the bound is stopped with the engine's diagnostic naming the final run
+/// directory, and a step at half the bound is stable.
+#[test]
+fn stability_command_maps_stable_and_stopped_cells() {
+    let dir = std::env::temp_dir().join(format!("hvi-stability-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("dir");
+    let scenes = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../studies/scenes");
+    let slice = dir.join("slice.toml");
+    std::fs::write(
+        &slice,
+        format!(
+            r#"[study]
+name = "tiny-step"
+description = "test slice"
+scene = "{}"
+set = ["resolution.particles_across_d=6", "scene.width_over_d=2", "run.end_time_s=1e-6", "analysis.track_every=0"]
+
+[[axes]]
+key = "scene.v0_m_s"
+values = [3000, 10000]
+
+[[axes]]
+key = "run.dt_over_bound"
+values = [0.5, 4.0]
+
+[tiers.quick]
+description = "tiny"
+set = []
+"#,
+            scenes.join("validity-map.toml").display()
+        ),
+    )
+    .expect("write slice");
+    let out = dir.join("report");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_hvi-study"))
+        .args(["stability", "--quiet", "--out"])
+        .arg(&out)
+        .arg("--store")
+        .arg(dir.join("runs"))
+        .arg(&slice)
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("slice.png").exists());
+    let md = std::fs::read_to_string(out.join("stability.md")).expect("md");
+    assert!(md.contains("cells: 4; stable: 2; stopped: 2"), "{md}");
+    let csv = std::fs::read_to_string(out.join("stability.csv")).expect("csv");
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    assert_eq!(rows.len(), 4);
+    for r in rows {
+        if r.contains(",4,") || r.contains(",4.0,") {
+            assert!(
+                r.contains("stopped") && r.contains("numerical instability"),
+                "{r}"
+            );
+            assert!(!r.contains(".tmp-"), "names a temporary directory: {r}");
+        } else {
+            assert!(r.contains("stable"), "{r}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

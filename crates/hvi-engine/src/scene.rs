@@ -231,6 +231,11 @@ pub struct RunSettings {
     pub dt_s: TimeStep,
     /// Multiplier on the automatic step.
     pub dt_factor: f64,
+    /// For stress tests: the step as this multiple of the stability bound, in (0, 8] (above 1
+    /// is beyond the bound, where the stability map looks for the first sign of trouble);
+    /// when set it replaces `dt_s` and `dt_factor`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dt_over_bound: Option<f64>,
     /// Seed of the thermal velocities.
     pub seed: u64,
     /// Per-component standard deviation of the thermal velocities, as a fraction of v0.
@@ -264,6 +269,7 @@ impl Default for RunSettings {
             end_time_s: paper::ANALYSIS_TIME_S,
             dt_s: TimeStep::default(),
             dt_factor: DEFAULT_DT_FACTOR,
+            dt_over_bound: None,
             seed: 1,
             thermal_ratio: 1e-3,
             skin_over_sigma: 0.3,
@@ -734,10 +740,11 @@ impl SceneSpec {
             .min(MAX_STEP_OVER_SQRT_M_K * (mass_imp.min(mass_tgt) / stiffness).sqrt());
         // "auto" never exceeds AUTO_STEP_SAFETY of the bound (fast impacts, stiff springs); a
         // fixed step beyond the bound is refused.
-        let dt = match run.dt_s {
-            TimeStep::Auto => (paper::TIME_STEP_S * (sigma / sigma_ref) * run.dt_factor)
+        let dt = match (run.dt_over_bound, run.dt_s) {
+            (Some(f), _) => check_range("run.dt_over_bound", f, 0.0, true, 8.0, false)? * dt_max,
+            (None, TimeStep::Auto) => (paper::TIME_STEP_S * (sigma / sigma_ref) * run.dt_factor)
                 .min(AUTO_STEP_SAFETY * dt_max),
-            TimeStep::Fixed(dt) => {
+            (None, TimeStep::Fixed(dt)) => {
                 check_positive("run.dt_s", dt)?;
                 if dt > dt_max {
                     return Err(EngineError::invalid(

@@ -56,6 +56,9 @@ enum Command {
     /// Validity map: the study's grid over (v0, t/D), F contour with the cut-off in red
     /// (Fig. 16b), the boundary as validity_boundary.csv, runs marked valid in results.csv.
     ValidityMap(hvi_study::study::validity::ValidityArgs),
+    /// Stability map: every slice of studies/stability/ (v0 x t/D, v0 x step, eps x kappa)
+    /// run through the study store; writes a map per slice, stability.csv and stability.md.
+    Stability(hvi_study::study::stability::StabilityArgs),
     /// Run one run of a written plan.json by its index (for an external scheduler).
     RunUnit {
         /// The plan.json of a study's output directory.
@@ -210,6 +213,15 @@ fn main() -> ExitCode {
             println!("report: {}", report_dir.join("accuracy.md").display());
             Ok(())
         })(),
+        Command::Stability(args) => hvi_study::study::stability::stability(&args).map(|cells| {
+            let stopped = cells.iter().filter(|c| c.status != "stable").count();
+            println!(
+                "{} cells, {} stopped; report: {}",
+                cells.len(),
+                stopped,
+                args.out.join("stability.md").display()
+            );
+        }),
         Command::Plan(args) => hvi_study::study::cli::plan(&args),
         Command::Sweep(args) => hvi_study::study::cli::sweep(&args),
         Command::Calibrate(args) => hvi_study::study::calibrate::calibrate(&args).map(|_| ()),

@@ -17,6 +17,7 @@ pub mod score;
 pub mod slurm;
 pub mod snapshots;
 pub mod spec;
+pub mod stability;
 pub mod store;
 pub mod table;
 pub mod validity;

@@ -406,7 +406,11 @@ impl Store {
         }));
         let error = match outcome {
             Ok(Ok(())) => None,
-            Ok(Err(e)) => Some(format!("{e:#}")),
+            // The run wrote into the temporary directory; its message names the final one.
+            Ok(Err(e)) => Some(format!("{e:#}").replace(
+                &tmp.display().to_string(),
+                &self.dir(&job.fingerprint).display().to_string(),
+            )),
             Err(panic) => Some(format!(
                 "panic: {}",
                 panic
