@@ -696,6 +696,8 @@ fn run_with_render_writes_cloud_files_and_pictures() {
             "run.end_time_s=3e-6",
             "--set",
             "analysis.render_times_s=[0, 1.5e-6, 3e-6]",
+            "--set",
+            "analysis.track_every=20",
             "--render",
         ])
         .output()
