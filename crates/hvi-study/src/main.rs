@@ -56,6 +56,9 @@ enum Command {
     /// Validity map: the study's grid over (v0, t/D), F contour with the cut-off in red
     /// (Fig. 16b), the boundary as validity_boundary.csv, runs marked valid in results.csv.
     ValidityMap(hvi_study::study::validity::ValidityArgs),
+    /// Reproduce every figure of the paper through the study runner and its store, and write
+    /// report.md: per figure the paper's result, ours, the deciding numbers and a verdict.
+    Reproduce(hvi_study::reproduce::ReproduceArgs),
     /// Run one run of a written plan.json by its index (for an external scheduler).
     RunUnit {
         /// The plan.json of a study's output directory.
@@ -146,6 +149,7 @@ fn main() -> ExitCode {
         Command::Sweep(args) => hvi_study::study::cli::sweep(&args),
         Command::Calibrate(args) => hvi_study::study::calibrate::calibrate(&args).map(|_| ()),
         Command::ValidityMap(args) => hvi_study::study::validity::validity_map(&args).map(|_| ()),
+        Command::Reproduce(args) => hvi_study::reproduce::reproduce(&args).map(|_| ()),
         Command::RunUnit {
             plan,
             index,

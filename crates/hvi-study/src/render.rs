@@ -178,7 +178,7 @@ fn format_mm(mm: f64) -> String {
 }
 
 /// Encodes an RGB buffer as PNG and writes it atomically.
-fn write_png(path: &Path, rgb: &[u8], w: u32, h: u32) -> Result<()> {
+pub(crate) fn write_png(path: &Path, rgb: &[u8], w: u32, h: u32) -> Result<()> {
     let mut bytes = Vec::new();
     {
         let mut enc = png::Encoder::new(&mut bytes, w, h);

@@ -70,8 +70,8 @@ pub fn non_increasing(values: &[f64], tolerance: f64) -> Option<bool> {
     non_decreasing(&neg, tolerance)
 }
 
-/// Relative change of each step of a series, |v[k+1] - v[k]| / |v[k]| (NaN where either is
-/// missing or v[k] = 0).
+/// Relative change of each step of a series, `|v[k+1] - v[k]| / |v[k]|` (NaN where either
+/// is missing or `v[k] = 0`).
 pub fn relative_changes(values: &[f64]) -> Vec<f64> {
     values
         .windows(2)
