@@ -90,14 +90,14 @@ pub fn short(x: f64) -> String {
     }
 }
 
-/// A number as the report prints it: whole numbers as they are (below 1e9), else four
+/// A number as the report prints it: whole numbers below 1e6 as they are, else four
 /// significant digits, in exponent form outside [1e-3, 1e5).
 pub fn fmt_num(x: f64) -> String {
     if !x.is_finite() {
         return "n/a".into();
     }
     let a = x.abs();
-    if x.fract() == 0.0 && a < 1e9 {
+    if x.fract() == 0.0 && a < 1e6 {
         format!("{x:.0}")
     } else if a != 0.0 && !(1e-3..1e5).contains(&a) {
         format!("{x:.3e}")
@@ -437,14 +437,17 @@ impl Reproduction {
                 "| stage | figures | runs | particles | particle-steps | expected |\n|---|---|---|---|---|---|"
             );
             for r in &e.rows {
+                let particles = if r.particles.0 == r.particles.1 {
+                    r.particles.0.to_string()
+                } else {
+                    format!("{}-{}", r.particles.0, r.particles.1)
+                };
                 let _ = writeln!(
                     s,
-                    "| {} | {} | {} | {}-{} | {} | {} |",
+                    "| {} | {} | {} | {particles} | {} | {} |",
                     r.stage,
                     r.figures,
                     r.runs,
-                    r.particles.0,
-                    r.particles.1,
                     fmt_num(r.particle_steps),
                     fmt_duration(r.seconds)
                 );
@@ -630,6 +633,7 @@ mod tests {
         assert_eq!(fmt_num(1.5432), "1.543");
         assert_eq!(fmt_num(0.3), "0.3000");
         assert_eq!(fmt_num(2.5e5), "250000");
+        assert_eq!(fmt_num(2.4e7), "2.400e7");
         assert_eq!(fmt_num(2.5e-5), "2.500e-5");
         assert_eq!(fmt_num(12.0), "12");
         assert_eq!(fmt_num(50430.0), "50430");
