@@ -168,7 +168,11 @@ fn reproduce_draws_every_figure_gives_every_verdict_and_reruns_from_the_store() 
         &config,
         &out,
         &runs,
-        &["--previous", out.to_str().expect("utf-8")],
+        &[
+            "--previous",
+            out.to_str().expect("utf-8"),
+            "--fail-on-change",
+        ],
     );
     assert!(o.status.success(), "{}", stderr(&o));
     let json: serde_json::Value =
@@ -183,6 +187,23 @@ fn reproduce_draws_every_figure_gives_every_verdict_and_reruns_from_the_store() 
         md.contains("## What changed since the previous report\n\nNothing"),
         "{md}"
     );
+
+    // A changed number is listed, and --fail-on-change fails on it.
+    let prev = dir.join("previous");
+    std::fs::create_dir_all(&prev).expect("dir");
+    let mut json = json;
+    json["figures"][1]["numbers"][1]["value"] = serde_json::json!(99.0);
+    std::fs::write(prev.join("reproduce.json"), json.to_string()).expect("write");
+    let args = [
+        "--previous",
+        prev.to_str().expect("utf-8"),
+        "--fail-on-change",
+    ];
+    let o = reproduce(&config, &out, &runs, &args);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("changed since"), "{}", stderr(&o));
+    let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
+    assert!(md.contains("- Fig. 4: decades spanned: 99 -> "), "{md}");
 }
 
 #[test]

@@ -55,6 +55,10 @@ pub struct ReproduceArgs {
     /// A previous report directory: list what changed since its reproduce.json.
     #[arg(long, value_name = "DIR")]
     pub previous: Option<PathBuf>,
+    /// With --previous: fail (exit code 2) when a verdict or deciding number changed, e.g. to
+    /// check in CI that a committed report is current.
+    #[arg(long, requires = "previous")]
+    pub fail_on_change: bool,
     /// The reproduction's config.
     #[arg(long, default_value = "studies/reproduce.toml")]
     pub config: PathBuf,
@@ -668,7 +672,7 @@ pub fn reproduce(args: &ReproduceArgs) -> Result<Reproduction> {
                         slot.reason = format!("the stage failed: {e:#}");
                     }
                 }
-                errors.push(format!("{name}: {e:#}"));
+                errors.push(format!("stage {name} failed: {e:#}"));
             }
         }
         say(format!(
@@ -693,12 +697,20 @@ pub fn reproduce(args: &ReproduceArgs) -> Result<Reproduction> {
             .join(", ")
     ));
     println!("{}", out.join("report.md").display());
+    if let (true, Some(changes)) = (args.fail_on_change, &rep.changes) {
+        if !changes.is_empty() {
+            errors.push(format!(
+                "{} verdict(s) or deciding number(s) changed since {} (--fail-on-change):\n    {}",
+                changes.len(),
+                args.previous
+                    .as_deref()
+                    .map_or("the previous report".into(), |p| p.display().to_string()),
+                changes.join("\n    ")
+            ));
+        }
+    }
     if !errors.is_empty() {
-        bail!(
-            "{} stage(s) failed (the report says which):\n  {}",
-            errors.len(),
-            errors.join("\n  ")
-        );
+        bail!("{}", errors.join("\n"));
     }
     Ok(rep)
 }
