@@ -3,12 +3,12 @@
 
 use glam::DVec3;
 use hvi_engine::potential::{ContactForm, Interaction};
-use hvi_engine::scene::{
-    Analysis, Derived, Geometry, Material, Resolution, RunSettings, SceneSpec,
-};
+use hvi_engine::scene::{Derived, RunSettings, SceneSpec};
 use hvi_engine::sim::{Energy, Simulation};
 use hvi_engine::state::{Body, Particles, BONDS_PER_PARTICLE, NO_BOND};
-use hvi_engine::{paper, EngineError};
+use hvi_engine::EngineError;
+use hvi_study::reproduce::decide::{curve_deviation, EnergySample};
+use hvi_study::reproduce::sizing;
 
 fn sphere_scene(particles: f64, end_time_s: f64) -> SceneSpec {
     SceneSpec::calibration(particles, end_time_s)
@@ -90,86 +90,43 @@ fn same_seed_is_bit_identical_at_one_and_two_threads() {
     }
 }
 
-/// Kinetic and potential (contact + bond) energy against time since contact.
-fn flyer_curves(particles: f64, sizing: bool) -> Vec<(f64, f64, f64)> {
-    let spec = SceneSpec {
-        scene: Geometry::FlyerPlate {
-            flyer_thickness_m: 1e-3,
-            target_thickness_m: 2e-3,
-            width_m: 4e-3,
-            v0_m_s: 300.0,
-            density_kg_m3: paper::ALUMINIUM_DENSITY_KG_M3,
-            standoff_m: 0.0,
-        },
-        resolution: Resolution {
-            particles: Some(particles),
-            particles_across_d: None,
-        },
-        material: Material {
-            sizing,
-            ..Material::default()
-        },
-        run: RunSettings {
-            end_time_s: 0.8e-6,
-            dt_factor: 10.0,
-            energy_every: 10,
-            ..RunSettings::default()
-        },
-        analysis: Analysis::default(),
-    };
+/// Kinetic and potential (contact + bond) energy against time since contact, stepping the
+/// engine directly on the scene `hvi-study reproduce` uses for Fig. 4.
+fn flyer_curves(particles: f64, sizing: bool) -> Vec<EnergySample> {
+    let spec = sizing::plates_scene(particles, sizing);
     let mut sim = Simulation::new(spec.build().expect("valid")).expect("starts");
     let mut out = Vec::new();
     while sim.step < sim.derived.steps {
         let e = sim.energy();
-        out.push((sim.tau_s(), e.kinetic_j, e.contact_j + e.bond_j));
-        sim.advance(10.min(sim.derived.steps - sim.step))
-            .expect("stable");
+        out.push(EnergySample {
+            tau_s: sim.tau_s(),
+            kinetic_j: e.kinetic_j,
+            potential_j: e.contact_j + e.bond_j,
+        });
+        let n = sizing::SAMPLE_EVERY.min(sim.derived.steps - sim.step);
+        sim.advance(n).expect("stable");
     }
     out
 }
 
-fn interpolate(curve: &[(f64, f64, f64)], t: f64) -> (f64, f64) {
-    let k = curve.partition_point(|c| c.0 < t).clamp(1, curve.len() - 1);
-    let (a, b) = (curve[k - 1], curve[k]);
-    let w = if b.0 > a.0 {
-        (t - a.0) / (b.0 - a.0)
-    } else {
-        0.0
-    };
-    (a.1 + w * (b.1 - a.1), a.2 + w * (b.2 - a.2))
-}
-
-/// Largest difference of the kinetic and of the potential energy between two runs, over the
-/// collision and first rebound (0 to 0.8 us), relative to the initial kinetic energy.
-fn curve_difference(a: &[(f64, f64, f64)], b: &[(f64, f64, f64)]) -> f64 {
-    let ke0 = b[0].1;
-    (1..200)
-        .map(|k| {
-            let t = 0.8e-6 * k as f64 / 200.0;
-            let (x, y) = (interpolate(a, t), interpolate(b, t));
-            ((x.0 - y.0).abs()).max((x.1 - y.1).abs()) / ke0
-        })
-        .fold(0.0, f64::max)
-}
-
 /// Fig. 4: with sizing, energy curves of colliding plates at 500, 5000 and 50000 particles
-/// agree within 10 % of the initial kinetic energy (measured: 7-8 %); without sizing they
-/// differ by more than 30 % (measured: about 45 %).
+/// agree within `SIZED_MAX_DEVIATION` of the initial kinetic energy (measured: 7-8 %); without
+/// sizing they differ by more than `UNSIZED_MIN_DEVIATION` (measured: about 45 %).
 #[test]
 fn sizing_makes_colliding_plates_independent_of_particle_count() {
     let counts = [500.0, 5000.0, 50000.0];
     let sized: Vec<_> = counts.iter().map(|&n| flyer_curves(n, true)).collect();
     let unscaled: Vec<_> = counts.iter().map(|&n| flyer_curves(n, false)).collect();
     for k in 0..2 {
-        let d = curve_difference(&sized[k], &sized[2]);
+        let d = curve_deviation(&sized[k], &sized[2]);
         assert!(
-            d < 0.10,
+            d < sizing::SIZED_MAX_DEVIATION,
             "with sizing, N = {} differs from N = 5e4 by {d:.3}",
             counts[k]
         );
-        let u = curve_difference(&unscaled[k], &unscaled[2]);
+        let u = curve_deviation(&unscaled[k], &unscaled[2]);
         assert!(
-            u > 0.30,
+            u > sizing::UNSIZED_MIN_DEVIATION,
             "without sizing, N = {} differs from N = 5e4 by only {u:.3}",
             counts[k]
         );

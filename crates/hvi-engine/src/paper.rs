@@ -34,6 +34,31 @@ pub const FIG12_TIMES_S: [f64; 4] = [0.0, 9.1e-6, 16.1e-6, 32e-6];
 /// Wall time of the paper's 7.4e5-particle run on one processor, s (nine hours).
 pub const PAPER_WALL_SECONDS: f64 = 9.0 * 3600.0;
 
+/// Fig. 5: the particle count from which the fragmentation converges ("the simulations begin
+/// to converge at about a quarter of a million particles").
+pub const CONVERGED_PARTICLES: f64 = 2.5e5;
+/// Fig. 4: the particle counts of the sizing test span "almost three orders of magnitude".
+pub const SIZING_DECADES: f64 = 3.0;
+/// Fig. 7: every run with kappa at or below this (N/m, at the reference sigma) fragments almost
+/// completely.
+pub const FIG7_FINE_MAX_KAPPA_N_M: f64 = 1.14e6;
+/// Fig. 7: the size of those runs' fragments ("on the order of 0.1 mm"), m.
+pub const FIG7_FINE_FRAGMENT_SIZE_M: f64 = 0.1e-3;
+/// Fig. 7: (eps in J, kappa in N/m) of runs with a large central fragment.
+pub const FIG7_LARGE_FRAGMENT_POINTS: [(f64, f64); 2] = [(1.0, 9.12e6), (0.1, 9.12e6)];
+/// Fig. 9: the plateau of R = La/Lr over the (eps, kappa) grid ("approximately 1.47").
+pub const FIG9_R_PLATEAU: f64 = 1.47;
+/// Fig. 9: the peak of R over the grid.
+pub const FIG9_R_PEAK: f64 = 1.54;
+/// Fig. 9: (eps in J, kappa in N/m) of that peak.
+pub const FIG9_R_PEAK_AT: (f64, f64) = (1.0, 1.14e6);
+/// R = La/Lr measured in the calibration shot (section 3, Fig. 6).
+pub const CALIBRATION_SHOT_LENGTH_RATIO: f64 = 1.55;
+/// Fig. 13: impact velocity of the va/v0 against t/D comparison, m/s (the calibration's).
+pub const FIG13_V0_M_S: f64 = CALIBRATION_V0_M_S;
+/// Figs. 16-17: the fragmentation below which the model is not valid (section 5).
+pub const VALIDITY_FRAGMENTATION_CUTOFF: f64 = 0.3;
+
 /// Zero-force distance of the Lennard-Jones repulsion over sigma: r_eq = 2^(1/6) sigma.
 pub fn r_eq_over_sigma() -> f64 {
     2f64.powf(1.0 / 6.0)

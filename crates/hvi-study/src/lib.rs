@@ -7,6 +7,7 @@ pub mod accuracy;
 pub mod bench;
 pub mod output;
 pub mod render;
+pub mod reproduce;
 pub mod run;
 pub mod scene_file;
 pub mod study;

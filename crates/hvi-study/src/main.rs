@@ -59,6 +59,9 @@ enum Command {
     /// Stability map: every slice of studies/stability/ (v0 x t/D, v0 x step, eps x kappa)
     /// run through the study store; writes a map per slice, stability.csv and stability.md.
     Stability(hvi_study::study::stability::StabilityArgs),
+    /// Reproduce every figure of the paper through the study runner and its store, and write
+    /// report.md: per figure the paper's result, ours, the deciding numbers and a verdict.
+    Reproduce(hvi_study::reproduce::ReproduceArgs),
     /// Run one run of a written plan.json by its index (for an external scheduler).
     RunUnit {
         /// The plan.json of a study's output directory.
@@ -229,6 +232,7 @@ fn main() -> ExitCode {
         Command::Submit(args) => hvi_study::study::slurm::submit(&args),
         Command::Status(args) => hvi_study::study::collect::status(&args),
         Command::Collect(args) => hvi_study::study::collect::collect(&args),
+        Command::Reproduce(args) => hvi_study::reproduce::reproduce(&args).map(|_| ()),
         Command::RunUnit {
             plan,
             index,

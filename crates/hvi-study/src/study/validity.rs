@@ -30,7 +30,7 @@ use crate::output::write_atomic;
 use plotters::style::{BLUE, RED};
 
 /// The paper's cut-off of the validity region (section 5, Fig. 16): F = 0.3.
-pub const PAPER_CUTOFF: f64 = 0.3;
+pub const PAPER_CUTOFF: f64 = hvi_engine::paper::VALIDITY_FRAGMENTATION_CUTOFF;
 
 fn default_observable() -> String {
     "fragmentation".into()
@@ -206,7 +206,7 @@ pub fn validity_outputs(
             plan.axes[axes.1].label
         ),
         subtitle: format!(
-            "tier `{}`, {}-{} particles; red: {} = {cutoff} (validity cut-off; the paper's is 0.3); {valid} runs valid, {invalid} not",
+            "tier `{}`, {}-{} particles; red: {} = {cutoff} (validity cut-off; the paper's is {PAPER_CUTOFF}); {valid} runs valid, {invalid} not",
             plan.tier, particles.0, particles.1, observable
         ),
         x_label: plan.axes[axes.0].label.clone(),
