@@ -34,7 +34,7 @@ use crate::output::{write_atomic_bytes, write_csv_atomic};
 use crate::render::{fonts, write_png, FAMILY};
 use crate::scene_file::parse_scene;
 use crate::study::plan::fingerprint;
-use crate::study::store::{Job, Observables, RunStatus, Store};
+use crate::study::store::{read_summary, Job, Observables, RunStatus, Store};
 
 /// Observables compared with the reference, with their relative tolerance.
 pub const TOLERANCES: [(&str, &str, f64); 4] = [
@@ -203,26 +203,17 @@ fn measured(store: &Store, fp: &str, cached: bool) -> Result<Measured> {
     let rec = store
         .lookup(fp)?
         .ok_or_else(|| anyhow!("run {} vanished from the store", &fp[..16]))?;
-    let summary: Option<serde_json::Value> =
-        std::fs::read_to_string(store.dir(fp).join("summary.json"))
-            .ok()
-            .and_then(|t| serde_json::from_str(&t).ok());
-    let num = |k: &[&str]| {
-        let mut v = summary.as_ref()?;
-        for key in k {
-            v = v.get(*key)?;
-        }
-        v.as_f64()
-    };
+    let summary = read_summary(&store.dir(fp));
+    let num = |pointer: &str| summary.as_ref()?.pointer(pointer)?.as_f64();
     Ok(Measured {
         status: rec.status,
         error: rec.error.clone(),
         obs: rec.observables.clone(),
-        dt_s: num(&["dt_s"]),
-        steps: num(&["steps"]).map(|s| s as u64),
-        wall_s: num(&["wall_seconds"]),
-        rate: num(&["particle_steps_per_second"]),
-        max_drift: num(&["energy", "max_abs_relative_drift"]),
+        dt_s: num("/dt_s"),
+        steps: num("/steps").map(|s| s as u64),
+        wall_s: num("/wall_seconds"),
+        rate: num("/particle_steps_per_second"),
+        max_drift: num("/energy/max_abs_relative_drift"),
         cached,
     })
 }

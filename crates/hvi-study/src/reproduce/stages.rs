@@ -126,9 +126,9 @@ fn timing(
 
 /// A number from a run's `summary.json` by JSON pointer (e.g. `/dt_s`).
 fn summary_number(run_dir: &Path, pointer: &str) -> Option<f64> {
-    let text = std::fs::read_to_string(run_dir.join("summary.json")).ok()?;
-    let v: Json = serde_json::from_str(&text).ok()?;
-    v.pointer(pointer).and_then(Json::as_f64)
+    crate::study::store::read_summary(run_dir)?
+        .pointer(pointer)
+        .and_then(Json::as_f64)
 }
 
 /// The index of `v` in sorted axis values (relative tolerance 1e-9).

@@ -18,7 +18,7 @@ use serde::Serialize;
 
 use super::cli::StudyArgs;
 use super::execute_plan;
-use super::store::{RunStatus, Store};
+use super::store::{read_summary, RunStatus, Store};
 use crate::output::{write_atomic_bytes, write_csv_atomic};
 use crate::render::{fonts, write_png, FAMILY};
 
@@ -153,19 +153,10 @@ pub fn stability(args: &StabilityArgs) -> Result<Vec<Cell>> {
         let store = Store::open(&out)?;
         let mut slice_cells = Vec::new();
         for (run, rec) in plan.runs.iter().zip(&report.records) {
-            let summary: Option<serde_json::Value> =
-                std::fs::read_to_string(store.dir(&run.fingerprint).join("summary.json"))
-                    .ok()
-                    .and_then(|t| serde_json::from_str(&t).ok());
-            let num = |path: &[&str]| {
-                let mut v = summary.as_ref()?;
-                for k in path {
-                    v = v.get(*k)?;
-                }
-                v.as_f64()
-            };
-            let dt = num(&["dt_s"]);
-            let bound = num(&["derived", "dt_max_s"]);
+            let summary = read_summary(&store.dir(&run.fingerprint));
+            let num = |pointer: &str| summary.as_ref()?.pointer(pointer)?.as_f64();
+            let dt = num("/dt_s");
+            let bound = num("/derived/dt_max_s");
             slice_cells.push(Cell {
                 slice: plan.study.clone(),
                 x_key: plan.axes[0].key.clone(),
@@ -178,7 +169,7 @@ pub fn stability(args: &StabilityArgs) -> Result<Vec<Cell>> {
                     "stopped"
                 }
                 .into(),
-                max_drift: num(&["energy", "max_abs_relative_drift"]),
+                max_drift: num("/energy/max_abs_relative_drift"),
                 dt_s: dt,
                 dt_over_bound: dt.zip(bound).map(|(a, b)| a / b),
                 broken_fraction: rec.observables.bonds_broken_fraction,

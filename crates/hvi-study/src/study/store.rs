@@ -157,6 +157,13 @@ impl Observables {
     }
 }
 
+/// A run directory's `summary.json` (`hvi_study::run::run_scene`), if it has a readable one.
+/// Numbers are read from it by JSON pointer, e.g. `.pointer("/energy/max_abs_relative_drift")`.
+pub fn read_summary(run_dir: &Path) -> Option<serde_json::Value> {
+    let text = fs::read_to_string(run_dir.join("summary.json")).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
 /// `record.json`: the last file of a run's directory, and the proof that it is complete.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Record {
@@ -420,9 +427,7 @@ impl Store {
                     .unwrap_or_else(|| "(no message)".into())
             )),
         };
-        let summary = fs::read_to_string(tmp.join("summary.json"))
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
+        let summary = read_summary(&tmp);
         let observables = summary
             .as_ref()
             .map(Observables::from_summary)
