@@ -29,6 +29,8 @@
 
 use std::collections::HashMap;
 
+use rustc_hash::FxHashMap;
+
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -39,6 +41,8 @@ const COORD_OFFSET: i64 = 1 << (COORD_BITS - 1);
 const COORD_MAX: i64 = (1 << COORD_BITS) - 2;
 /// Cells per chunk of the parallel search (fixed, for reproducible work units).
 const CELL_CHUNK: usize = 2048;
+/// Candidates per block of the branch-free distance filter.
+const HIT_BLOCK: usize = 64;
 
 /// The neighbour list in compressed-row form over the current particle order.
 #[derive(Debug, Default, Clone)]
@@ -72,6 +76,7 @@ pub struct NeighbourList {
     ys: Vec<f64>,
     zs: Vec<f64>,
     fill: Vec<u32>,
+    block_keys: Vec<u64>,
 }
 
 #[inline]
@@ -121,11 +126,14 @@ impl NeighbourList {
             return;
         }
         let inv_b = 1.0 / block;
-        let keys: Vec<u64> = p.pos.par_iter().map(|&x| cell_key(x, inv_b).0).collect();
-        let mut blocks: HashMap<u64, (DVec3, f64)> = HashMap::new();
+        let mut keys = std::mem::take(&mut self.block_keys);
+        keys.clear();
+        keys.par_extend(p.pos.par_iter().map(|&x| cell_key(x, inv_b).0));
+        // Sums in particle order (fixed by the sort), one map update per run of equal block:
+        // runs are common in cell order. Few updates; the per-particle work below is parallel.
+        let mut blocks: FxHashMap<u64, (DVec3, f64)> = FxHashMap::default();
         let mut i = 0;
         while i < n {
-            // Runs of one block are common in cell order: one map update per run.
             let mut j = i;
             let mut sum = DVec3::ZERO;
             while j < n && keys[j] == keys[i] {
@@ -140,30 +148,41 @@ impl NeighbourList {
         for v in blocks.values_mut() {
             v.0 /= v.1;
         }
-        self.frame_vel.extend(
-            keys.iter()
-                .map(|k| blocks.get(k).map_or(DVec3::ZERO, |b| b.0)),
+        let blocks_r = &blocks;
+        self.frame_vel.par_extend(
+            keys.par_iter()
+                .map(|k| blocks_r.get(k).map_or(DVec3::ZERO, |b| b.0)),
         );
+        self.block_keys = keys;
         let row = 1i64 << COORD_BITS;
         let plane = 1i64 << (2 * COORD_BITS);
-        let mut near: f64 = 0.0;
-        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-        for (&k, &(u, _)) in &blocks {
-            lo = lo.min(u);
-            hi = hi.max(u);
-            for dz in -1..=1i64 {
-                for dy in -1..=1i64 {
-                    for dx in -1..=1i64 {
-                        let kb = k as i64 + dz * plane + dy * row + dx;
-                        if kb != k as i64 {
-                            if let Some(&(ub, _)) = blocks.get(&(kb as u64)) {
+        let list: Vec<(u64, DVec3)> = blocks.iter().map(|(&k, &(u, _))| (k, u)).collect();
+        // Maxima and minima do not depend on the order they are taken in.
+        let near = list
+            .par_iter()
+            .map(|&(k, u)| {
+                let mut near: f64 = 0.0;
+                // Half of the 26 neighbours: the other half sees this block.
+                for dz in 0..=1i64 {
+                    for dy in -1..=1i64 {
+                        for dx in -1..=1i64 {
+                            if dz == 0 && (dy < 0 || (dy == 0 && dx <= 0)) {
+                                continue;
+                            }
+                            let kb = (k as i64 + dz * plane + dy * row + dx) as u64;
+                            if let Some(&(ub, _)) = blocks_r.get(&kb) {
                                 near = near.max((u - ub).length());
                             }
                         }
                     }
                 }
-            }
-        }
+                near
+            })
+            .reduce(|| 0.0, f64::max);
+        let (lo, hi) = list.par_iter().map(|&(_, u)| (u, u)).reduce(
+            || (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |a, b| (a.0.min(b.0), a.1.max(b.1)),
+        );
         self.near_dv = near;
         self.far_dv = if blocks.is_empty() {
             0.0
@@ -190,17 +209,21 @@ impl NeighbourList {
             // Out-of-range particles are counted through the flag bit below.
             (key, i as u32 | if ok { 0 } else { 1 << 31 })
         }));
-        self.out_of_range = order.iter().filter(|o| o.1 & (1 << 31) != 0).count();
-        for o in order.iter_mut() {
-            o.1 &= !(1 << 31);
-        }
-        // std's stable sort finds the long sorted runs of a nearly sorted input (rayon's
-        // parallel quicksort does not: ten times the work here).
-        order.sort();
+        self.out_of_range = order
+            .par_iter_mut()
+            .map(|o| {
+                let out = o.1 >> 31;
+                o.1 &= !(1 << 31);
+                out as usize
+            })
+            .sum();
+        // A merge sort finds the long sorted runs of a nearly sorted input (rayon's parallel
+        // quicksort does not: ten times the work here); rayon's merges in parallel.
+        order.par_sort();
         let mut perm = std::mem::take(&mut self.perm);
         perm.clear();
-        perm.extend(order.iter().map(|o| o.1));
-        if perm.iter().enumerate().any(|(k, &o)| k as u32 != o) {
+        perm.par_extend(order.par_iter().map(|o| o.1));
+        if perm.par_iter().enumerate().any(|(k, &o)| k as u32 != o) {
             p.permute(&perm, &mut self.scratch);
         }
         // Cells: runs of equal key.
@@ -225,9 +248,9 @@ impl NeighbourList {
         xs.clear();
         ys.clear();
         zs.clear();
-        xs.extend(p.pos.iter().map(|x| x.x));
-        ys.extend(p.pos.iter().map(|x| x.y));
-        zs.extend(p.pos.iter().map(|x| x.z));
+        xs.par_extend(p.pos.par_iter().map(|x| x.x));
+        ys.par_extend(p.pos.par_iter().map(|x| x.y));
+        zs.par_extend(p.pos.par_iter().map(|x| x.z));
         let ncell = cell_key_list.len();
         let r2 = radius * radius;
         let bonds = &p.bonds;
@@ -278,15 +301,26 @@ impl NeighbourList {
                             if a >= b {
                                 continue;
                             }
-                            let (cx, cy, cz) = (&xs[a..b], &ys[a..b], &zs[a..b]);
-                            for k in 0..cx.len() {
-                                let (dx, dy, dz) = (px - cx[k], py - cy[k], pz - cz[k]);
-                                if dx * dx + dy * dy + dz * dz < r2 {
-                                    let j = (a + k) as u32;
+                            // Branch-free compaction of the candidates within the radius
+                            // (a third of them, so a branch would be mispredicted often), in
+                            // blocks; then the few hits are checked against the bonds.
+                            let mut hits = [0u32; HIT_BLOCK];
+                            let mut a0 = a;
+                            while a0 < b {
+                                let a1 = (a0 + HIT_BLOCK).min(b);
+                                let (cx, cy, cz) = (&xs[a0..a1], &ys[a0..a1], &zs[a0..a1]);
+                                let mut cnt = 0;
+                                for k in 0..cx.len() {
+                                    let (dx, dy, dz) = (px - cx[k], py - cy[k], pz - cz[k]);
+                                    hits[cnt] = (a0 + k) as u32;
+                                    cnt += usize::from(dx * dx + dy * dy + dz * dz < r2);
+                                }
+                                for &j in &hits[..cnt] {
                                     if !slots.contains(&j) {
                                         found.push((i as u32, j));
                                     }
                                 }
+                                a0 = a1;
                             }
                         }
                     }
@@ -318,7 +352,7 @@ impl NeighbourList {
         }
         self.fill = fill;
         self.pos_at_build.clear();
-        self.pos_at_build.extend_from_slice(&p.pos);
+        self.pos_at_build.par_extend(p.pos.par_iter().copied());
         self.build_frames(p, block);
         (self.order, self.perm, self.cell_start, self.cell_keys) =
             (order, perm, cell_start, cell_key_list);
