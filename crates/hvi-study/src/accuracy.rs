@@ -106,14 +106,37 @@ impl Variant {
     }
 }
 
+/// Most noise-floor seeds a benchmark takes (`--noise-seeds`).
+pub const MAX_NOISE_SEEDS: u32 = 8;
+
+/// The reference and `noise_seeds` noise-floor runs (seeds 2, 3, ...) at the paper's step.
+/// With none, the noise floor is zero and the tolerance alone applies (for scenes whose
+/// reference is too expensive to repeat).
+pub fn reference_variants(noise_seeds: u32) -> Result<Vec<Variant>> {
+    if noise_seeds > MAX_NOISE_SEEDS {
+        bail!("--noise-seeds = {noise_seeds} is out of range: allowed 0 to {MAX_NOISE_SEEDS}");
+    }
+    let mut list = vec![Variant::new(
+        "reference",
+        &["run.dt_factor=1"],
+        Role::Reference,
+    )];
+    for seed in 2..noise_seeds + 2 {
+        list.push(Variant {
+            name: format!("seed{seed}"),
+            sets: vec!["run.dt_factor=1".into(), format!("run.seed={seed}")],
+            role: Role::NoiseFloor,
+        });
+    }
+    Ok(list)
+}
+
 /// The reference, two noise-floor seeds, and the default candidates: the time step from 2 to
 /// 16 times the paper's, the skin at the larger steps, and the ballistic cut-off.
 pub fn default_variants() -> Vec<Variant> {
     use Role::*;
-    vec![
-        Variant::new("reference", &["run.dt_factor=1"], Reference),
-        Variant::new("seed2", &["run.dt_factor=1", "run.seed=2"], NoiseFloor),
-        Variant::new("seed3", &["run.dt_factor=1", "run.seed=3"], NoiseFloor),
+    let mut list = reference_variants(2).expect("2 seeds are within range");
+    list.extend([
         Variant::new("dt2", &["run.dt_factor=2"], Candidate),
         Variant::new("dt4", &["run.dt_factor=4"], Candidate),
         Variant::new("dt6", &["run.dt_factor=6"], Candidate),
@@ -135,7 +158,8 @@ pub fn default_variants() -> Vec<Variant> {
             &["run.dt_factor=8", "run.ballistic_cutoff=true"],
             Candidate,
         ),
-    ]
+    ]);
+    list
 }
 
 /// One row of `accuracy.csv`.
@@ -757,6 +781,14 @@ mod tests {
         assert!(Variant::parse("x:").is_err());
         let d = default_variants();
         assert_eq!(d.iter().filter(|v| v.role == Role::Reference).count(), 1);
+        // Noise-floor seeds: 0 leaves the reference alone; names and seeds follow the count.
+        assert_eq!(reference_variants(0).expect("0 is allowed").len(), 1);
+        let r = reference_variants(3).expect("3 is allowed");
+        assert_eq!(r.len(), 4);
+        assert_eq!(r[3].name, "seed4");
+        assert!(r[3].sets.contains(&"run.seed=4".to_string()));
+        let e = reference_variants(MAX_NOISE_SEEDS + 1).expect_err("out of range");
+        assert!(e.to_string().contains("--noise-seeds"), "{e}");
     }
 
     #[test]

@@ -120,7 +120,7 @@ enum Command {
         sets: Vec<String>,
         /// A candidate NAME:key=value[;key=value...] (repeatable); replaces the default
         /// candidates (dt_factor 2..16, skin, ballistic cut-off). The reference and the
-        /// noise-floor seeds always run.
+        /// noise-floor seeds (`--noise-seeds`) always run.
         #[arg(long = "variant", value_name = "NAME:KEY=VALUE[;...]")]
         variants: Vec<String>,
         /// Worker threads per run (default: every core).
@@ -132,6 +132,10 @@ enum Command {
         /// Run store (default: runs/accuracy/<scene file stem>).
         #[arg(long)]
         store: Option<PathBuf>,
+        /// Noise-floor runs: other seeds at the paper's step (0 to 8). With 0 the tolerance
+        /// alone applies; for scenes whose reference takes hours.
+        #[arg(long, default_value_t = 2)]
+        noise_seeds: u32,
     },
 }
 
@@ -195,11 +199,17 @@ fn main() -> ExitCode {
             threads,
             out,
             store,
+            noise_seeds,
         } => (|| {
             use hvi_study::accuracy::{self, Role, Variant};
-            let mut list: Vec<Variant> = accuracy::default_variants();
-            if !variants.is_empty() {
-                list.retain(|v| v.role != Role::Candidate);
+            let mut list: Vec<Variant> = accuracy::reference_variants(noise_seeds)?;
+            if variants.is_empty() {
+                list.extend(
+                    accuracy::default_variants()
+                        .into_iter()
+                        .filter(|v| v.role == Role::Candidate),
+                );
+            } else {
                 for v in &variants {
                     list.push(Variant::parse(v)?);
                 }
