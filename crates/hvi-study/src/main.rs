@@ -201,14 +201,10 @@ fn main() -> ExitCode {
             store,
             noise_seeds,
         } => (|| {
-            use hvi_study::accuracy::{self, Role, Variant};
+            use hvi_study::accuracy::{self, Variant};
             let mut list: Vec<Variant> = accuracy::reference_variants(noise_seeds)?;
             if variants.is_empty() {
-                list.extend(
-                    accuracy::default_variants()
-                        .into_iter()
-                        .filter(|v| v.role == Role::Candidate),
-                );
+                list.extend(accuracy::default_candidates());
             } else {
                 for v in &variants {
                     list.push(Variant::parse(v)?);
