@@ -166,6 +166,12 @@ fn bad_inputs_name_the_key_and_the_allowed_range() {
         ),
         (&["--set", "run.end_time_s=-1"], "run.end_time_s"),
         (&["--set", "run.thermal_ratio=-0.1"], "run.thermal_ratio"),
+        (&["--set", "run.max_stride=0"], "run.max_stride"),
+        (&["--set", "run.max_stride=65"], "run.max_stride"),
+        (
+            &["--set", "run.stride_displacement_over_sigma=0.2"],
+            "run.stride_displacement_over_sigma",
+        ),
         (&["--set", "run.dt_s=fast"], "dt_s"),
         (&["--set", "material.contact=cubic"], "contact"),
         (&["--threads", "0"], "--threads"),

@@ -808,3 +808,70 @@ fn analysis_can_be_turned_off_and_bad_keys_are_named() {
     }
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// With the adaptive step, every sample still lands on its time: the front at both front
+/// times, the track at every `track_every` base steps, the energy at every `energy_every`.
+#[test]
+fn adaptive_run_samples_on_schedule() {
+    let out = std::env::temp_dir().join(format!("hvi-cloud-adaptive-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let o = Command::new(env!("CARGO_BIN_EXE_hvi-study"))
+        .arg("run")
+        .arg(repo().join("studies/scenes/default.toml"))
+        .arg("--out")
+        .arg(&out)
+        .args([
+            "--quiet",
+            "--set",
+            "resolution.particles=2000",
+            "--set",
+            "run.end_time_s=8e-6",
+            "--set",
+            "run.max_stride=8",
+            "--set",
+            "analysis.track_every=30",
+        ])
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
+            .expect("json");
+    let steps = summary["steps"].as_u64().expect("steps");
+    let base = summary["base_steps"].as_u64().expect("base steps");
+    let dt = summary["dt_s"].as_f64().expect("dt");
+    assert_eq!(base, summary["derived"]["steps"].as_u64().expect("planned"));
+    assert!(
+        steps < base,
+        "{steps} steps for {base} base steps: no stride"
+    );
+    assert!(summary["dt_largest_s"].as_f64().expect("largest") > 1.5 * dt);
+    let times = summary["cloud"]["front_velocity_times_s"]
+        .as_array()
+        .expect("front times");
+    for (t, want) in times.iter().zip([7e-6, 8e-6]) {
+        let t = t.as_f64().expect("reached");
+        assert!(
+            (t - want).abs() <= 0.5 * dt,
+            "front sampled at {t}, not {want}"
+        );
+    }
+    let track = std::fs::read_to_string(out.join("cloud_track.csv")).expect("track");
+    let rows: Vec<u64> = track
+        .lines()
+        .skip(1)
+        .map(|l| {
+            l.split(',')
+                .next()
+                .and_then(|s| s.parse().ok())
+                .expect("step")
+        })
+        .collect();
+    let expected: Vec<u64> = (0..=base / 30).map(|k| k * 30).chain([base]).collect();
+    let mut expected = expected;
+    expected.dedup();
+    assert_eq!(rows, expected);
+    let energy = std::fs::read_to_string(out.join("energy.csv")).expect("energy");
+    assert_eq!(energy.lines().count() - 1, base.div_ceil(200) as usize + 1);
+    let _ = std::fs::remove_dir_all(&out);
+}

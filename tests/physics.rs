@@ -210,6 +210,67 @@ fn blow_up_is_detected_with_a_diagnostic() {
     }
 }
 
+/// The adaptive step (`run.max_stride`): the hot impact is integrated at the base step (first
+/// contact, at v0, may take two); the expanding debris strides; every sample lands on its base step; momentum to round-off and the
+/// ledger within its bound; bit-identical at one and two threads.
+#[test]
+fn adaptive_step_strides_after_the_impact_and_keeps_the_invariants() {
+    let mut spec = sphere_scene(2000.0, 12e-6);
+    spec.run.max_stride = 16;
+    let go = || {
+        let mut sim = Simulation::new(spec.build().expect("valid")).expect("starts");
+        // Through the hot impact (neighbours closing at more than v0) the base step.
+        let hot = |tau: f64| ((sim.derived.contact_time_s + tau) / sim.dt) as u64;
+        let (hot_start, hot_end) = (hot(0.25e-6), hot(1e-6));
+        let every = spec.run.energy_every;
+        let mut samples = vec![sim.energy_initial];
+        while sim.step < sim.derived.steps {
+            let next = ((sim.step / every + 1) * every).min(sim.derived.steps);
+            let before = sim.step;
+            sim.step_until(next).expect("stable");
+            assert!(sim.step <= next, "stepped over a sample");
+            if (hot_start..hot_end).contains(&before) {
+                assert_eq!(sim.step - before, 1, "base step {before} of the hot impact");
+            }
+            if sim.step == next {
+                samples.push(sim.energy());
+            }
+        }
+        (sim, samples)
+    };
+    let (a, ea) = pool(1).install(go);
+    let (b, eb) = pool(2).install(go);
+    assert_eq!(a.step, a.derived.steps);
+    assert!(
+        a.largest_stride >= 3,
+        "the debris must stride: {}",
+        a.largest_stride
+    );
+    assert!(
+        (a.steps_taken as f64) < 0.8 * a.step as f64,
+        "{} steps for {} base steps",
+        a.steps_taken,
+        a.step
+    );
+    assert_eq!(
+        ea.len(),
+        (a.step.div_ceil(spec.run.energy_every) + 1) as usize
+    );
+    for (x, y) in ea.iter().zip(&eb) {
+        assert_eq!(x.total_j().to_bits(), y.total_j().to_bits());
+    }
+    assert_eq!(a.steps_taken, b.steps_taken);
+    let total_mass: f64 = a.particles.mass.iter().sum();
+    let dp = (a.momentum() - a.momentum_initial).length() / (total_mass * a.derived.v0_m_s);
+    assert!(dp < 1e-12, "momentum changed by {dp:e} of M v0");
+    let e0 = a.energy_initial.total_j();
+    let worst = ea
+        .iter()
+        .map(|e| ((e.total_j() - e0) / e0).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < ENERGY_DRIFT_BOUND, "ledger drifted by {worst:e}");
+}
+
 /// Free flight (the ballistic cut-off): fragments move rigidly, so kinetic and bond energy,
 /// momentum, bonds and every distance inside a fragment stay exactly as at the cut-off, while
 /// each fragment's centre of mass moves on at its velocity; and the gate refuses free flight

@@ -699,6 +699,26 @@ impl CloudObserver {
         &self.reference
     }
 
+    /// The first step after `step` at which something is due (a track sample or a front
+    /// time), if any: an adaptive step must land on it.
+    pub fn next_due(&self, step: u64) -> Option<u64> {
+        let track = (self.track_every > 0).then(|| {
+            (step / self.track_every + 1)
+                .saturating_mul(self.track_every)
+                .min(self.last_step.max(step + 1))
+        });
+        let front = self
+            .front_steps
+            .iter()
+            .copied()
+            .filter(|&s| self.measure_cloud && s > step)
+            .min();
+        match (track, front) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
     fn track_due(&self, step: u64) -> bool {
         step.checked_rem(self.track_every) == Some(0)
             || (self.track_every > 0 && step == self.last_step)

@@ -166,11 +166,48 @@ impl Interaction {
     pub fn contact_stiffness_at_r_eq(&self) -> f64 {
         18.0 * self.c_eps / self.r_eq2
     }
+
+    /// The stiffest pair law at squared distance `r2` (N/m): the contact repulsion's
+    /// d^2 phi / dr^2 = c eps (156 s^12 / r^14 - 42 s^6 / r^8) at min(r, r_eq), or kappa if
+    /// larger. The adaptive step resolves the closest pair with it.
+    pub fn stiffness_at(&self, r2: f64) -> f64 {
+        let r2 = r2.min(self.r_eq2);
+        let s6 = (self.sigma2 / r2).powi(3);
+        let contact = self.c_eps * (156.0 * s6 * s6 - 42.0 * s6) / r2;
+        contact.max(self.kappa_n_m)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stiffness_is_the_second_derivative() {
+        for form in [ContactForm::Printed, ContactForm::Wca] {
+            let ia = unit(form);
+            assert!(
+                (ia.stiffness_at(ia.r_eq2()) - ia.contact_stiffness_at_r_eq().max(ia.kappa_n_m))
+                    .abs()
+                    < 1e-9
+            );
+            for r in [0.8, 0.9, 1.0, 1.1] {
+                let h = 1e-5;
+                let e = |x: f64| ia.contact_energy(x * x);
+                let fd = (e(r + h) - 2.0 * e(r) + e(r - h)) / (h * h);
+                let k = ia.stiffness_at(r * r);
+                assert!(
+                    (k - fd.max(ia.kappa_n_m)).abs() < 1e-4 * k,
+                    "r {r}: {k} vs {fd}"
+                );
+            }
+            // Beyond r_eq the contact law is flat: its value at r_eq (or kappa) applies.
+            assert_eq!(
+                ia.stiffness_at(4.0 * ia.r_eq2()),
+                ia.stiffness_at(ia.r_eq2())
+            );
+        }
+    }
 
     fn unit(form: ContactForm) -> Interaction {
         // sigma = 1, eps = 1, kappa = 10, rcut = 1.5 in any consistent units.

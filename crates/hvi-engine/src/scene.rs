@@ -246,7 +246,22 @@ pub struct RunSettings {
     /// sigma (0: the classic rule, rebuild once any particle moved half the skin). Exact for
     /// any value; larger blocks let a fast cloud go longer between builds (`neighbour`).
     pub frame_block_over_sigma: f64,
-    /// Steps between energy-ledger samples.
+    /// Adaptive step: the largest multiple of the base step (`dt_s`, the step the impact is
+    /// resolved with) a step may take, a whole number in [1, 64]; 1 is a fixed step. The
+    /// criterion is in [`crate::sim`]: a step of m base steps is taken only while the bound on
+    /// the relative speed of any two neighbours, times m dt, stays below
+    /// `stride_displacement_over_sigma` sigma, and the stiffest active pair is resolved.
+    /// (Omitted from the scene as written in outputs when 1, so fixed-step runs keep the
+    /// fingerprints they had before the adaptive step existed; the summary's `steps`,
+    /// `base_steps` and `dt_largest_s` say what the run did.)
+    #[serde(skip_serializing_if = "is_fixed_stride")]
+    pub max_stride: u64,
+    /// The adaptive step's displacement bound: listed pairs close in by at most this fraction
+    /// of sigma per step, in (0, [`MAX_STEP_DISPLACEMENT_OVER_SIGMA`]]; default
+    /// [`DEFAULT_STRIDE_DISPLACEMENT_OVER_SIGMA`].
+    #[serde(skip_serializing_if = "is_default_stride_displacement")]
+    pub stride_displacement_over_sigma: f64,
+    /// Base steps between energy-ledger samples (an adaptive step never steps over one).
     pub energy_every: u64,
     /// Abort when |E_total - E_0| / E_0 exceeds this (a blow-up guard, not the accuracy bound).
     pub max_energy_drift: f64,
@@ -274,6 +289,8 @@ impl Default for RunSettings {
             thermal_ratio: 1e-3,
             skin_over_sigma: 0.3,
             frame_block_over_sigma: 8.0,
+            max_stride: DEFAULT_MAX_STRIDE,
+            stride_displacement_over_sigma: DEFAULT_STRIDE_DISPLACEMENT_OVER_SIGMA,
             energy_every: 200,
             max_energy_drift: 0.05,
             min_distance_over_sigma: 0.35,
@@ -466,9 +483,30 @@ pub const MAX_STEP_OVER_SQRT_M_K: f64 = 0.5;
 /// (reports/accuracy): on the calibration scene at 1e5 particles, 6x keeps R, va/v0 and F
 /// within 1 % of the mean at the paper's step (0.5, 0.8, 0.4 %; ledger 4e-5), while 8x misses
 /// by a hair (1.07 % on R, 1.08 % on va/v0); at 3e4 particles both were within the larger
-/// seed-to-seed spread. The automatic step's cap (AUTO_STEP_SAFETY of the spring's bound) is 8x
-/// at the paper's kappa.
+/// seed-to-seed spread. The automatic step's cap (AUTO_STEP_SAFETY of the bound) is about 8x at
+/// 6.7 km/s, set by the displacement bound; the spring's bound is far larger (about 450x the
+/// paper's step at the paper's kappa).
 pub const DEFAULT_DT_FACTOR: f64 = 6.0;
+fn is_fixed_stride(m: &u64) -> bool {
+    *m == 1
+}
+
+fn is_default_stride_displacement(c: &f64) -> bool {
+    *c == DEFAULT_STRIDE_DISPLACEMENT_OVER_SIGMA
+}
+
+/// The adaptive step's default displacement bound for listed pairs: the stability bound
+/// itself. Chosen by `hvi-study accuracy` (reports/accuracy/calibration-n1e5): on the
+/// calibration scene at 1e5 particles, base step 6x the paper's, R, va/v0 and F within 0.6 %
+/// of the mean at the paper's step, 1.6x faster than the fixed 6x step; half of it (0.025, the
+/// automatic step's own margin, which the base step gives the fastest pairs of the impact)
+/// was no more accurate within the seed-to-seed noise and 1.2x slower.
+pub const DEFAULT_STRIDE_DISPLACEMENT_OVER_SIGMA: f64 = MAX_STEP_DISPLACEMENT_OVER_SIGMA;
+/// The default `run.max_stride`: high enough never to bind on the paper's scenes (the
+/// bounds keep the stride at 3-6 in the hot debris cloud).
+pub const DEFAULT_MAX_STRIDE: u64 = 16;
+/// The largest `run.max_stride`.
+pub const MAX_STRIDE: u64 = 64;
 /// The automatic step is at most this fraction of that bound: a margin of two on every scene,
 /// whatever its velocity or stiffness (the stability map in `reports/stability` shows the
 /// bound itself is stable).
@@ -689,6 +727,21 @@ impl SceneSpec {
                 "0 (off) or a number in [2, 1000]",
             ));
         }
+        if !(1..=MAX_STRIDE).contains(&run.max_stride) {
+            return Err(EngineError::invalid(
+                "run.max_stride",
+                run.max_stride.to_string(),
+                format!("a whole number from 1 to {MAX_STRIDE} (1: a fixed step)"),
+            ));
+        }
+        check_range(
+            "run.stride_displacement_over_sigma",
+            run.stride_displacement_over_sigma,
+            0.0,
+            true,
+            MAX_STEP_DISPLACEMENT_OVER_SIGMA,
+            false,
+        )?;
         if run.energy_every == 0 {
             return Err(EngineError::invalid(
                 "run.energy_every",

@@ -15,7 +15,10 @@ use serde::Serialize;
 use crate::error::{EngineError, Result};
 use crate::neighbour::NeighbourList;
 use crate::potential::Interaction;
-use crate::scene::{Derived, RunSettings, Setup};
+use crate::scene::{
+    Derived, RunSettings, Setup, AUTO_STEP_SAFETY, MAX_STEP_DISPLACEMENT_OVER_SIGMA,
+    MAX_STEP_OVER_SQRT_M_K,
+};
 use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND, OWNED_BONDS};
 
 /// Particles per work unit and per partial sum.
@@ -25,6 +28,9 @@ pub const CHUNK: usize = 1024;
 /// its relative drift stays below this through a run at the default step. Tested in
 /// `tests/physics.rs` and applied by `hvi-study accuracy` to every candidate setting.
 pub const LEDGER_DRIFT_BOUND: f64 = 1e-3;
+/// The adaptive step raises its stride by one base step only after the criterion has
+/// allowed the larger stride for this many consecutive steps; it lowers it at once.
+pub const STRIDE_RAISE_AFTER: u32 = 20;
 /// Owned bonds per vectorised block of the bond kernel.
 const BLOCK_BONDS: usize = 192;
 
@@ -85,10 +91,25 @@ pub struct Simulation {
     since_build_s: f64,
     min_distance2: f64,
     max_energy_drift: f64,
-    /// Current step number.
+    /// Time reached, in base steps (`dt`): the clock every schedule (samples, renders, the
+    /// end) is kept in. An adaptive step advances it by its stride.
     pub step: u64,
-    /// Time step, s.
+    /// The base time step, s: the step the impact is resolved with.
     pub dt: f64,
+    /// Steps actually taken (each costs one force evaluation); equals `step` at a fixed step.
+    pub steps_taken: u64,
+    /// Base steps the next step takes (1 at a fixed step).
+    pub stride: u64,
+    /// The largest stride taken so far.
+    pub largest_stride: u64,
+    max_stride: u64,
+    stride_disp_m: f64,
+    stride_calm: u32,
+    min_mass: f64,
+    last_min_r2: f64,
+    speed_partials: Vec<[f64; 2]>,
+    vel_at_build: Vec<DVec3>,
+    pair_speed_at_build: f64,
     /// Bonds at t = 0.
     pub bonds_initial: u64,
     /// Bonds broken so far.
@@ -149,6 +170,17 @@ impl Simulation {
             max_energy_drift: run.max_energy_drift,
             step: 0,
             dt: derived.dt_s,
+            steps_taken: 0,
+            stride: 1,
+            largest_stride: 1,
+            max_stride: run.max_stride.max(1),
+            stride_disp_m: run.stride_displacement_over_sigma * derived.sigma_m,
+            stride_calm: 0,
+            min_mass: 0.0,
+            last_min_r2: f64::INFINITY,
+            speed_partials: vec![[0.0; 2]; nchunks],
+            vel_at_build: Vec::new(),
+            pair_speed_at_build: 0.0,
             bonds_initial,
             bonds_broken: 0,
             coast_velocity: Vec::new(),
@@ -163,8 +195,13 @@ impl Simulation {
             contact_min_r2: vec![f64::INFINITY; nchunks],
             disp_partials: vec![0.0; nchunks],
         };
+        sim.min_mass = sim
+            .particles
+            .mass
+            .iter()
+            .fold(f64::INFINITY, |a, &b| a.min(b));
         sim.rebuild();
-        sim.compute_forces(false)?;
+        sim.compute_forces(0.0)?;
         sim.energy_initial = sim.energy();
         sim.momentum_initial = sim.momentum();
         Ok(sim)
@@ -196,15 +233,50 @@ impl Simulation {
         self.neighbours
             .build(&mut self.particles, radius, self.block_m);
         self.since_build_s = 0.0;
+        if self.max_stride > 1 {
+            self.measure_pair_speed();
+        }
         self.timing.neighbour += t.elapsed();
+    }
+
+    /// For the adaptive step: the velocities now, and the largest relative speed of any two
+    /// particles that can interact until the next build (neighbour-list pairs and bond
+    /// partners).
+    fn measure_pair_speed(&mut self) {
+        let p = &self.particles;
+        let nl = &self.neighbours;
+        let radius2 = nl.radius * nl.radius;
+        self.vel_at_build.clear();
+        self.vel_at_build.par_extend(p.vel.par_iter().copied());
+        self.pair_speed_at_build = (0..p.len())
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .map(|i| {
+                let vi = p.vel[i];
+                let listed = nl
+                    .of(i)
+                    .iter()
+                    .map(|&j| (vi - p.vel[j as usize]).length_squared());
+                // Bond partners within the list's radius: the steep law acts on them when
+                // compressed. Stretched ones feel only the soft spring (the stiffness bound).
+                let bonded = p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE]
+                    .iter()
+                    .filter(|&&s| s != NO_BOND)
+                    .map(|&s| (s & INDEX_MASK) as usize)
+                    .filter(|&j| (p.pos[i] - p.pos[j]).length_squared() < radius2)
+                    .map(|j| (vi - p.vel[j]).length_squared());
+                listed.chain(bonded).fold(0.0f64, f64::max)
+            })
+            .reduce(|| 0.0, f64::max)
+            .sqrt();
     }
 
     /// Forces into `particles.force`: first every owned bond once (spring, or repulsion when
     /// compressed; breaks booked here), then per particle the contact repulsion over the
     /// neighbour list plus the bond forces gathered from its owned and mirror slots.
     ///
-    /// With `kick`, also applies the second half-kick of velocity Verlet.
-    fn compute_forces(&mut self, kick: bool) -> Result<()> {
+    /// Also applies the second half-kick of velocity Verlet, `half_dt` (0: none).
+    fn compute_forces(&mut self, half_dt: f64) -> Result<()> {
         let t0 = Instant::now();
         let ia = self.interaction;
         let r_eq2 = ia.r_eq2();
@@ -281,7 +353,6 @@ impl Simulation {
         let fr_bond = &self.bond_force_over_r;
         let bonds = &p.bonds;
         let inv_mass = &p.inv_mass;
-        let half_dt = if kick { 0.5 * self.dt } else { 0.0 };
         p.force
             .par_chunks_mut(CHUNK)
             .zip(p.vel.par_chunks_mut(CHUNK))
@@ -327,6 +398,7 @@ impl Simulation {
             min_r2 = min_r2.min(b.min_r2).min(c);
         }
         self.timing.contact += t1.elapsed();
+        self.last_min_r2 = min_r2;
         if min_r2 < self.min_distance2 {
             return Err(self.unstable(format!(
                 "two particles {:.3} sigma apart (limit run.min_distance_over_sigma = {:.3}); \
@@ -346,32 +418,83 @@ impl Simulation {
         }
     }
 
-    /// Advances one velocity-Verlet step (or one free-flight step after
+    /// Advances one velocity-Verlet step of the current stride (or one free-flight step after
     /// [`Self::start_coasting`]).
     pub fn step_once(&mut self) -> Result<()> {
+        self.step_until(u64::MAX)
+    }
+
+    /// Advances one step, of the current stride but never past base step `limit` (a sample,
+    /// a render, the end): `min(stride, limit - step)` base steps. In free flight (after
+    /// [`Self::start_coasting`]) the step goes to `limit` at once: rigid motion is exact for
+    /// any step.
+    ///
+    /// The adaptive step (`run.max_stride` > 1). The base step `dt` resolves the impact, and
+    /// the bound on it is that a particle at v0 moves at most a small fraction of sigma per
+    /// step. What the bound protects against is two neighbours closing in too far within one
+    /// step, so the stride, the multiple of `dt` taken, applies the same bound to the speed at
+    /// which neighbours actually close in. After each step:
+    /// - pairs that can interact until the next build (the neighbour list's pairs and bond
+    ///   partners): u = u_b + 2 max_i |v_i - v_i(b)| bounds their relative speed, where u_b is
+    ///   the largest relative speed among them measured at the last build and v_i(b) each
+    ///   particle's velocity then. The displacement bound: u m dt <=
+    ///   `run.stride_displacement_over_sigma` sigma;
+    /// - pairs not yet listed close in at most at u' = 2 max_i |v_i - f_i| + df (f_i the
+    ///   frame velocity of the particle's block, df the largest difference between adjacent
+    ///   blocks' frames, see [`crate::neighbour`]); the list's rebuild rule keeps them out of
+    ///   contact until listed, so they enter it at most one step's closing deep: u' m dt <=
+    ///   [`MAX_STEP_DISPLACEMENT_OVER_SIGMA`] sigma, the stability bound (this holds the stride
+    ///   down before first contact, when the impactor closes in at v0);
+    /// - the stiffness bound: m dt <= [`AUTO_STEP_SAFETY`] x [`MAX_STEP_OVER_SQRT_M_K`] x
+    ///   sqrt(m_min / k), k the stiffest pair law at the closest pair now
+    ///   ([`Interaction::stiffness_at`]);
+    /// - m is the largest whole number, at most `run.max_stride`, within the three bounds. It
+    ///   drops at once when the bounds fall below it and rises by one only after they have
+    ///   allowed more for [`STRIDE_RAISE_AFTER`] consecutive steps, so the step changes
+    ///   rarely.
+    ///
+    /// At first contact the leading layers close at v0; once the impact is hot, neighbours
+    /// close at up to 1.4 v0 and more, and at the default bounds and base step the stride is 1:
+    /// the hot impact is integrated as at the fixed step (the first contact may take two base
+    /// steps). In the expanding cloud neighbours close at a fraction of v0 and the stride
+    /// grows. Velocity Verlet is synchronised at the end of every step, so changing the step
+    /// between steps needs nothing else.
+    pub fn step_until(&mut self, limit: u64) -> Result<()> {
+        if limit <= self.step {
+            return Ok(());
+        }
         if self.coast_from_step.is_some() {
-            self.coast_step();
+            self.coast_step(limit - self.step);
             return Ok(());
         }
         let t0 = Instant::now();
-        let dt = self.dt;
+        let m = self.stride.min(limit - self.step);
+        let dt = self.dt * m as f64;
         let half = 0.5 * dt;
         let p = &mut self.particles;
         let built = &self.neighbours.pos_at_build;
         let frame = &self.neighbours.frame_vel;
         let since = self.since_build_s + dt;
+        let adaptive = self.max_stride > 1;
+        let vel_built = &self.vel_at_build;
         p.pos
             .par_chunks_mut(CHUNK)
             .zip(p.vel.par_chunks_mut(CHUNK))
             .zip(self.disp_partials.par_iter_mut())
+            .zip(self.speed_partials.par_iter_mut())
             .enumerate()
-            .for_each(|(c, ((pos, vel), out))| {
+            .for_each(|(c, (((pos, vel), out), speed_out))| {
                 let base = c * CHUNK;
                 let mut max_d2: f64 = 0.0;
+                let (mut max_e2, mut max_w2): (f64, f64) = (0.0, 0.0);
                 for k in 0..pos.len() {
                     let i = base + k;
                     let v = vel[k] + p.force[i] * (half * p.inv_mass[i]);
                     vel[k] = v;
+                    if adaptive {
+                        max_e2 = max_e2.max((v - frame[i]).length_squared());
+                        max_w2 = max_w2.max((v - vel_built[i]).length_squared());
+                    }
                     let x = pos[k] + v * dt;
                     pos[k] = x;
                     // Displacement relative to the particle's frame (see `neighbour`).
@@ -386,10 +509,17 @@ impl Simulation {
                     };
                 }
                 *out = max_d2;
+                *speed_out = [max_e2, max_w2];
             });
         let max_d2 = self.disp_partials.iter().fold(0.0f64, |a, &b| a.max(b));
+        let [max_e2, max_w2] = self
+            .speed_partials
+            .iter()
+            .fold([0.0f64; 2], |a, b| [a[0].max(b[0]), a[1].max(b[1])]);
         self.timing.integrate += t0.elapsed();
-        self.step += 1;
+        self.step += m;
+        self.steps_taken += 1;
+        self.largest_stride = self.largest_stride.max(m);
         self.since_build_s = since;
         if !max_d2.is_finite() {
             return Err(self.unstable("non-finite or runaway particle position".into()));
@@ -406,13 +536,51 @@ impl Simulation {
                 )));
             }
         }
-        self.compute_forces(true)
+        self.compute_forces(half)?;
+        if adaptive {
+            self.adapt_stride(max_e2.sqrt(), max_w2.sqrt());
+        }
+        Ok(())
     }
 
-    /// Advances `n` steps, sampling nothing.
+    /// The stride for the next step, from the speed bound and the closest pair (see
+    /// [`Self::step_until`]).
+    fn adapt_stride(&mut self, max_e: f64, max_w: f64) {
+        // Pairs that can interact (listed or bonded): closing speed at most u.
+        let u = self.pair_speed_at_build + 2.0 * max_w;
+        let by_speed = self.stride_disp_m / (u * self.dt);
+        // Pairs not yet listed: they enter contact at most one step's closing deep.
+        let u_new = 2.0 * max_e + self.neighbours.near_dv;
+        let by_new = MAX_STEP_DISPLACEMENT_OVER_SIGMA * self.derived.sigma_m / (u_new * self.dt);
+        let k = self.interaction.stiffness_at(self.last_min_r2);
+        let by_stiffness =
+            AUTO_STEP_SAFETY * MAX_STEP_OVER_SQRT_M_K * (self.min_mass / k).sqrt() / self.dt;
+        let allowed = by_speed.min(by_new).min(by_stiffness);
+        // NaN (nothing moves) and infinity allow the most.
+        let target = if allowed >= self.max_stride as f64 || allowed.is_nan() {
+            self.max_stride
+        } else {
+            (allowed.floor() as u64).max(1)
+        };
+        if target < self.stride {
+            self.stride = target;
+            self.stride_calm = 0;
+        } else if target > self.stride {
+            self.stride_calm += 1;
+            if self.stride_calm >= STRIDE_RAISE_AFTER {
+                self.stride += 1;
+                self.stride_calm = 0;
+            }
+        } else {
+            self.stride_calm = 0;
+        }
+    }
+
+    /// Advances `n` base steps (fewer steps when the adaptive step strides), sampling nothing.
     pub fn advance(&mut self, n: u64) -> Result<()> {
-        for _ in 0..n {
-            self.step_once()?;
+        let end = self.step + n;
+        while self.step < end {
+            self.step_until(end)?;
         }
         Ok(())
     }
@@ -527,9 +695,9 @@ impl Simulation {
         self.coast_from_step
     }
 
-    fn coast_step(&mut self) {
+    fn coast_step(&mut self, base_steps: u64) {
         let t = Instant::now();
-        let dt = self.dt;
+        let dt = self.dt * base_steps as f64;
         self.particles
             .pos
             .par_chunks_mut(CHUNK)
@@ -539,7 +707,8 @@ impl Simulation {
                     *x += *v * dt;
                 }
             });
-        self.step += 1;
+        self.step += base_steps;
+        self.steps_taken += 1;
         self.timing.integrate += t.elapsed();
     }
 

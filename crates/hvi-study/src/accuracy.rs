@@ -118,43 +118,79 @@ pub fn reference_variants(noise_seeds: u32) -> Result<Vec<Variant>> {
     }
     let mut list = vec![Variant::new(
         "reference",
-        &["run.dt_factor=1"],
+        &["run.dt_factor=1", "run.max_stride=1"],
         Role::Reference,
     )];
     for seed in 2..noise_seeds + 2 {
         list.push(Variant {
             name: format!("seed{seed}"),
-            sets: vec!["run.dt_factor=1".into(), format!("run.seed={seed}")],
+            sets: vec![
+                "run.dt_factor=1".into(),
+                "run.max_stride=1".into(),
+                format!("run.seed={seed}"),
+            ],
             role: Role::NoiseFloor,
         });
     }
     Ok(list)
 }
 
-/// The default candidates (after [`reference_variants`]): the time step from 2 to 16 times
-/// the paper's, the skin at the larger steps, and the ballistic cut-off.
+/// The default candidates (after [`reference_variants`]): fixed steps from 2 to 16 times the
+/// paper's, the skin at the larger steps and the ballistic cut-off (all at a fixed step), and
+/// the adaptive step (`run.max_stride`) on base steps of 4 and 6 times the paper's, at its
+/// default displacement bound (0.05 sigma) and at half that.
 pub fn default_candidates() -> Vec<Variant> {
     use Role::*;
+    const FIXED: &str = "run.max_stride=1";
+    let fixed = |name: &str, sets: &[&str]| {
+        let mut all = sets.to_vec();
+        all.push(FIXED);
+        Variant::new(name, &all, Candidate)
+    };
     vec![
-        Variant::new("dt2", &["run.dt_factor=2"], Candidate),
-        Variant::new("dt4", &["run.dt_factor=4"], Candidate),
-        Variant::new("dt6", &["run.dt_factor=6"], Candidate),
-        Variant::new("dt8", &["run.dt_factor=8"], Candidate),
-        Variant::new("dt12", &["run.dt_factor=12"], Candidate),
-        Variant::new("dt16", &["run.dt_factor=16"], Candidate),
-        Variant::new(
+        fixed("dt2", &["run.dt_factor=2"]),
+        fixed("dt4", &["run.dt_factor=4"]),
+        fixed("dt6", &["run.dt_factor=6"]),
+        fixed("dt8", &["run.dt_factor=8"]),
+        fixed("dt12", &["run.dt_factor=12"]),
+        fixed("dt16", &["run.dt_factor=16"]),
+        fixed(
             "dt8-skin0.5",
             &["run.dt_factor=8", "run.skin_over_sigma=0.5"],
-            Candidate,
         ),
-        Variant::new(
+        fixed(
             "dt8-skin0.2",
             &["run.dt_factor=8", "run.skin_over_sigma=0.2"],
+        ),
+        fixed(
+            "dt8-cutoff",
+            &["run.dt_factor=8", "run.ballistic_cutoff=true"],
+        ),
+        Variant::new(
+            "dt4-adaptive",
+            &[
+                "run.dt_factor=4",
+                "run.max_stride=16",
+                "run.stride_displacement_over_sigma=0.05",
+            ],
             Candidate,
         ),
         Variant::new(
-            "dt8-cutoff",
-            &["run.dt_factor=8", "run.ballistic_cutoff=true"],
+            "dt6-adaptive",
+            &[
+                "run.dt_factor=6",
+                "run.max_stride=16",
+                "run.stride_displacement_over_sigma=0.05",
+            ],
+            Candidate,
+        ),
+        Variant::new(
+            "dt6-adaptive-c0.025",
+            &[
+                "run.dt_factor=6",
+                "run.max_stride=16",
+                "run.stride_displacement_over_sigma=0.025",
+            ],
             Candidate,
         ),
     ]

@@ -56,6 +56,8 @@ pub struct EnergyRow {
     pub total_j: f64,
     /// Bonds broken so far.
     pub bonds_broken: u64,
+    /// The step in use, s (the base step times the adaptive stride).
+    pub dt_s: f64,
 }
 
 /// The energy block of `summary.json`.
@@ -132,10 +134,14 @@ pub struct Summary {
     pub bonds_initial: u64,
     /// Bonds broken by the end.
     pub bonds_broken: u64,
-    /// Steps taken.
+    /// Steps taken (force evaluations).
     pub steps: u64,
-    /// Time step, s.
+    /// Time reached in base steps (`dt_s`); more than `steps` when the adaptive step strode.
+    pub base_steps: u64,
+    /// Base time step, s (the step of the impact; the adaptive step takes multiples of it).
     pub dt_s: f64,
+    /// Largest step taken, s.
+    pub dt_largest_s: f64,
     /// Simulated time reached, s.
     pub time_s: f64,
     /// Time since first contact reached, s.
@@ -192,6 +198,7 @@ fn row(sim: &Simulation, e: &Energy) -> EnergyRow {
         broken_j: e.broken_j,
         total_j: e.total_j(),
         bonds_broken: sim.bonds_broken,
+        dt_s: sim.dt * sim.stride as f64,
     }
 }
 
@@ -350,8 +357,22 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         write_xyz(&opts.out_dir.join(format!("dump_{:09}.xyz", 0)), &sim)?;
         output_time += t.elapsed();
     }
+    let next_multiple = |s: u64, every: u64| (s / every + 1).saturating_mul(every);
+    let mut next_thermo = thermo_every;
     while sim.step < d.steps {
-        if let Err(e) = sim.step_once() {
+        // The next base step at which something is due: an adaptive step lands on it.
+        let s = sim.step;
+        let mut next = d.steps.min(next_multiple(s, energy_every));
+        if dump_every > 0 {
+            next = next.min(next_multiple(s, dump_every));
+        }
+        if let Some(due) = observer.as_ref().and_then(|o| o.next_due(s)) {
+            next = next.min(due);
+        }
+        if let Some(&(r, _)) = render_steps.iter().find(|&&(r, _)| r > s) {
+            next = next.min(r);
+        }
+        if let Err(e) = sim.step_until(next) {
             failure = Some(e);
             break;
         }
@@ -407,11 +428,12 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
             write_xyz(&opts.out_dir.join(format!("dump_{s:09}.xyz")), &sim)?;
             output_time += t.elapsed();
         }
-        if opts.progress && (s % thermo_every == 0 || s == d.steps) {
+        if opts.progress && (s >= next_thermo || s == d.steps) {
+            next_thermo = next_multiple(s, thermo_every);
             let t = Instant::now();
             let el = step_wall0.elapsed().as_secs_f64();
-            let rate = n as f64 * s as f64 / el.max(1e-9);
-            let eta = (d.steps - s) as f64 * n as f64 / rate.max(1e-9);
+            let rate = n as f64 * sim.steps_taken as f64 / el.max(1e-9);
+            let eta = (d.steps - s) as f64 * el / (s as f64).max(1.0);
             let msg = format!(
                 "tau {:7.3} us  {:6.2} M particle-steps/s  bonds broken {}  ",
                 sim.tau_s() * 1e6,
@@ -536,13 +558,15 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         particles_target: n - n_imp,
         bonds_initial: sim.bonds_initial,
         bonds_broken: sim.bonds_broken,
-        steps: sim.step,
+        steps: sim.steps_taken,
+        base_steps: sim.step,
         dt_s: d.dt_s,
+        dt_largest_s: sim.largest_stride as f64 * d.dt_s,
         time_s: sim.time_s(),
         tau_s: sim.tau_s(),
         sigma_m: d.sigma_m,
         wall_seconds: total.as_secs_f64(),
-        particle_steps_per_second: n as f64 * sim.step as f64 / step_wall.max(1e-12),
+        particle_steps_per_second: n as f64 * sim.steps_taken as f64 / step_wall.max(1e-12),
         threads: rayon::current_num_threads(),
         neighbour_builds: sim.neighbour_builds(),
         ballistic_cutoff_tau_s: sim
@@ -576,8 +600,11 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         let mut err = std::io::stderr().lock();
         let _ = writeln!(
             err,
-            "{} steps, {} particles in {:.2} s: {:.3e} particle-steps/s; bonds broken {} of {}; energy drift {:.2e}; {} neighbour builds",
+            "{} steps ({} of {:.3e} s, largest {:.3e} s), {} particles in {:.2} s: {:.3e} particle-steps/s; bonds broken {} of {}; energy drift {:.2e}; {} neighbour builds",
+            sim.steps_taken,
             sim.step,
+            d.dt_s,
+            summary.dt_largest_s,
             n,
             summary.wall_seconds,
             summary.particle_steps_per_second,
