@@ -3,7 +3,7 @@
 //! ```toml
 //! [estimate]
 //! tier = "paper"                       # the tier whose wall time every report estimates
-//! particle_steps_per_second = 2.4e7    # measured throughput on the machine below
+//! particle_steps_per_second = 2.44e7   # particles x base steps per second, measured
 //! cores = 2
 //!
 //! [tiers.quick]
@@ -109,7 +109,9 @@ pub struct TierConfig {
 pub struct EstimateConfig {
     /// The tier every report estimates (besides measuring its own).
     pub tier: Option<String>,
-    /// Engine throughput on `cores` cores, particle-steps per second.
+    /// Engine throughput on `cores` cores over a whole run: particles x base steps per second
+    /// (with the adaptive step a run takes fewer steps than base steps; the estimate counts
+    /// each scene's base steps, which the engine knows before running).
     pub particle_steps_per_second: f64,
     /// The cores that throughput was measured on.
     pub cores: usize,

@@ -298,8 +298,9 @@ pub fn build_plans(config: &Config, tier_name: &str) -> Result<Plans> {
     })
 }
 
-/// The cost of a tier: per stage, the sum over runs of particles x steps (each scene built by
-/// the engine, so the time step is the one it would run with) over the throughput.
+/// The cost of a tier: per stage, the sum over runs of particles x base steps (each scene
+/// built by the engine, so the base step is the one it would run with) over the throughput
+/// in the same unit (`[estimate]`, measured with the adaptive step).
 pub fn estimate(plans: &Plans, tier: &str, cfg: &EstimateConfig) -> Result<Estimate> {
     let mut rows = Vec::new();
     for (stage, figures, plan) in plans.stages() {
@@ -416,14 +417,14 @@ fn pending_figures() -> Vec<Figure> {
 
 fn print_estimate(e: &Estimate) {
     println!(
-        "tier `{}` on {} cores at {} particle-steps/s:",
+        "tier `{}` on {} cores at {} particles x base steps per second:",
         e.tier,
         e.cores,
         report::fmt_num(e.particle_steps_per_second)
     );
     for r in &e.rows {
         println!(
-            "  {:<15} Fig. {:<10} {:>3} runs, {:>7}-{:<7} particles, {:>10} particle-steps, {}",
+            "  {:<15} Fig. {:<10} {:>3} runs, {:>7}-{:<7} particles, {:>10} particles x base steps, {}",
             r.stage,
             r.figures,
             r.runs,
@@ -434,7 +435,7 @@ fn print_estimate(e: &Estimate) {
         );
     }
     println!(
-        "  total: {} particle-steps, expected {}",
+        "  total: {} particles x base steps, expected {}",
         report::fmt_num(e.particle_steps()),
         fmt_duration(e.seconds())
     );

@@ -427,14 +427,15 @@ impl Reproduction {
             );
             let _ = writeln!(
                 s,
-                "From every planned run's particle count and number of steps (the scene's own time \
-                 step, as the engine chooses it) at {} particle-steps/s ({}).\n",
+                "From every planned run's particle count and number of base steps (the scene's own \
+                 base step, as the engine chooses it; the adaptive step takes fewer, longer steps) \
+                 at {} particles x base steps per second ({}).\n",
                 fmt_num(e.particle_steps_per_second),
                 e.source
             );
             let _ = writeln!(
                 s,
-                "| stage | figures | runs | particles | particle-steps | expected |\n|---|---|---|---|---|---|"
+                "| stage | figures | runs | particles | particles x base steps | expected |\n|---|---|---|---|---|---|"
             );
             for r in &e.rows {
                 let particles = if r.particles.0 == r.particles.1 {
