@@ -327,6 +327,10 @@ fn free_flight_moves_fragments_rigidly_and_keeps_the_ledger() {
             "{before} vs {after}"
         );
     }
+    // One free-flight step covers one stride of base steps, as a computed step would.
+    let before = sim.step;
+    sim.step_once().expect("free flight");
+    assert_eq!(sim.step - before, sim.stride);
 }
 
 /// The comoving rebuild rule (`neighbour`) never misses a contact: through an impact at 8x the

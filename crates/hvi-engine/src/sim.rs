@@ -418,10 +418,10 @@ impl Simulation {
         }
     }
 
-    /// Advances one velocity-Verlet step of the current stride (or one free-flight step after
-    /// [`Self::start_coasting`]).
+    /// Advances one velocity-Verlet step of the current stride (or, after
+    /// [`Self::start_coasting`], free flight over as many base steps).
     pub fn step_once(&mut self) -> Result<()> {
-        self.step_until(u64::MAX)
+        self.step_until(self.step.saturating_add(self.stride))
     }
 
     /// Advances one step, of the current stride but never past base step `limit` (a sample,
