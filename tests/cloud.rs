@@ -668,6 +668,24 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
+/// `hvi-study run` on the default scene into `out`, with `args` after it.
+fn run_default_scene(out: &Path, args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_hvi-study"))
+        .arg("run")
+        .arg(repo().join("studies/scenes/default.toml"))
+        .arg("--out")
+        .arg(out)
+        .args(args)
+        .output()
+        .expect("runs")
+}
+
+/// The `summary.json` a run wrote into `out`.
+fn read_summary(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
+        .expect("json")
+}
+
 fn png_size(path: &Path) -> (u32, u32) {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     assert_eq!(
@@ -684,12 +702,9 @@ fn png_size(path: &Path) -> (u32, u32) {
 fn run_with_render_writes_cloud_files_and_pictures() {
     let out = std::env::temp_dir().join(format!("hvi-cloud-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
-    let o = Command::new(env!("CARGO_BIN_EXE_hvi-study"))
-        .arg("run")
-        .arg(repo().join("studies/scenes/default.toml"))
-        .arg("--out")
-        .arg(&out)
-        .args([
+    let o = run_default_scene(
+        &out,
+        &[
             "--set",
             "resolution.particles=2000",
             "--set",
@@ -699,18 +714,15 @@ fn run_with_render_writes_cloud_files_and_pictures() {
             "--set",
             "analysis.track_every=20",
             "--render",
-        ])
-        .output()
-        .expect("runs");
+        ],
+    );
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{stderr}");
     assert!(
         stderr.contains("cloud at tau") && stderr.contains("Render"),
         "{stderr}"
     );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
-            .expect("json");
+    let summary = read_summary(&out);
     let cloud = &summary["cloud"];
     for key in [
         "fragmentation",
@@ -767,21 +779,15 @@ fn analysis_can_be_turned_off_and_bad_keys_are_named() {
     let out = std::env::temp_dir().join(format!("hvi-cloud-off-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     let run = |extra: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_hvi-study"))
-            .arg("run")
-            .arg(repo().join("studies/scenes/default.toml"))
-            .arg("--out")
-            .arg(&out)
-            .args([
-                "--quiet",
-                "--set",
-                "resolution.particles=2000",
-                "--set",
-                "run.end_time_s=5e-7",
-            ])
-            .args(extra)
-            .output()
-            .expect("runs")
+        let mut args = vec![
+            "--quiet",
+            "--set",
+            "resolution.particles=2000",
+            "--set",
+            "run.end_time_s=5e-7",
+        ];
+        args.extend_from_slice(extra);
+        run_default_scene(&out, &args)
     };
     let o = run(&[
         "--set",
@@ -815,12 +821,9 @@ fn analysis_can_be_turned_off_and_bad_keys_are_named() {
 fn adaptive_run_samples_on_schedule() {
     let out = std::env::temp_dir().join(format!("hvi-cloud-adaptive-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
-    let o = Command::new(env!("CARGO_BIN_EXE_hvi-study"))
-        .arg("run")
-        .arg(repo().join("studies/scenes/default.toml"))
-        .arg("--out")
-        .arg(&out)
-        .args([
+    let o = run_default_scene(
+        &out,
+        &[
             "--quiet",
             "--set",
             "resolution.particles=2000",
@@ -830,13 +833,10 @@ fn adaptive_run_samples_on_schedule() {
             "run.max_stride=8",
             "--set",
             "analysis.track_every=30",
-        ])
-        .output()
-        .expect("runs");
+        ],
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
-            .expect("json");
+    let summary = read_summary(&out);
     let steps = summary["steps"].as_u64().expect("steps");
     let base = summary["base_steps"].as_u64().expect("base steps");
     let dt = summary["dt_s"].as_f64().expect("dt");

@@ -37,6 +37,21 @@ fn run(spec: &SceneSpec) -> (Simulation, Vec<Energy>) {
 /// The bound this project states for the energy ledger at the default step.
 const ENERGY_DRIFT_BOUND: f64 = hvi_engine::sim::LEDGER_DRIFT_BOUND;
 
+/// Change of total momentum since t = 0, relative to M v0.
+fn momentum_change(sim: &Simulation) -> f64 {
+    let total_mass: f64 = sim.particles.mass.iter().sum();
+    (sim.momentum() - sim.momentum_initial).length() / (total_mass * sim.derived.v0_m_s)
+}
+
+/// Largest relative drift of the ledger over the samples.
+fn worst_drift(sim: &Simulation, samples: &[Energy]) -> f64 {
+    let e0 = sim.energy_initial.total_j();
+    samples
+        .iter()
+        .map(|e| ((e.total_j() - e0) / e0).abs())
+        .fold(0.0, f64::max)
+}
+
 #[test]
 fn impact_conserves_momentum_to_round_off_and_energy_within_bound() {
     let spec = sphere_scene(5000.0, 3e-6);
@@ -46,15 +61,10 @@ fn impact_conserves_momentum_to_round_off_and_energy_within_bound() {
         broken_fraction > 0.1,
         "the impact must break many bonds, broke {broken_fraction}"
     );
-    let total_mass: f64 = sim.particles.mass.iter().sum();
-    let scale = total_mass * sim.derived.v0_m_s;
-    let dp = (sim.momentum() - sim.momentum_initial).length() / scale;
+    let dp = momentum_change(&sim);
     assert!(dp < 1e-12, "momentum changed by {dp:e} of M v0");
     let e0 = sim.energy_initial.total_j();
-    let worst = samples
-        .iter()
-        .map(|e| ((e.total_j() - e0) / e0).abs())
-        .fold(0.0, f64::max);
+    let worst = worst_drift(&sim, &samples);
     assert!(
         worst < ENERGY_DRIFT_BOUND,
         "energy ledger drifted by {worst:e}"
@@ -260,14 +270,9 @@ fn adaptive_step_strides_after_the_impact_and_keeps_the_invariants() {
         assert_eq!(x.total_j().to_bits(), y.total_j().to_bits());
     }
     assert_eq!(a.steps_taken, b.steps_taken);
-    let total_mass: f64 = a.particles.mass.iter().sum();
-    let dp = (a.momentum() - a.momentum_initial).length() / (total_mass * a.derived.v0_m_s);
+    let dp = momentum_change(&a);
     assert!(dp < 1e-12, "momentum changed by {dp:e} of M v0");
-    let e0 = a.energy_initial.total_j();
-    let worst = ea
-        .iter()
-        .map(|e| ((e.total_j() - e0) / e0).abs())
-        .fold(0.0, f64::max);
+    let worst = worst_drift(&a, &ea);
     assert!(worst < ENERGY_DRIFT_BOUND, "ledger drifted by {worst:e}");
 }
 
