@@ -503,7 +503,7 @@ fn is_default_stride_displacement(c: &f64) -> bool {
 /// was no more accurate within the seed-to-seed noise and 1.2x slower.
 pub const DEFAULT_STRIDE_DISPLACEMENT_OVER_SIGMA: f64 = MAX_STEP_DISPLACEMENT_OVER_SIGMA;
 /// The default `run.max_stride`: high enough never to bind on the paper's scenes (the
-/// bounds keep the stride at 3-6 in the hot debris cloud).
+/// bounds keep the stride at 3-4 in the hot debris cloud).
 pub const DEFAULT_MAX_STRIDE: u64 = 16;
 /// The largest `run.max_stride`.
 pub const MAX_STRIDE: u64 = 64;
