@@ -41,8 +41,9 @@ const COORD_OFFSET: i64 = 1 << (COORD_BITS - 1);
 const COORD_MAX: i64 = (1 << COORD_BITS) - 2;
 /// Cells per chunk of the parallel search (fixed, for reproducible work units).
 const CELL_CHUNK: usize = 2048;
-/// Candidates per block of the branch-free distance filter.
+/// Candidates per block of the branch-free distance filter (one bit each in a `u64`).
 const HIT_BLOCK: usize = 64;
+const _: () = assert!(HIT_BLOCK <= 64);
 
 /// The neighbour list in compressed-row form over the current particle order.
 #[derive(Debug, Default, Clone)]
@@ -65,6 +66,9 @@ pub struct NeighbourList {
     pub radius: f64,
     /// Number of builds so far.
     pub builds: u64,
+    /// With `measure_speed` at the build: the largest relative speed |v_i - v_j| of any two
+    /// particles within the list radius then (listed pairs and bond partners alike), m/s.
+    pub pair_speed: f64,
     /// Particles outside the representable grid at the last build (a blow-up symptom).
     pub out_of_range: usize,
     scratch: PermuteScratch,
@@ -194,7 +198,10 @@ impl NeighbourList {
     /// Rebuilds the list: clears bond slots broken since the last build (those pairs join the
     /// ordinary list now), re-sorts the particles by cell, searches neighbouring cells and
     /// sets the frames of the rebuild rule (blocks of side `block`, 0 for the classic rule).
-    pub fn build(&mut self, p: &mut Particles, radius: f64, block: f64) {
+    ///
+    /// With `measure_speed`, also finds [`Self::pair_speed`] (the search meets every such pair
+    /// once, so this costs one velocity difference per pair).
+    pub fn build(&mut self, p: &mut Particles, radius: f64, block: f64, measure_speed: bool) {
         self.radius = radius;
         self.builds += 1;
         let n = p.len();
@@ -262,12 +269,14 @@ impl NeighbourList {
         // exactly the candidates j > i: each pair is examined once and entered on both lists.
         const ROWS: usize = 5;
         let offsets: [i64; ROWS] = [0, row, plane - row, plane, plane + row];
-        let pairs: Vec<Vec<(u32, u32)>> = (0..ncell.div_ceil(CELL_CHUNK))
+        let vel = &p.vel;
+        let pairs: Vec<(Vec<(u32, u32)>, f64)> = (0..ncell.div_ceil(CELL_CHUNK))
             .into_par_iter()
             .map(|chunk| {
                 let c0 = chunk * CELL_CHUNK;
                 let c1 = (c0 + CELL_CHUNK).min(ncell);
                 let mut found = Vec::with_capacity((cell_start[c1] - cell_start[c0]) as usize * 2);
+                let mut max_w2: f64 = 0.0;
                 let k0 = cell_key_list[c0] as i64;
                 let mut ptr = [0usize; ROWS];
                 for (r, off) in offsets.iter().enumerate() {
@@ -294,29 +303,35 @@ impl NeighbourList {
                     }
                     for i in cell_start[c] as usize..cell_start[c + 1] as usize {
                         let (px, py, pz) = (xs[i], ys[i], zs[i]);
-                        let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
+                        let slots: &[u32; BONDS_PER_PARTICLE] = bonds
+                            [i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE]
+                            .try_into()
+                            .expect("BONDS_PER_PARTICLE slots");
                         for (r, &(a, b)) in ranges.iter().enumerate() {
                             // The own row holds cells x - 1 .. x + 1: only j > i is forward.
                             let a = if r == 0 { a.max(i + 1) } else { a };
-                            if a >= b {
-                                continue;
-                            }
                             // Branch-free compaction of the candidates within the radius
-                            // (a third of them, so a branch would be mispredicted often), in
+                            // (a sixth of them, so a branch would be mispredicted often), in
                             // blocks; then the few hits are checked against the bonds.
-                            let mut hits = [0u32; HIT_BLOCK];
                             let mut a0 = a;
                             while a0 < b {
                                 let a1 = (a0 + HIT_BLOCK).min(b);
                                 let (cx, cy, cz) = (&xs[a0..a1], &ys[a0..a1], &zs[a0..a1]);
-                                let mut cnt = 0;
+                                let mut mask = 0u64;
                                 for k in 0..cx.len() {
                                     let (dx, dy, dz) = (px - cx[k], py - cy[k], pz - cz[k]);
-                                    hits[cnt] = (a0 + k) as u32;
-                                    cnt += usize::from(dx * dx + dy * dy + dz * dz < r2);
+                                    mask |= u64::from(dx * dx + dy * dy + dz * dz < r2) << k;
                                 }
-                                for &j in &hits[..cnt] {
-                                    if !slots.contains(&j) {
+                                while mask != 0 {
+                                    let j = (a0 + mask.trailing_zeros() as usize) as u32;
+                                    mask &= mask - 1;
+                                    if measure_speed {
+                                        let w2 = (vel[i] - vel[j as usize]).length_squared();
+                                        max_w2 = max_w2.max(w2);
+                                    }
+                                    // All twelve slots at once (no early exit to mispredict).
+                                    let bonded = slots.iter().fold(false, |acc, &s| acc | (s == j));
+                                    if !bonded {
                                         found.push((i as u32, j));
                                     }
                                 }
@@ -325,15 +340,16 @@ impl NeighbourList {
                         }
                     }
                 }
-                found
+                (found, max_w2)
             })
             .collect();
+        self.pair_speed = pairs.iter().fold(0.0f64, |a, c| a.max(c.1)).sqrt();
         // Full lists in compressed-row form: count, prefix-sum, fill in pair order (fixed by
         // the sorted walk, so the lists are the same at any thread count).
         let mut fill = std::mem::take(&mut self.fill);
         fill.clear();
         fill.resize(n + 1, 0);
-        for &(i, j) in pairs.iter().flatten() {
+        for &(i, j) in pairs.iter().flat_map(|c| &c.0) {
             fill[i as usize + 1] += 1;
             fill[j as usize + 1] += 1;
         }
@@ -344,7 +360,7 @@ impl NeighbourList {
         self.start.extend_from_slice(&fill);
         self.neighbours.clear();
         self.neighbours.resize(fill[n] as usize, 0);
-        for &(i, j) in pairs.iter().flatten() {
+        for &(i, j) in pairs.iter().flat_map(|c| &c.0) {
             self.neighbours[fill[i as usize] as usize] = j;
             fill[i as usize] += 1;
             self.neighbours[fill[j as usize] as usize] = i;
@@ -436,16 +452,36 @@ mod tests {
             bonds[k * BONDS_PER_PARTICLE] = (k + 1) as u32;
             bonds[(k + 1) * BONDS_PER_PARTICLE + 1] = k as u32;
         }
-        let mut p = Particles::new(
-            pos,
-            vec![DVec3::ZERO; n],
-            vec![1.0; n],
-            vec![Body::Target; n],
-            bonds,
-        );
+        let vel: Vec<DVec3> = (0..n as u64)
+            .map(|k| {
+                DVec3::new(
+                    crate::rng::uniform(4, k, 0) - 0.5,
+                    crate::rng::uniform(4, k, 1) - 0.5,
+                    crate::rng::uniform(4, k, 2) - 0.5,
+                )
+            })
+            .collect();
+        let mut p = Particles::new(pos, vel, vec![1.0; n], vec![Body::Target; n], bonds);
         let radius = 1.3;
         let mut nl = NeighbourList::default();
-        nl.build(&mut p, radius, 0.0);
+        nl.build(&mut p, radius, 0.0, true);
+        // The measured speed: the largest |v_i - v_j| over all pairs within the radius,
+        // bonded or not.
+        let mut fastest: f64 = 0.0;
+        let mut bonded_within = 0;
+        for i in 0..n {
+            for j in i + 1..n {
+                if (p.pos[i] - p.pos[j]).length_squared() < radius * radius {
+                    fastest = fastest.max((p.vel[i] - p.vel[j]).length());
+                    bonded_within += usize::from(p.intact_partners_of(i).any(|b| b == j));
+                }
+            }
+        }
+        assert!(
+            bonded_within > 0,
+            "bonded pairs within the radius are covered too"
+        );
+        assert_eq!(nl.pair_speed, fastest);
         let mut brute = 0;
         for i in 0..n {
             let mut got: Vec<u32> = nl.of(i).to_vec();
@@ -504,14 +540,14 @@ mod tests {
             vec![NO_BOND; n * BONDS_PER_PARTICLE],
         );
         let mut nl = NeighbourList::default();
-        nl.build(&mut p, 1.3, 4.0);
+        nl.build(&mut p, 1.3, 4.0, false);
         assert!(nl.frame_vel.iter().all(|u| (u.x.abs() - 1.0).abs() < 1e-12));
         assert_eq!(nl.near_dv, 0.0, "the clumps' blocks are not adjacent");
         assert!((nl.far_dv - 2.0).abs() < 1e-12);
         // Moving with their frames, nothing is stale until the far bound: 2 t >= 4 - 1.
         assert!(!nl.stale(0.0, 1.4, 1.0));
         assert!(nl.stale(0.0, 1.6, 1.0));
-        nl.build(&mut p, 1.3, 0.0);
+        nl.build(&mut p, 1.3, 0.0, false);
         assert!(nl.frame_vel.iter().all(|u| *u == DVec3::ZERO));
         assert!(nl.stale(0.16, 0.0, 1.0));
         assert!(!nl.stale(0.14, 0.0, 1.0));

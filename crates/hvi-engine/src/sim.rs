@@ -230,45 +230,21 @@ impl Simulation {
     fn rebuild(&mut self) {
         let t = Instant::now();
         let radius = self.interaction.r_eq_m + self.skin_m;
+        let adaptive = self.max_stride > 1;
         self.neighbours
-            .build(&mut self.particles, radius, self.block_m);
+            .build(&mut self.particles, radius, self.block_m, adaptive);
         self.since_build_s = 0.0;
-        if self.max_stride > 1 {
-            self.measure_pair_speed();
+        if adaptive {
+            // For the adaptive step: the velocities now, and the largest relative speed of any
+            // two particles that can interact until the next build (listed pairs and bond
+            // partners within the list radius; stretched partners beyond it feel only the soft
+            // spring, which the stiffness bound covers).
+            self.vel_at_build.clear();
+            self.vel_at_build
+                .par_extend(self.particles.vel.par_iter().copied());
+            self.pair_speed_at_build = self.neighbours.pair_speed;
         }
         self.timing.neighbour += t.elapsed();
-    }
-
-    /// For the adaptive step: the velocities now, and the largest relative speed of any two
-    /// particles that can interact until the next build (neighbour-list pairs and bond
-    /// partners).
-    fn measure_pair_speed(&mut self) {
-        let p = &self.particles;
-        let nl = &self.neighbours;
-        let radius2 = nl.radius * nl.radius;
-        self.vel_at_build.clear();
-        self.vel_at_build.par_extend(p.vel.par_iter().copied());
-        self.pair_speed_at_build = (0..p.len())
-            .into_par_iter()
-            .with_min_len(CHUNK)
-            .map(|i| {
-                let vi = p.vel[i];
-                let listed = nl
-                    .of(i)
-                    .iter()
-                    .map(|&j| (vi - p.vel[j as usize]).length_squared());
-                // Bond partners within the list's radius: the steep law acts on them when
-                // compressed. Stretched ones feel only the soft spring (the stiffness bound).
-                let bonded = p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE]
-                    .iter()
-                    .filter(|&&s| s != NO_BOND)
-                    .map(|&s| (s & INDEX_MASK) as usize)
-                    .filter(|&j| (p.pos[i] - p.pos[j]).length_squared() < radius2)
-                    .map(|j| (vi - p.vel[j]).length_squared());
-                listed.chain(bonded).fold(0.0f64, f64::max)
-            })
-            .reduce(|| 0.0, f64::max)
-            .sqrt();
     }
 
     /// Forces into `particles.force`: first every owned bond once (spring, or repulsion when
