@@ -341,13 +341,23 @@ impl Simulation {
                     let i = base + k;
                     let pi = pos[i];
                     let mut f = DVec3::ZERO;
-                    for &j in nl.of(i) {
-                        let d = pi - pos[j as usize];
-                        let r2 = d.length_squared();
-                        // Branch-free for the same reason as above.
-                        let fr = ia.contact_force_over_r(r2);
-                        f += d * (fr * f64::from(u8::from(r2 < r_eq2)));
-                        min_r2 = min_r2.min(r2);
+                    // Most listed pairs are out of contact in the cloud (the skin): a
+                    // branch-free pass finds the pairs in contact (a bit each), then only they
+                    // get the force. Leaving out the others' zero force leaves f as it is (f
+                    // starts at +0, and a sum is -0 only if both terms are).
+                    for list in nl.of(i).chunks(64) {
+                        let mut contact = 0u64;
+                        for (k, &j) in list.iter().enumerate() {
+                            let r2 = (pi - pos[j as usize]).length_squared();
+                            min_r2 = min_r2.min(r2);
+                            contact |= u64::from(r2 < r_eq2) << k;
+                        }
+                        while contact != 0 {
+                            let j = list[contact.trailing_zeros() as usize];
+                            contact &= contact - 1;
+                            let d = pi - pos[j as usize];
+                            f += d * ia.contact_force_over_r(d.length_squared());
+                        }
                     }
                     let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
                     for m in 0..OWNED_BONDS {
