@@ -109,7 +109,6 @@ pub struct Simulation {
     last_min_r2: f64,
     speed_partials: Vec<[f64; 2]>,
     vel_at_build: Vec<DVec3>,
-    pair_speed_at_build: f64,
     /// Bonds at t = 0.
     pub bonds_initial: u64,
     /// Bonds broken so far.
@@ -180,7 +179,6 @@ impl Simulation {
             last_min_r2: f64::INFINITY,
             speed_partials: vec![[0.0; 2]; nchunks],
             vel_at_build: Vec::new(),
-            pair_speed_at_build: 0.0,
             bonds_initial,
             bonds_broken: 0,
             coast_velocity: Vec::new(),
@@ -235,14 +233,13 @@ impl Simulation {
             .build(&mut self.particles, radius, self.block_m, adaptive);
         self.since_build_s = 0.0;
         if adaptive {
-            // For the adaptive step: the velocities now, and the largest relative speed of any
-            // two particles that can interact until the next build (listed pairs and bond
-            // partners within the list radius; stretched partners beyond it feel only the soft
-            // spring, which the stiffness bound covers).
+            // For the adaptive step: the velocities now (the build measured the largest
+            // relative speed of any two particles within the list radius, listed pairs and
+            // bond partners; stretched partners beyond it feel only the soft spring, which the
+            // stiffness bound covers).
             self.vel_at_build.clear();
             self.vel_at_build
                 .par_extend(self.particles.vel.par_iter().copied());
-            self.pair_speed_at_build = self.neighbours.pair_speed;
         }
         self.timing.neighbour += t.elapsed();
     }
@@ -533,7 +530,7 @@ impl Simulation {
     /// [`Self::step_until`]).
     fn adapt_stride(&mut self, max_e: f64, max_w: f64) {
         // Pairs that can interact (listed or bonded): closing speed at most u.
-        let u = self.pair_speed_at_build + 2.0 * max_w;
+        let u = self.neighbours.pair_speed + 2.0 * max_w;
         let by_speed = self.stride_disp_m / (u * self.dt);
         // Pairs not yet listed: they enter contact at most one step's closing deep.
         let u_new = 2.0 * max_e + self.neighbours.near_dv;
