@@ -270,6 +270,10 @@ fn adaptive_step_strides_after_the_impact_and_keeps_the_invariants() {
         assert_eq!(x.total_j().to_bits(), y.total_j().to_bits());
     }
     assert_eq!(a.steps_taken, b.steps_taken);
+    let l = a.stride_limits;
+    assert_eq!(l.listed + l.unlisted + l.stiffness + l.cap, a.steps_taken);
+    assert!(l.listed > 0 && l.stiffness > 0, "{l:?}");
+    assert_eq!(l, b.stride_limits);
     let dp = momentum_change(&a);
     assert!(dp < 1e-12, "momentum changed by {dp:e} of M v0");
     let worst = worst_drift(&a, &ea);
@@ -371,4 +375,50 @@ fn comoving_rebuild_rule_never_misses_a_contact() {
         builds[0],
         builds[1]
     );
+}
+
+/// The adaptive step's look-ahead (`sim::Simulation::step_until`): two free particles close
+/// in head-on from just beyond the list radius; the rebuild rule lists them the step before
+/// they touch, so their first step in contact is within the listed pairs' bound (the rule
+/// without the look-ahead lists them only once they are in contact, and a step deep).
+#[test]
+fn adaptive_step_lists_a_pair_before_it_touches() {
+    let sigma = 1e-4;
+    let ia = Interaction::new(sigma, 1e-3, 1e4, 1.5 * sigma, ContactForm::Printed);
+    let mass = 1e-9;
+    let run = RunSettings {
+        max_stride: 16,
+        frame_block_over_sigma: 0.0,
+        ..RunSettings::default()
+    };
+    let radius = ia.r_eq_m + run.skin_over_sigma * sigma;
+    let w = 1e4; // each moves 0.01 sigma per base step of 1e-10 s
+    for offset in [1e-3, 0.37, 0.71] {
+        let pos = vec![
+            DVec3::ZERO,
+            DVec3::new(radius + offset * w * 1e-10, 0.0, 0.0),
+        ];
+        let vel = vec![DVec3::new(w, 0.0, 0.0), DVec3::new(-w, 0.0, 0.0)];
+        let bonds = vec![NO_BOND; 2 * BONDS_PER_PARTICLE];
+        let particles = Particles::new(pos, vel, vec![mass; 2], vec![Body::Target; 2], bonds);
+        let derived = Derived::for_interaction(&ia, 1e-10, mass, 100_000);
+        let mut sim = Simulation::from_parts(particles, ia, derived, &run).expect("starts");
+        assert!(sim.neighbour_list().of(0).is_empty(), "listed at the start");
+        loop {
+            let listed = !sim.neighbour_list().of(0).is_empty();
+            let before = sim.step;
+            sim.step_once().expect("stable");
+            let r = (sim.particles.pos[0] - sim.particles.pos[1]).length();
+            if r < ia.r_eq_m {
+                assert!(
+                    listed,
+                    "offset {offset}: touched unlisted at step {before}, {} sigma deep",
+                    (ia.r_eq_m - r) / sigma
+                );
+                break;
+            }
+            assert!(sim.step < 1000, "never touched");
+        }
+        assert!(sim.largest_stride > 1, "the pair must stride");
+    }
 }

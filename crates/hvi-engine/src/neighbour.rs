@@ -21,7 +21,9 @@
 //! are not adjacent were at least one block side apart, and are covered by a bound on
 //! |u_a - u_b| over all blocks (`far_dv`) against the block side less the contact radius. The
 //! rule is exact (no pair is ever missed); with `block = 0` every frame is at rest and it is the
-//! classic rule.
+//! classic rule. The adaptive step asks the rule to look one step ahead (the same bound at the
+//! end of the next step, from the largest speed relative to a frame), so that a pair is listed
+//! before it comes into contact.
 //!
 //! The list is full (each pair appears on both particles' lists) so forces are gathered per
 //! particle and the result does not depend on the thread count. Pairs joined by an intact bond
@@ -106,15 +108,25 @@ fn cell_key(p: DVec3, inv_h: f64) -> (u64, bool) {
 }
 
 impl NeighbourList {
-    /// Whether the list may miss a contact now: `max_e` is the largest displacement of a
-    /// particle relative to its frame since the build, `since_build_s` the time since the build,
-    /// `contact_radius` the range of the contact force (see the module's rule).
-    pub fn stale(&self, max_e: f64, since_build_s: f64, contact_radius: f64) -> bool {
-        let two_e = 2.0 * max_e;
-        if two_e + self.near_dv * since_build_s >= self.radius - contact_radius {
+    /// Whether the list may miss a contact now or, with `ahead_s` > 0, by the end of a step of
+    /// `ahead_s` taken at particle speeds at most `max_s` relative to their frames: `max_e` is
+    /// the largest displacement of a particle relative to its frame since the build,
+    /// `since_build_s` the time since the build, `contact_radius` the range of the contact
+    /// force (see the module's rule).
+    pub fn stale(
+        &self,
+        max_e: f64,
+        since_build_s: f64,
+        contact_radius: f64,
+        max_s: f64,
+        ahead_s: f64,
+    ) -> bool {
+        let two_e = 2.0 * max_e + 2.0 * max_s * ahead_s;
+        let t = since_build_s + ahead_s;
+        if two_e + self.near_dv * t >= self.radius - contact_radius {
             return true;
         }
-        self.block > 0.0 && two_e + self.far_dv * since_build_s >= self.block - contact_radius
+        self.block > 0.0 && two_e + self.far_dv * t >= self.block - contact_radius
     }
 
     /// The frames: each particle's block (side `block`) and its mean velocity; `near_dv` and
@@ -515,7 +527,7 @@ mod tests {
         p.pos[a] = p.pos[b] + DVec3::new(0.5, 0.0, 0.0);
         assert!(nl.missing_pairs(&p, 1.0) >= 1);
         let moved = (p.pos[a] - nl.pos_at_build[a]).length();
-        assert!(nl.stale(moved, 0.0, 1.0));
+        assert!(nl.stale(moved, 0.0, 1.0, 0.0, 0.0));
     }
 
     /// Frames: a block's mean velocity, the near and far bounds; block 0 is the classic rule.
@@ -545,11 +557,18 @@ mod tests {
         assert_eq!(nl.near_dv, 0.0, "the clumps' blocks are not adjacent");
         assert!((nl.far_dv - 2.0).abs() < 1e-12);
         // Moving with their frames, nothing is stale until the far bound: 2 t >= 4 - 1.
-        assert!(!nl.stale(0.0, 1.4, 1.0));
-        assert!(nl.stale(0.0, 1.6, 1.0));
+        assert!(!nl.stale(0.0, 1.4, 1.0, 0.0, 0.0));
+        assert!(nl.stale(0.0, 1.6, 1.0, 0.0, 0.0));
         nl.build(&mut p, 1.3, 0.0, false);
         assert!(nl.frame_vel.iter().all(|u| *u == DVec3::ZERO));
-        assert!(nl.stale(0.16, 0.0, 1.0));
-        assert!(!nl.stale(0.14, 0.0, 1.0));
+        assert!(nl.stale(0.16, 0.0, 1.0, 0.0, 0.0));
+        assert!(!nl.stale(0.14, 0.0, 1.0, 0.0, 0.0));
+        // The look-ahead: a step of 0.2 at speeds up to 0.1 adds 2 x 0.1 x 0.2 = 0.04.
+        assert!(!nl.stale(0.12, 0.0, 1.0, 0.1, 0.2));
+        assert!(nl.stale(0.14, 0.0, 1.0, 0.1, 0.2));
+        // ... and counts the frames' relative motion over the step too.
+        nl.build(&mut p, 1.3, 4.0, false);
+        assert!(!nl.stale(0.0, 1.0, 1.0, 0.0, 0.45));
+        assert!(nl.stale(0.0, 1.0, 1.0, 0.0, 0.55));
     }
 }

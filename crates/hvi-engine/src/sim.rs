@@ -10,14 +10,13 @@ use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::{EngineError, Result};
 use crate::neighbour::NeighbourList;
 use crate::potential::Interaction;
 use crate::scene::{
-    Derived, RunSettings, Setup, AUTO_STEP_SAFETY, MAX_STEP_DISPLACEMENT_OVER_SIGMA,
-    MAX_STEP_OVER_SQRT_M_K,
+    Derived, RunSettings, Setup, AUTO_STEP_SAFETY, LOOKAHEAD_SKIN_FRACTION, MAX_STEP_OVER_SQRT_M_K,
 };
 use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND, OWNED_BONDS};
 
@@ -102,6 +101,8 @@ pub struct Simulation {
     pub stride: u64,
     /// The largest stride taken so far.
     pub largest_stride: u64,
+    /// Which bound set the stride target after each adaptive step (see [`StrideLimits`]).
+    pub stride_limits: StrideLimits,
     max_stride: u64,
     stride_disp_m: f64,
     stride_calm: u32,
@@ -130,6 +131,20 @@ pub struct Simulation {
     bond_partials: Vec<BondPartial>,
     contact_min_r2: Vec<f64>,
     disp_partials: Vec<f64>,
+}
+
+/// How often each bound of the adaptive step ([`Simulation::step_until`]) set the stride's
+/// target: one count per step taken with `run.max_stride` > 1.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StrideLimits {
+    /// The displacement bound on pairs that can interact until the next build.
+    pub listed: u64,
+    /// The look-ahead's share of the skin (pairs not yet listed).
+    pub unlisted: u64,
+    /// The stiffness bound.
+    pub stiffness: u64,
+    /// `run.max_stride`.
+    pub cap: u64,
 }
 
 impl Simulation {
@@ -172,6 +187,7 @@ impl Simulation {
             steps_taken: 0,
             stride: 1,
             largest_stride: 1,
+            stride_limits: StrideLimits::default(),
             max_stride: run.max_stride.max(1),
             stride_disp_m: run.stride_displacement_over_sigma * derived.sigma_m,
             stride_calm: 0,
@@ -424,10 +440,13 @@ impl Simulation {
     ///   `run.stride_displacement_over_sigma` sigma;
     /// - pairs not yet listed close in at most at u' = 2 max_i |v_i - f_i| + df (f_i the
     ///   frame velocity of the particle's block, df the largest difference between adjacent
-    ///   blocks' frames, see [`crate::neighbour`]); the list's rebuild rule keeps them out of
-    ///   contact until listed, so they enter it at most one step's closing deep: u' m dt <=
-    ///   [`MAX_STEP_DISPLACEMENT_OVER_SIGMA`] sigma, the stability bound (this holds the stride
-    ///   down before first contact, when the impactor closes in at v0);
+    ///   blocks' frames, see [`crate::neighbour`]). The list's rebuild rule looks one step
+    ///   ahead: it rebuilds once a pair not listed could come within the contact radius by the
+    ///   end of the next step (of at most m + 1 base steps: the stride rises by at most one),
+    ///   so a pair enters contact only after it was listed, and its first step in contact is
+    ///   within the listed pairs' bound. The look-ahead u' (m + 1) dt is held to
+    ///   [`LOOKAHEAD_SKIN_FRACTION`] of the skin, so that most of the skin is left to the time
+    ///   between builds;
     /// - the stiffness bound: m dt <= [`AUTO_STEP_SAFETY`] x [`MAX_STEP_OVER_SQRT_M_K`] x
     ///   sqrt(m_min / k), k the stiffest pair law at the closest pair now
     ///   ([`Interaction::stiffness_at`]);
@@ -507,10 +526,20 @@ impl Simulation {
         if !max_d2.is_finite() {
             return Err(self.unstable("non-finite or runaway particle position".into()));
         }
-        if self
-            .neighbours
-            .stale(max_d2.sqrt(), since, self.interaction.r_eq_m)
-        {
+        // The adaptive step looks one step ahead (the next stride is at most one more than
+        // this one), so that pairs enter contact only once listed.
+        let ahead = if adaptive {
+            (self.stride + 1).min(self.max_stride) as f64 * self.dt
+        } else {
+            0.0
+        };
+        if self.neighbours.stale(
+            max_d2.sqrt(),
+            since,
+            self.interaction.r_eq_m,
+            max_e2.sqrt(),
+            ahead,
+        ) {
             self.rebuild();
             if self.neighbours.out_of_range > 0 {
                 return Err(self.unstable(format!(
@@ -532,13 +561,24 @@ impl Simulation {
         // Pairs that can interact (listed or bonded): closing speed at most u.
         let u = self.neighbours.pair_speed + 2.0 * max_w;
         let by_speed = self.stride_disp_m / (u * self.dt);
-        // Pairs not yet listed: they enter contact at most one step's closing deep.
+        // Pairs not yet listed: the rebuild rule's look-ahead takes at most a fraction of the
+        // skin.
         let u_new = 2.0 * max_e + self.neighbours.near_dv;
-        let by_new = MAX_STEP_DISPLACEMENT_OVER_SIGMA * self.derived.sigma_m / (u_new * self.dt);
+        let by_new = LOOKAHEAD_SKIN_FRACTION * self.skin_m / (u_new * self.dt) - 1.0;
         let k = self.interaction.stiffness_at(self.last_min_r2);
         let by_stiffness =
             AUTO_STEP_SAFETY * MAX_STEP_OVER_SQRT_M_K * (self.min_mass / k).sqrt() / self.dt;
         let allowed = by_speed.min(by_new).min(by_stiffness);
+        let l = &mut self.stride_limits;
+        if allowed >= self.max_stride as f64 || allowed.is_nan() {
+            l.cap += 1;
+        } else if allowed == by_speed {
+            l.listed += 1;
+        } else if allowed == by_new {
+            l.unlisted += 1;
+        } else {
+            l.stiffness += 1;
+        }
         // NaN (nothing moves) and infinity allow the most.
         let target = if allowed >= self.max_stride as f64 || allowed.is_nan() {
             self.max_stride

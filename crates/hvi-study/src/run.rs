@@ -156,6 +156,8 @@ pub struct Summary {
     pub threads: usize,
     /// Neighbour-list builds.
     pub neighbour_builds: u64,
+    /// How often each bound of the adaptive step set the stride (all zero at a fixed step).
+    pub stride_limits: hvi_engine::sim::StrideLimits,
     /// Time since first contact at which the ballistic cut-off began free flight, s (null when
     /// it did not, or was off).
     pub ballistic_cutoff_tau_s: Option<f64>,
@@ -569,6 +571,7 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         particle_steps_per_second: n as f64 * sim.steps_taken as f64 / step_wall.max(1e-12),
         threads: rayon::current_num_threads(),
         neighbour_builds: sim.neighbour_builds(),
+        stride_limits: sim.stride_limits,
         ballistic_cutoff_tau_s: sim
             .coasting_since()
             .map(|step| step as f64 * d.dt_s - d.contact_time_s),
