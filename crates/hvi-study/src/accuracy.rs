@@ -138,7 +138,7 @@ pub fn reference_variants(noise_seeds: u32) -> Result<Vec<Variant>> {
 /// The default candidates (after [`reference_variants`]): fixed steps from 2 to 16 times the
 /// paper's, the skin at the larger steps and the ballistic cut-off (all at a fixed step), and
 /// the adaptive step (`run.max_stride`) on base steps of 4 and 6 times the paper's, at its
-/// default displacement bound (0.05 sigma) and at half that.
+/// default displacement bound (0.05 sigma) and at twice that (the largest allowed).
 pub fn default_candidates() -> Vec<Variant> {
     use Role::*;
     const FIXED: &str = "run.max_stride=1";
@@ -155,8 +155,8 @@ pub fn default_candidates() -> Vec<Variant> {
         fixed("dt12", &["run.dt_factor=12"]),
         fixed("dt16", &["run.dt_factor=16"]),
         fixed(
-            "dt8-skin0.5",
-            &["run.dt_factor=8", "run.skin_over_sigma=0.5"],
+            "dt8-skin0.3",
+            &["run.dt_factor=8", "run.skin_over_sigma=0.3"],
         ),
         fixed(
             "dt8-skin0.2",
@@ -185,11 +185,11 @@ pub fn default_candidates() -> Vec<Variant> {
             Candidate,
         ),
         Variant::new(
-            "dt6-adaptive-c0.025",
+            "dt6-adaptive-c0.1",
             &[
                 "run.dt_factor=6",
                 "run.max_stride=16",
-                "run.stride_displacement_over_sigma=0.025",
+                "run.stride_displacement_over_sigma=0.1",
             ],
             Candidate,
         ),
