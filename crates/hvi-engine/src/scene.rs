@@ -496,11 +496,11 @@ fn is_default_stride_displacement(c: &f64) -> bool {
 }
 
 /// The adaptive step's default displacement bound for listed pairs: the stability bound
-/// itself. Chosen by `hvi-study accuracy` (reports/accuracy/calibration-n1e5): on the
-/// calibration scene at 1e5 particles, base step 6x the paper's, R, va/v0 and F within 0.6 %
-/// of the mean at the paper's step, 1.6x faster than the fixed 6x step; half of it (0.025, the
-/// automatic step's own margin, which the base step gives the fastest pairs of the impact)
-/// was no more accurate within the seed-to-seed noise and 1.2x slower.
+/// itself. Chosen by `hvi-study accuracy` (reports/accuracy/calibration-n1e5, engine 0.5.0): on
+/// the calibration scene at 1e5 particles, base step 6x the paper's, the cheapest candidate
+/// within tolerance (R -0.92 %, va/v0 +0.16 %, F -0.38 % of the mean at the paper's step,
+/// 12.4x faster than it); twice it (0.1) was 10 % faster but missed R by 1.07 %, and in 0.3
+/// half of it (0.025) was no more accurate within the seed-to-seed noise and 1.2x slower.
 pub const DEFAULT_STRIDE_DISPLACEMENT_OVER_SIGMA: f64 = MAX_STEP_DISPLACEMENT_OVER_SIGMA;
 /// The largest `run.stride_displacement_over_sigma`: twice the stability bound. The stride
 /// stays within the stiffness bound whatever this is, so this is an accuracy knob
@@ -515,7 +515,7 @@ pub const LOOKAHEAD_SKIN_FRACTION: f64 = 0.5;
 /// cloud builds its lists a third less often than at 0.3 sigma.
 pub const DEFAULT_SKIN_OVER_SIGMA: f64 = 0.45;
 /// The default `run.max_stride`: high enough never to bind on the paper's scenes (the
-/// bounds keep the stride at 3-4 in the hot debris cloud).
+/// bounds keep the stride at 5 in the hot debris cloud at the default bound, 8 at 0.1 sigma).
 pub const DEFAULT_MAX_STRIDE: u64 = 16;
 /// The largest `run.max_stride`.
 pub const MAX_STRIDE: u64 = 64;

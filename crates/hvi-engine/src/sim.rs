@@ -569,8 +569,10 @@ impl Simulation {
         let by_stiffness =
             AUTO_STEP_SAFETY * MAX_STEP_OVER_SQRT_M_K * (self.min_mass / k).sqrt() / self.dt;
         let allowed = by_speed.min(by_new).min(by_stiffness);
+        // NaN (nothing moves) and infinity allow the most.
+        let capped = allowed >= self.max_stride as f64 || allowed.is_nan();
         let l = &mut self.stride_limits;
-        if allowed >= self.max_stride as f64 || allowed.is_nan() {
+        if capped {
             l.cap += 1;
         } else if allowed == by_speed {
             l.listed += 1;
@@ -579,8 +581,7 @@ impl Simulation {
         } else {
             l.stiffness += 1;
         }
-        // NaN (nothing moves) and infinity allow the most.
-        let target = if allowed >= self.max_stride as f64 || allowed.is_nan() {
+        let target = if capped {
             self.max_stride
         } else {
             (allowed.floor() as u64).max(1)
