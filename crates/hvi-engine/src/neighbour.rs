@@ -31,10 +31,9 @@
 
 use std::collections::HashMap;
 
-use rustc_hash::FxHashMap;
-
 use glam::DVec3;
 use rayon::prelude::*;
+use rustc_hash::FxHashMap;
 
 use crate::state::{Particles, PermuteScratch, BONDS_PER_PARTICLE, BROKEN_FLAG};
 
@@ -83,6 +82,7 @@ pub struct NeighbourList {
     zs: Vec<f64>,
     fill: Vec<u32>,
     block_keys: Vec<u64>,
+    block_of: Vec<u32>,
 }
 
 #[inline]
@@ -105,6 +105,16 @@ fn cell_key(p: DVec3, inv_h: f64) -> (u64, bool) {
         ((c[2] as u64) << (2 * COORD_BITS)) | ((c[1] as u64) << COORD_BITS) | c[0] as u64,
         ok,
     )
+}
+
+/// Rows of the half stencil on the key grid: the own row, the next row, and the three rows of
+/// the next plane (key offsets of each row's centre cell).
+const FORWARD_ROWS: usize = 5;
+
+fn forward_rows() -> [i64; FORWARD_ROWS] {
+    let row = 1i64 << COORD_BITS;
+    let plane = 1i64 << (2 * COORD_BITS);
+    [0, row, plane - row, plane, plane + row]
 }
 
 impl NeighbourList {
@@ -146,8 +156,13 @@ impl NeighbourList {
         keys.clear();
         keys.par_extend(p.pos.par_iter().map(|&x| cell_key(x, inv_b).0));
         // Sums in particle order (fixed by the sort), one map update per run of equal block:
-        // runs are common in cell order. Few updates; the per-particle work below is parallel.
-        let mut blocks: FxHashMap<u64, (DVec3, f64)> = FxHashMap::default();
+        // runs are common in cell order. Blocks get dense indices in order of first
+        // appearance, so the per-particle pass below indexes a vector instead of the map.
+        let mut index: FxHashMap<u64, u32> = FxHashMap::default();
+        let mut blocks: Vec<(u64, DVec3, f64)> = Vec::new();
+        let mut block_of = std::mem::take(&mut self.block_of);
+        block_of.clear();
+        block_of.resize(n, 0);
         let mut i = 0;
         while i < n {
             let mut j = i;
@@ -156,46 +171,60 @@ impl NeighbourList {
                 sum += p.vel[j];
                 j += 1;
             }
-            let e = blocks.entry(keys[i]).or_insert((DVec3::ZERO, 0.0));
-            e.0 += sum;
-            e.1 += (j - i) as f64;
+            let b = *index.entry(keys[i]).or_insert_with(|| {
+                blocks.push((keys[i], DVec3::ZERO, 0.0));
+                (blocks.len() - 1) as u32
+            });
+            let e = &mut blocks[b as usize];
+            e.1 += sum;
+            e.2 += (j - i) as f64;
+            block_of[i..j].fill(b);
             i = j;
         }
-        for v in blocks.values_mut() {
-            v.0 /= v.1;
-        }
+        let mut blocks: Vec<(u64, DVec3)> =
+            blocks.into_iter().map(|(k, s, c)| (k, s / c)).collect();
         let blocks_r = &blocks;
-        self.frame_vel.par_extend(
-            keys.par_iter()
-                .map(|k| blocks_r.get(k).map_or(DVec3::ZERO, |b| b.0)),
-        );
+        self.frame_vel
+            .par_extend(block_of.par_iter().map(|&b| blocks_r[b as usize].1));
+        self.block_of = block_of;
         self.block_keys = keys;
-        let row = 1i64 << COORD_BITS;
-        let plane = 1i64 << (2 * COORD_BITS);
-        let list: Vec<(u64, DVec3)> = blocks.iter().map(|(&k, &(u, _))| (k, u)).collect();
-        // Maxima and minima do not depend on the order they are taken in.
-        let near = list
-            .par_iter()
-            .map(|&(k, u)| {
+        // In key order for the walk below (keys are distinct).
+        blocks.par_sort_unstable_by_key(|b| b.0);
+        let blocks_r = &blocks;
+        // Adjacent blocks: for each block the forward half of its 26 neighbours (the other
+        // half sees this block), found by pointers that only move forward as the sorted
+        // blocks are walked, as in the cell search. Maxima do not depend on the order.
+        let nb = blocks.len();
+        let offsets = forward_rows();
+        let near = (0..nb.div_ceil(CELL_CHUNK))
+            .into_par_iter()
+            .map(|chunk| {
+                let c0 = chunk * CELL_CHUNK;
+                let c1 = (c0 + CELL_CHUNK).min(nb);
+                let first = |k: i64, r: usize| if r == 0 { k + 1 } else { k + offsets[r] - 1 };
+                let k0 = blocks_r[c0].0 as i64;
+                let mut ptr = [0usize; FORWARD_ROWS];
+                for (r, p) in ptr.iter_mut().enumerate() {
+                    *p = blocks_r.partition_point(|b| (b.0 as i64) < first(k0, r));
+                }
                 let mut near: f64 = 0.0;
-                // Half of the 26 neighbours: the other half sees this block.
-                for dz in 0..=1i64 {
-                    for dy in -1..=1i64 {
-                        for dx in -1..=1i64 {
-                            if dz == 0 && (dy < 0 || (dy == 0 && dx <= 0)) {
-                                continue;
-                            }
-                            let kb = (k as i64 + dz * plane + dy * row + dx) as u64;
-                            if let Some(&(ub, _)) = blocks_r.get(&kb) {
-                                near = near.max((u - ub).length());
-                            }
+                for &(k, u) in &blocks_r[c0..c1] {
+                    let k = k as i64;
+                    for (r, p) in ptr.iter_mut().enumerate() {
+                        while *p < nb && (blocks_r[*p].0 as i64) < first(k, r) {
+                            *p += 1;
+                        }
+                        let mut b = *p;
+                        while b < nb && blocks_r[b].0 as i64 <= k + offsets[r] + 1 {
+                            near = near.max((u - blocks_r[b].1).length());
+                            b += 1;
                         }
                     }
                 }
                 near
             })
             .reduce(|| 0.0, f64::max);
-        let (lo, hi) = list.par_iter().map(|&(_, u)| (u, u)).reduce(
+        let (lo, hi) = blocks.par_iter().map(|&(_, u)| (u, u)).reduce(
             || (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
             |a, b| (a.0.min(b.0), a.1.max(b.1)),
         );
@@ -274,13 +303,11 @@ impl NeighbourList {
         let r2 = radius * radius;
         let bonds = &p.bonds;
         let (xs_r, ys_r, zs_r) = (&xs, &ys, &zs);
-        let row = 1i64 << COORD_BITS;
-        let plane = 1i64 << (2 * COORD_BITS);
         // Half stencil: rows whose keys follow the cell's own (same row from x - 1, the next
         // row, and the three rows of the next plane). Sorted order is key order, so these hold
         // exactly the candidates j > i: each pair is examined once and entered on both lists.
-        const ROWS: usize = 5;
-        let offsets: [i64; ROWS] = [0, row, plane - row, plane, plane + row];
+        const ROWS: usize = FORWARD_ROWS;
+        let offsets = forward_rows();
         let vel = &p.vel;
         let pairs: Vec<(Vec<(u32, u32)>, f64)> = (0..ncell.div_ceil(CELL_CHUNK))
             .into_par_iter()
@@ -446,6 +473,26 @@ mod tests {
 
     /// The list equals a brute-force search: every unbonded pair closer than the radius, on
     /// both particles' lists, once; intact bonded pairs left out.
+    /// Each list is exactly the unbonded particles within the radius, in ascending order;
+    /// returns the number of listed entries.
+    fn assert_lists_exact(nl: &NeighbourList, p: &Particles, radius: f64) -> usize {
+        let n = p.len();
+        let mut brute = 0;
+        for i in 0..n {
+            let want: Vec<u32> = (0..n)
+                .filter(|&j| {
+                    j != i
+                        && (p.pos[i] - p.pos[j]).length_squared() < radius * radius
+                        && !p.intact_partners_of(i).any(|b| b == j)
+                })
+                .map(|j| j as u32)
+                .collect();
+            brute += want.len();
+            assert_eq!(nl.of(i), &want[..], "particle {i}");
+        }
+        brute
+    }
+
     #[test]
     fn matches_brute_force() {
         let n = 600;
@@ -494,22 +541,7 @@ mod tests {
             "bonded pairs within the radius are covered too"
         );
         assert_eq!(nl.pair_speed, fastest);
-        let mut brute = 0;
-        for i in 0..n {
-            let mut got: Vec<u32> = nl.of(i).to_vec();
-            got.sort_unstable();
-            let mut want: Vec<u32> = (0..n)
-                .filter(|&j| {
-                    j != i
-                        && (p.pos[i] - p.pos[j]).length_squared() < radius * radius
-                        && !p.intact_partners_of(i).any(|b| b == j)
-                })
-                .map(|j| j as u32)
-                .collect();
-            want.sort_unstable();
-            brute += want.len();
-            assert_eq!(got, want, "particle {i}");
-        }
+        let brute = assert_lists_exact(&nl, &p, radius);
         assert!(
             brute > n,
             "the test must exercise real neighbours ({brute})"
