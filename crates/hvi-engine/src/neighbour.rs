@@ -471,8 +471,6 @@ mod tests {
     use super::*;
     use crate::state::{Body, NO_BOND};
 
-    /// The list equals a brute-force search: every unbonded pair closer than the radius, on
-    /// both particles' lists, once; intact bonded pairs left out.
     /// Each list is exactly the unbonded particles within the radius, in ascending order;
     /// returns the number of listed entries.
     fn assert_lists_exact(nl: &NeighbourList, p: &Particles, radius: f64) -> usize {
@@ -493,6 +491,8 @@ mod tests {
         brute
     }
 
+    /// The list equals a brute-force search: every unbonded pair closer than the radius, on
+    /// both particles' lists, once; intact bonded pairs left out.
     #[test]
     fn matches_brute_force() {
         let n = 600;
