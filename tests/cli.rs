@@ -219,3 +219,101 @@ fn unstable_run_stops_and_still_writes_what_it_had() {
     assert!(out.join("energy.csv").exists());
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `hvi-study accuracy` end to end on a tiny scene: candidates at two seeds, the reference
+/// step at two, their means, the pooled seed scatter and the noise floor it sets, every run in
+/// `accuracy-runs.csv`, and a second invocation that reuses every stored run.
+#[test]
+fn accuracy_compares_seed_means_and_resumes_from_the_store() {
+    let dir = scratch("accuracy");
+    let (report, store) = (dir.join("report"), dir.join("store"));
+    let accuracy = |extra: &[&str]| {
+        let mut cmd = bin();
+        cmd.arg("accuracy")
+            .arg(repo().join("studies/scenes/default.toml"))
+            .args([
+                "--set",
+                "resolution.particles=1500",
+                "--set",
+                "run.end_time_s=4e-6",
+                "--variant",
+                "dt4:run.dt_factor=4;run.max_stride=1",
+                "--noise-seeds",
+                "0",
+                "--threads",
+                "1",
+                "--out",
+            ])
+            .arg(&report)
+            .arg("--store")
+            .arg(&store)
+            .args(extra);
+        cmd.output().expect("runs")
+    };
+    let o = accuracy(&["--seeds", "2"]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    // `--seeds 2` raises the noise-floor seeds from 0 to 1: four runs in all.
+    let runs = std::fs::read_to_string(report.join("accuracy-runs.csv")).expect("runs csv");
+    assert_eq!(runs.lines().count(), 1 + 4, "{runs}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report.join("accuracy.json")).expect("json"))
+            .expect("parses");
+    assert_eq!(json["seeds"], 2);
+    assert_eq!(json["reference_runs"], 2);
+    // One dof from the reference step's pair, one from the candidate's.
+    assert_eq!(json["scatter_dof"], 2);
+    let run_rows = json["runs"].as_array().expect("runs");
+    let value = |variant: &str, seed: u64, key: &str| {
+        run_rows
+            .iter()
+            .find(|r| r["variant"] == variant && r["seed"] == seed)
+            .and_then(|r| r[key].as_f64())
+            .unwrap_or_else(|| panic!("{variant} seed {seed} {key}"))
+    };
+    let row = json["rows"]
+        .as_array()
+        .expect("rows")
+        .iter()
+        .find(|r| r["variant"] == "dt4")
+        .expect("dt4 row");
+    assert_eq!(row["seeds"], 2);
+    let key = "length_ratio";
+    let (c1, c2) = (value("dt4", 1, key), value("dt4", 2, key));
+    let (r1, r2) = (value("reference", 1, key), value("seed2", 1, key));
+    assert_ne!(c1, c2, "the two seeds of a candidate must differ");
+    let cand = row[key].as_f64().expect("R");
+    assert!((cand - 0.5 * (c1 + c2)).abs() <= 1e-12 * cand.abs());
+    let reference = 0.5 * (r1 + r2);
+    let err = row["err_length_ratio"].as_f64().expect("err");
+    assert!((err - ((cand - reference) / reference).abs()).abs() < 1e-12);
+    // Pooled scatter: each pair {a, b} adds (a - b)^2 / 2 to the sum of squares, one dof.
+    let s = (((c1 - c2).powi(2) + (r1 - r2).powi(2)) / 2.0 / 2.0).sqrt() / reference;
+    let scatter = json["seed_scatter"][0][1].as_f64().expect("scatter");
+    assert!((scatter - s).abs() < 1e-12, "{scatter} vs {s}");
+    // Noise floor for 2 seeds against 2 reference runs: 2 s sqrt(1/2 + 1/2).
+    let floor = json["noise_floor"][0][1].as_f64().expect("floor");
+    assert!((floor - 2.0 * s).abs() < 1e-12, "{floor} vs {}", 2.0 * s);
+    let md = std::fs::read_to_string(report.join("accuracy.md")).expect("md");
+    assert!(md.contains("2 SE, 2 seed(s) against 2"), "{md}");
+    assert!(report.join("pareto.png").exists());
+    // A second invocation runs nothing.
+    let o = accuracy(&["--seeds", "2"]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert_eq!(stderr.matches("(stored)").count(), 4, "{stderr}");
+    // Bad counts name the flag and the range, and lose nothing stored.
+    for bad in ["0", "10"] {
+        let o = accuracy(&["--seeds", bad]);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains("--seeds") && stderr.contains("allowed 1 to 9"),
+            "{stderr}"
+        );
+    }
+    let o = accuracy(&["--seeds", "2"]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(stderr.matches("(stored)").count(), 4, "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

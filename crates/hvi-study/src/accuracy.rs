@@ -5,23 +5,32 @@
 //! sigma_ref, scaled with sigma: `run.dt_factor = 1`), f64, the full run to the analysis time.
 //! Every variant runs to the same analysis time, and its observables are compared with the
 //! reference's: the relative error in R, va/v0, F and the largest fragment, and its energy
-//! drift. The dynamics of fragmentation are chaotic (a round-off difference grows into a
-//! different crack), so two runs that differ only in the thermal seed also differ. The
-//! reference value of each observable is therefore the mean over the reference and the
-//! *noise-floor* runs (other seeds at the reference step), and the noise floor is the largest
-//! relative deviation of one of those runs from that mean: an error below it cannot be told
-//! from zero.
+//! drift.
+//!
+//! The dynamics of fragmentation are chaotic (a round-off difference grows into a different
+//! crack), so two runs that differ only in the thermal seed also differ, and one run of a
+//! candidate against one reference cannot separate a real error from that scatter. Hence:
+//! - the reference value of each observable is the mean over the runs at the reference step
+//!   (the reference and the *noise-floor* runs, other seeds: `K_r` runs);
+//! - each candidate runs at `K` seeds (`--seeds`, default 1) and its value is their mean;
+//! - the *seed scatter* `s` of an observable is the standard deviation of one run about its
+//!   setting's mean, pooled over every setting with two or more runs (the reference step, and
+//!   each candidate when `K >= 2`), relative to the reference value: chaos, not the setting,
+//!   makes it, so the settings share it;
+//! - the *noise floor* is two standard errors of the difference of two means,
+//!   `2 s sqrt(1/K + 1/K_r)`: an error below it cannot be told from zero.
 //!
 //! Tolerances (one place: [`TOLERANCES`]): a variant is *within tolerance* when, for each
-//! observable, |error| <= max(tolerance, noise floor), and its energy drift stays within
-//! [`ENERGY_DRIFT_BOUND`]. The *recommended* setting is the cheapest variant within tolerance.
+//! observable, |error of its mean| <= max(tolerance, noise floor), and its energy drift stays
+//! within [`ENERGY_DRIFT_BOUND`] at every seed. The *recommended* setting is the cheapest
+//! variant within tolerance (mean wall time over its seeds).
 //!
 //! Runs go through the study store (fingerprinted, complete-or-absent directories), so a
 //! second invocation reuses every finished run and a killed benchmark resumes. Runs execute
 //! one after another on all threads, so their wall times compare.
 //!
-//! Writes `accuracy.csv`, `accuracy.json`, `accuracy.md` and `pareto.png` into the report
-//! directory.
+//! Writes `accuracy.csv` (a row per variant), `accuracy-runs.csv` (a row per run),
+//! `accuracy.json`, `accuracy.md` and `pareto.png` into the report directory.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -109,6 +118,23 @@ impl Variant {
 /// Most noise-floor seeds a benchmark takes (`--noise-seeds`).
 pub const MAX_NOISE_SEEDS: u32 = 8;
 
+/// Most seeds a candidate runs at (`--seeds`).
+pub const MAX_SEEDS: u32 = MAX_NOISE_SEEDS + 1;
+
+/// Checks `--seeds` (1 to [`MAX_SEEDS`]).
+pub fn check_seeds(seeds: u32) -> Result<()> {
+    if !(1..=MAX_SEEDS).contains(&seeds) {
+        bail!("--seeds = {seeds} is out of range: allowed 1 to {MAX_SEEDS}");
+    }
+    Ok(())
+}
+
+/// The `--set` that makes the run of a variant at seed `seed` (seed 1 is the scene's own:
+/// no override), the same numbering as the noise-floor runs.
+fn seed_set(seed: u32) -> Option<String> {
+    (seed > 1).then(|| format!("run.seed={seed}"))
+}
+
 /// The reference and `noise_seeds` noise-floor runs (seeds 2, 3, ...) at the paper's step.
 /// With none, the noise floor is zero and the tolerance alone applies (for scenes whose
 /// reference is too expensive to repeat).
@@ -122,13 +148,11 @@ pub fn reference_variants(noise_seeds: u32) -> Result<Vec<Variant>> {
         Role::Reference,
     )];
     for seed in 2..noise_seeds + 2 {
+        let mut sets = vec!["run.dt_factor=1".to_string(), "run.max_stride=1".into()];
+        sets.extend(seed_set(seed));
         list.push(Variant {
             name: format!("seed{seed}"),
-            sets: vec![
-                "run.dt_factor=1".into(),
-                "run.max_stride=1".into(),
-                format!("run.seed={seed}"),
-            ],
+            sets,
             role: Role::NoiseFloor,
         });
     }
@@ -205,13 +229,16 @@ pub struct AccuracyRow {
     pub role: Role,
     /// Its overrides, `;`-separated.
     pub sets: String,
-    /// Run status.
+    /// Run status: `completed` when every seed's run completed.
     pub status: String,
+    /// Completed runs averaged in this row (a candidate's seeds; 1 for the runs at the
+    /// reference step, which are rows of their own).
+    pub seeds: u32,
     /// Time step, s.
     pub dt_s: Option<f64>,
-    /// Steps.
+    /// Steps (mean over the seeds).
     pub steps: Option<u64>,
-    /// Wall time of the stepping loop, s.
+    /// Wall time of the stepping loop, s (mean over the seeds).
     pub wall_s: Option<f64>,
     /// Particles times steps per second.
     pub particle_steps_per_s: Option<f64>,
@@ -225,9 +252,9 @@ pub struct AccuracyRow {
     pub fragmentation: Option<f64>,
     /// Largest fragment's share of the impactor mass.
     pub largest_fragment_mass_fraction: Option<f64>,
-    /// Largest |relative ledger drift| over the run.
+    /// Largest |relative ledger drift| over the run (the largest over the seeds).
     pub energy_max_drift: Option<f64>,
-    /// Relative error in R against the reference.
+    /// Relative error in R (the mean over the seeds) against the reference.
     pub err_length_ratio: Option<f64>,
     /// Relative error in va/v0.
     pub err_front_velocity_ratio: Option<f64>,
@@ -239,7 +266,36 @@ pub struct AccuracyRow {
     pub max_err_rvf: Option<f64>,
     /// Every observable within max(tolerance, noise floor) and the drift within its bound.
     pub within_tolerance: bool,
-    /// Whether this invocation reused a stored run.
+    /// Whether this invocation reused every stored run of the row.
+    pub cached: bool,
+}
+
+/// One row of `accuracy-runs.csv`: one run (a variant at one seed).
+#[derive(Debug, Clone, Serialize)]
+pub struct RunRow {
+    /// Variant name.
+    pub variant: String,
+    /// Its role.
+    pub role: Role,
+    /// The thermal seed's number in the benchmark (1: the scene's own).
+    pub seed: u32,
+    /// Run status.
+    pub status: String,
+    /// Steps.
+    pub steps: Option<u64>,
+    /// Wall time of the stepping loop, s.
+    pub wall_s: Option<f64>,
+    /// R.
+    pub length_ratio: Option<f64>,
+    /// va / v0.
+    pub front_velocity_ratio: Option<f64>,
+    /// F.
+    pub fragmentation: Option<f64>,
+    /// Largest fragment's share of the impactor mass.
+    pub largest_fragment_mass_fraction: Option<f64>,
+    /// Largest |relative ledger drift| over the run.
+    pub energy_max_drift: Option<f64>,
+    /// Whether this invocation reused the stored run.
     pub cached: bool,
 }
 
@@ -285,17 +341,28 @@ pub struct AccuracyReport {
     pub sets: Vec<String>,
     /// Threads per run.
     pub threads: usize,
+    /// Seeds per candidate (`K`).
+    pub seeds: u32,
+    /// Completed runs at the reference step (`K_r`).
+    pub reference_runs: usize,
     /// Reference value per observable: the mean over the runs at the reference step.
     pub reference_values: Vec<(String, Option<f64>)>,
-    /// Noise floor per observable: the largest |relative deviation| of a run at the reference
-    /// step from that mean.
+    /// Seed scatter per observable: the standard deviation of one run about its setting's
+    /// mean, pooled over every setting with two or more runs, relative to the reference value.
+    pub seed_scatter: Vec<(String, f64)>,
+    /// Degrees of freedom of the pooled seed scatter (0: no setting ran twice).
+    pub scatter_dof: usize,
+    /// Noise floor per observable for a candidate at `seeds` seeds: two standard errors of the
+    /// difference of its mean and the reference value, `2 s sqrt(1/K + 1/K_r)`.
     pub noise_floor: Vec<(String, f64)>,
     /// Tolerance per observable (relative).
     pub tolerances: Vec<(String, f64)>,
     /// Energy drift bound.
     pub energy_drift_bound: f64,
-    /// The rows.
+    /// The rows, one per variant.
     pub rows: Vec<AccuracyRow>,
+    /// Every run, one per variant and seed.
+    pub runs: Vec<RunRow>,
     /// The cheapest candidate within tolerance.
     pub recommended: Option<String>,
 }
@@ -307,17 +374,52 @@ fn rel_err(v: Option<f64>, r: Option<f64>) -> Option<f64> {
     }
 }
 
-/// Runs (or reuses) every variant of `scene_text` and compares it with the reference.
+/// Pooled seed scatter of one observable: the standard deviation of one run about its
+/// group's mean, pooled over the groups with two or more values, and its degrees of freedom.
+fn pooled_scatter(groups: &[Vec<f64>]) -> (f64, usize) {
+    let (mut sum_sq, mut dof) = (0.0f64, 0usize);
+    for g in groups.iter().filter(|g| g.len() >= 2) {
+        let mean = g.iter().sum::<f64>() / g.len() as f64;
+        sum_sq += g.iter().map(|x| (x - mean).powi(2)).sum::<f64>();
+        dof += g.len() - 1;
+    }
+    if dof == 0 {
+        (0.0, 0)
+    } else {
+        ((sum_sq / dof as f64).sqrt(), dof)
+    }
+}
+
+/// Two standard errors of the difference of a mean over `k` runs and one over `k_r` runs,
+/// for a scatter `s` of one run: the noise floor.
+fn noise_floor_of(s: f64, k: usize, k_r: usize) -> f64 {
+    if k == 0 || k_r == 0 {
+        return 0.0;
+    }
+    2.0 * s * (1.0 / k as f64 + 1.0 / k_r as f64).sqrt()
+}
+
+fn mean(vals: impl IntoIterator<Item = f64>) -> Option<f64> {
+    let (sum, n) = vals
+        .into_iter()
+        .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    (n > 0).then(|| sum / n as f64)
+}
+
+/// Runs (or reuses) every variant of `scene_text`, candidates at `seeds` seeds each, and
+/// compares it with the reference.
 pub fn accuracy(
     scene_path: &Path,
     common_sets: &[String],
     variants: &[Variant],
+    seeds: u32,
     threads: usize,
     store_dir: &Path,
     report_dir: &Path,
 ) -> Result<AccuracyReport> {
     let text = std::fs::read_to_string(scene_path)
         .with_context(|| format!("cannot read scene file {}", scene_path.display()))?;
+    check_seeds(seeds)?;
     if variants
         .iter()
         .filter(|v| v.role == Role::Reference)
@@ -326,54 +428,84 @@ pub fn accuracy(
     {
         bail!("the variants must hold exactly one reference");
     }
-    // Validate every variant before running anything.
-    let mut jobs = Vec::new();
-    for v in variants {
-        let mut sets = common_sets.to_vec();
-        sets.extend(v.sets.iter().cloned());
-        let spec = parse_scene(&text, &sets).with_context(|| format!("variant `{}`", v.name))?;
-        spec.build()
-            .with_context(|| format!("variant `{}`", v.name))?;
-        if !spec.analysis.cloud {
-            bail!(
-                "variant `{}`: analysis.cloud = false, but the benchmark compares cloud observables",
-                v.name
-            );
+    // The extra seeds are numbered 2, 3, ...: the scene's own must not be one of them.
+    let base = parse_scene(&text, common_sets)?;
+    let extra_seeds = variants
+        .iter()
+        .filter(|v| v.role == Role::NoiseFloor)
+        .count()
+        .max(seeds as usize - 1) as u64;
+    if (2..=extra_seeds + 1).contains(&base.run.seed) {
+        bail!(
+            "run.seed = {} collides with the benchmark's extra seeds 2 to {}: use run.seed = 1 or above {}",
+            base.run.seed,
+            extra_seeds + 1,
+            extra_seeds + 1
+        );
+    }
+    // Validate every run before running anything: (variant, seed, job).
+    let mut jobs: Vec<(usize, u32, Job)> = Vec::new();
+    for (i, v) in variants.iter().enumerate() {
+        let runs = if v.role == Role::Candidate { seeds } else { 1 };
+        for seed in 1..=runs {
+            let mut sets = common_sets.to_vec();
+            sets.extend(v.sets.iter().cloned());
+            sets.extend(seed_set(seed));
+            let what = if runs > 1 {
+                format!("variant `{}` at seed {seed}", v.name)
+            } else {
+                format!("variant `{}`", v.name)
+            };
+            let spec = parse_scene(&text, &sets).with_context(|| what.clone())?;
+            spec.build().with_context(|| what.clone())?;
+            if !spec.analysis.cloud {
+                bail!(
+                    "{what}: analysis.cloud = false, but the benchmark compares cloud observables"
+                );
+            }
+            let fp = fingerprint(&spec, "accuracy")?;
+            let params = serde_json::Map::from_iter([(
+                "variant".to_string(),
+                serde_json::Value::String(v.name.clone()),
+            )]);
+            jobs.push((
+                i,
+                seed,
+                Job {
+                    fingerprint: fp,
+                    scene: spec,
+                    study: "accuracy".into(),
+                    tier: "accuracy".into(),
+                    params,
+                },
+            ));
         }
-        let fp = fingerprint(&spec, "accuracy")?;
-        let params = serde_json::Map::from_iter([(
-            "variant".to_string(),
-            serde_json::Value::String(v.name.clone()),
-        )]);
-        jobs.push(Job {
-            fingerprint: fp,
-            scene: spec,
-            study: "accuracy".into(),
-            tier: "accuracy".into(),
-            params,
-        });
     }
     let store = Store::open(store_dir)?;
     let mut results: Vec<Measured> = Vec::with_capacity(jobs.len());
-    for (k, (job, v)) in jobs.iter().zip(variants).enumerate() {
+    for (k, (i, seed, job)) in jobs.iter().enumerate() {
+        let v = &variants[*i];
+        let label = if v.role == Role::Candidate && seeds > 1 {
+            format!("{} seed {seed}", v.name)
+        } else {
+            v.name.clone()
+        };
         let prior = store.lookup(&job.fingerprint)?;
         let cached = matches!(&prior, Some(r) if r.status == RunStatus::Completed);
         if !cached {
             eprintln!(
-                "accuracy [{}/{}] {} ({}) ...",
+                "accuracy [{}/{}] {label} ({}) ...",
                 k + 1,
                 jobs.len(),
-                v.name,
                 v.sets.join(" ")
             );
             store.execute(job, threads)?;
         }
         let m = measured(&store, &job.fingerprint, cached)?;
         eprintln!(
-            "accuracy [{}/{}] {}: {}{}",
+            "accuracy [{}/{}] {label}: {}{}",
             k + 1,
             jobs.len(),
-            v.name,
             match (m.status, m.wall_s) {
                 (RunStatus::Completed, Some(w)) => format!("{w:.1} s"),
                 (RunStatus::Completed, None) => "done".into(),
@@ -384,11 +516,20 @@ pub fn accuracy(
         );
         results.push(m);
     }
+    let completed = |m: &&Measured| m.status == RunStatus::Completed;
+    // The runs of each variant, in order.
+    let runs_of = |i: usize| -> Vec<&Measured> {
+        jobs.iter()
+            .zip(&results)
+            .filter(|((j, _, _), _)| *j == i)
+            .map(|(_, m)| m)
+            .collect()
+    };
     let reference_index = variants
         .iter()
         .position(|v| v.role == Role::Reference)
         .unwrap_or(0);
-    let reference = results[reference_index].clone();
+    let reference = runs_of(reference_index)[0].clone();
     if reference.status != RunStatus::Completed {
         bail!(
             "the reference run failed: {}",
@@ -396,65 +537,117 @@ pub fn accuracy(
         );
     }
     // The reference values: means over the runs at the reference step (reference + seeds).
-    let at_reference_step: Vec<&Measured> = variants
+    let at_reference_step: Vec<&Measured> = jobs
         .iter()
         .zip(&results)
-        .filter(|(v, m)| v.role != Role::Candidate && m.status == RunStatus::Completed)
+        .filter(|((i, _, _), m)| variants[*i].role != Role::Candidate && completed(m))
         .map(|(_, m)| m)
         .collect();
-    let mean_of = |key: &str| {
-        let vals: Vec<f64> = at_reference_step
-            .iter()
-            .filter_map(|m| m.obs.get(key))
-            .collect();
-        (!vals.is_empty()).then(|| vals.iter().sum::<f64>() / vals.len() as f64)
-    };
+    let reference_runs = at_reference_step.len();
     let reference_values: Vec<(String, Option<f64>)> = TOLERANCES
         .iter()
-        .map(|(key, _, _)| (key.to_string(), mean_of(key)))
-        .collect();
-    let noise_floor: Vec<(String, f64)> = reference_values
-        .iter()
-        .map(|(key, mean)| {
-            let spread = at_reference_step
-                .iter()
-                .filter_map(|m| rel_err(m.obs.get(key), *mean))
-                .fold(0.0f64, f64::max);
-            (key.clone(), spread)
+        .map(|(key, _, _)| {
+            let value = mean(at_reference_step.iter().filter_map(|m| m.obs.get(key)));
+            (key.to_string(), value)
         })
         .collect();
+    // The seed scatter, pooled over the reference step and every candidate's seeds.
+    let mut candidate_groups: Vec<Vec<&Measured>> = Vec::new();
+    for (i, v) in variants.iter().enumerate() {
+        if v.role == Role::Candidate {
+            candidate_groups.push(runs_of(i).into_iter().filter(completed).collect());
+        }
+    }
+    let mut scatter_dof = 0;
+    let seed_scatter: Vec<(String, f64)> = reference_values
+        .iter()
+        .map(|(key, value)| {
+            let groups: Vec<Vec<f64>> = std::iter::once(&at_reference_step)
+                .chain(&candidate_groups)
+                .map(|g| g.iter().filter_map(|m| m.obs.get(key)).collect())
+                .collect();
+            let (s, dof) = pooled_scatter(&groups);
+            scatter_dof = scatter_dof.max(dof);
+            let rel = match value {
+                Some(r) if *r != 0.0 => s / r.abs(),
+                _ => 0.0,
+            };
+            (key.clone(), rel)
+        })
+        .collect();
+    let floor_for = |k: usize| -> Vec<f64> {
+        seed_scatter
+            .iter()
+            .map(|(_, s)| noise_floor_of(*s, k, reference_runs))
+            .collect()
+    };
     let mut rows: Vec<AccuracyRow> = Vec::new();
-    for (v, m) in variants.iter().zip(&results) {
+    let mut run_rows: Vec<RunRow> = Vec::new();
+    for (i, v) in variants.iter().enumerate() {
+        let all = runs_of(i);
+        for ((_, seed, _), m) in jobs.iter().zip(&results).filter(|((j, _, _), _)| *j == i) {
+            run_rows.push(RunRow {
+                variant: v.name.clone(),
+                role: v.role,
+                seed: *seed,
+                status: if m.status == RunStatus::Completed {
+                    "completed"
+                } else {
+                    "failed"
+                }
+                .into(),
+                steps: m.steps,
+                wall_s: m.wall_s,
+                length_ratio: m.obs.length_ratio,
+                front_velocity_ratio: m.obs.front_velocity_ratio,
+                fragmentation: m.obs.fragmentation,
+                largest_fragment_mass_fraction: m.obs.largest_fragment_mass_fraction,
+                energy_max_drift: m.max_drift,
+                cached: m.cached,
+            });
+        }
+        let done: Vec<&Measured> = all.iter().copied().filter(completed).collect();
+        let all_completed = !done.is_empty() && done.len() == all.len();
+        let obs = |key: &str| mean(done.iter().filter_map(|m| m.obs.get(key)));
         let errs: Vec<Option<f64>> = reference_values
             .iter()
-            .map(|(k, mean)| rel_err(m.obs.get(k), *mean))
+            .map(|(k, value)| rel_err(obs(k), *value))
             .collect();
-        let completed = m.status == RunStatus::Completed;
-        let within = completed
+        let max_drift = if all_completed {
+            done.iter()
+                .map(|m| m.max_drift)
+                .try_fold(0.0f64, |a, d| d.map(|d| a.max(d)))
+        } else {
+            None
+        };
+        let wall_s = mean(done.iter().filter_map(|m| m.wall_s));
+        let within = all_completed
             && TOLERANCES
                 .iter()
                 .zip(&errs)
-                .zip(&noise_floor)
-                .all(|(((_, _, tol), e), (_, floor))| e.is_some_and(|e| e <= tol.max(*floor)))
-            && m.max_drift.is_some_and(|d| d <= ENERGY_DRIFT_BOUND);
+                .zip(floor_for(done.len()))
+                .all(|(((_, _, tol), e), floor)| e.is_some_and(|e| e <= tol.max(floor)))
+            && max_drift.is_some_and(|d| d <= ENERGY_DRIFT_BOUND);
         rows.push(AccuracyRow {
             variant: v.name.clone(),
             role: v.role,
             sets: v.sets.join(";"),
-            status: if completed { "completed" } else { "failed" }.into(),
-            dt_s: m.dt_s,
-            steps: m.steps,
-            wall_s: m.wall_s,
-            particle_steps_per_s: m.rate,
-            speedup: match (reference.wall_s, m.wall_s) {
+            status: if all_completed { "completed" } else { "failed" }.into(),
+            seeds: done.len() as u32,
+            dt_s: done.first().and_then(|m| m.dt_s),
+            steps: mean(done.iter().filter_map(|m| m.steps.map(|s| s as f64)))
+                .map(|s| s.round() as u64),
+            wall_s,
+            particle_steps_per_s: mean(done.iter().filter_map(|m| m.rate)),
+            speedup: match (reference.wall_s, wall_s) {
                 (Some(r), Some(w)) if w > 0.0 => Some(r / w),
                 _ => None,
             },
-            length_ratio: m.obs.length_ratio,
-            front_velocity_ratio: m.obs.front_velocity_ratio,
-            fragmentation: m.obs.fragmentation,
-            largest_fragment_mass_fraction: m.obs.largest_fragment_mass_fraction,
-            energy_max_drift: m.max_drift,
+            length_ratio: obs("length_ratio"),
+            front_velocity_ratio: obs("front_velocity_ratio"),
+            fragmentation: obs("fragmentation"),
+            largest_fragment_mass_fraction: obs("largest_fragment_mass_fraction"),
+            energy_max_drift: max_drift,
             err_length_ratio: errs[0],
             err_front_velocity_ratio: errs[1],
             err_fragmentation: errs[2],
@@ -463,7 +656,7 @@ pub fn accuracy(
                 .iter()
                 .try_fold(0.0f64, |a, e| e.map(|e| a.max(e))),
             within_tolerance: within,
-            cached: m.cached,
+            cached: all.iter().all(|m| m.cached),
         });
     }
     let recommended = rows
@@ -472,11 +665,20 @@ pub fn accuracy(
         .filter_map(|r| r.wall_s.map(|w| (w, r)))
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|(_, r)| r.variant.clone());
+    let noise_floor = seed_scatter
+        .iter()
+        .zip(floor_for(seeds as usize))
+        .map(|((k, _), f)| (k.clone(), f))
+        .collect();
     let report = AccuracyReport {
         scene: scene_path.display().to_string(),
         sets: common_sets.to_vec(),
         threads,
+        seeds,
+        reference_runs,
         reference_values,
+        seed_scatter,
+        scatter_dof,
         noise_floor,
         tolerances: TOLERANCES
             .iter()
@@ -484,11 +686,13 @@ pub fn accuracy(
             .collect(),
         energy_drift_bound: ENERGY_DRIFT_BOUND,
         rows,
+        runs: run_rows,
         recommended,
     };
     std::fs::create_dir_all(report_dir)
         .with_context(|| format!("cannot create {}", report_dir.display()))?;
     write_csv_atomic(&report_dir.join("accuracy.csv"), &report.rows)?;
+    write_csv_atomic(&report_dir.join("accuracy-runs.csv"), &report.runs)?;
     write_atomic_bytes(
         &report_dir.join("accuracy.json"),
         serde_json::to_string_pretty(&report)?.as_bytes(),
@@ -518,20 +722,23 @@ pub fn markdown(r: &AccuracyReport) -> String {
     }
     let _ = writeln!(
         s,
-        "Reference: the paper's step (run.dt_factor = 1), f64, to the analysis time; the reference value of each observable is the mean over the runs at that step (the reference and the other seeds). {} thread(s) per run, runs one after another. Errors are relative to the reference values, in %. Wall times are as measured on this machine, with whatever else ran on it.\n",
+        "Reference: the paper's step (run.dt_factor = 1), f64, to the analysis time; the reference value of each observable is the mean over the {} runs at that step (the reference and the other seeds). Each candidate ran at {} seed(s); its values and wall time are the means over them (`accuracy-runs.csv` holds every run). {} thread(s) per run, runs one after another. Errors are relative to the reference values, in %. Wall times are as measured on this machine, with whatever else ran on it.\n",
+        r.reference_runs,
+        r.seeds,
         r.threads
     );
     let _ = writeln!(
         s,
-        "| variant | role | dt (s) | steps | wall (s) | speed-up | particle-steps/s | R | va/v0 | F | largest frag. | max drift | err R % | err va % | err F % | err largest % | within |"
+        "| variant | role | seeds | dt (s) | steps | wall (s) | speed-up | particle-steps/s | R | va/v0 | F | largest frag. | max drift | err R % | err va % | err F % | err largest % | within |"
     );
-    let _ = writeln!(s, "|{}", "---|".repeat(17));
+    let _ = writeln!(s, "|{}", "---|".repeat(18));
     for row in &r.rows {
         let _ = writeln!(
             s,
-            "| {} | {:?} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {:?} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             row.variant,
             row.role,
+            row.seeds,
             row.dt_s.map_or("-".into(), |v| format!("{v:.2e}")),
             row.steps.map_or("-".into(), |v| v.to_string()),
             opt(row.wall_s, 1),
@@ -560,13 +767,18 @@ pub fn markdown(r: &AccuracyReport) -> String {
         );
     }
     let _ = writeln!(s, "\n## Tolerances and noise floor\n");
-    let _ = writeln!(s, "| observable | reference value (mean at the paper's step) | tolerance % | noise floor % (largest deviation of a seed from the mean) | applied % |");
-    let _ = writeln!(s, "|---|---|---|---|---|");
-    for (((k, t), (_, f)), (_, mean)) in r
+    let _ = writeln!(
+        s,
+        "| observable | reference value (mean at the paper's step) | tolerance % | seed scatter % (one run, pooled, {} dof) | noise floor % (2 SE, {} seed(s) against {}) | applied % |",
+        r.scatter_dof, r.seeds, r.reference_runs
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|");
+    for ((((k, t), (_, f)), (_, mean)), (_, sd)) in r
         .tolerances
         .iter()
         .zip(&r.noise_floor)
         .zip(&r.reference_values)
+        .zip(&r.seed_scatter)
     {
         let label = TOLERANCES
             .iter()
@@ -574,16 +786,17 @@ pub fn markdown(r: &AccuracyReport) -> String {
             .map_or(k.as_str(), |x| x.1);
         let _ = writeln!(
             s,
-            "| {label} | {} | {:.2} | {:.2} | {:.2} |",
+            "| {label} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
             opt(*mean, 4),
             100.0 * t,
+            100.0 * sd,
             100.0 * f,
             100.0 * t.max(*f)
         );
     }
     let _ = writeln!(
         s,
-        "\nA candidate is within tolerance when every observable's error is at most max(tolerance, noise floor) and its largest energy-ledger drift is at most {:.0e}. Fragmentation is chaotic: runs that differ only in the thermal seed differ by the noise floor, so an error below it cannot be told from zero.\n",
+        "\nA candidate is within tolerance when the error of its mean is, for every observable, at most max(tolerance, noise floor), and its largest energy-ledger drift is at most {:.0e} at every seed. Fragmentation is chaotic: runs that differ only in the thermal seed differ by the seed scatter (the standard deviation of one run about its setting's mean, pooled over every setting that ran more than once), and the noise floor is two standard errors of the difference of a candidate's mean and the reference value, 2 s sqrt(1/K + 1/K_r): an error below it cannot be told from zero. More seeds (`--seeds`, `--noise-seeds`) lower it.\n",
         r.energy_drift_bound
     );
     match &r.recommended {
@@ -670,7 +883,8 @@ pub fn pareto_plot(path: &Path, r: &AccuracyReport) -> Result<()> {
                         RGBColor(200, 200, 200).mix(0.4).filled(),
                     )))?
                     .label(format!(
-                        "noise floor (seeds at the paper step): {:.2} %",
+                        "noise floor (2 SE, {} seed(s)): {:.2} %",
+                        r.seeds,
                         100.0 * floor_rvf
                     ))
                     .legend(|(x, y)| {
@@ -824,6 +1038,27 @@ mod tests {
         assert!(r[3].sets.contains(&"run.seed=4".to_string()));
         let e = reference_variants(MAX_NOISE_SEEDS + 1).expect_err("out of range");
         assert!(e.to_string().contains("--noise-seeds"), "{e}");
+    }
+
+    #[test]
+    fn pooled_scatter_and_noise_floor() {
+        // Two groups: {1, 3} (sum of squares 2, 1 dof) and {4, 6, 8} (8, 2 dof); one-run
+        // groups add nothing.
+        let (s, dof) = pooled_scatter(&[vec![1.0, 3.0], vec![4.0, 6.0, 8.0], vec![100.0]]);
+        assert_eq!(dof, 3);
+        assert!((s - (10.0f64 / 3.0).sqrt()).abs() < 1e-12, "{s}");
+        assert_eq!(pooled_scatter(&[vec![1.0], vec![2.0]]), (0.0, 0));
+        // 2 SE of a difference of means: 2 s sqrt(1/K + 1/K_r).
+        assert!((noise_floor_of(0.01, 1, 3) - 0.02 * (4.0f64 / 3.0).sqrt()).abs() < 1e-15);
+        assert!((noise_floor_of(0.01, 3, 3) - 0.02 * (2.0f64 / 3.0).sqrt()).abs() < 1e-15);
+        assert_eq!(noise_floor_of(0.01, 0, 3), 0.0);
+        // More seeds lower the floor.
+        assert!(noise_floor_of(0.01, 4, 4) < noise_floor_of(0.01, 2, 4));
+        assert!(check_seeds(0).is_err());
+        let e = check_seeds(MAX_SEEDS + 1).expect_err("out of range");
+        assert!(e.to_string().contains("--seeds"), "{e}");
+        assert_eq!(seed_set(1), None);
+        assert_eq!(seed_set(3).as_deref(), Some("run.seed=3"));
     }
 
     #[test]

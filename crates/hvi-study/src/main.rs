@@ -133,9 +133,14 @@ enum Command {
         #[arg(long)]
         store: Option<PathBuf>,
         /// Noise-floor runs: other seeds at the paper's step (0 to 8). With 0 the tolerance
-        /// alone applies; for scenes whose reference takes hours.
+        /// alone applies; for scenes whose reference takes hours. Raised to seeds - 1 when
+        /// `--seeds` asks for more.
         #[arg(long, default_value_t = 2)]
         noise_seeds: u32,
+        /// Seeds per candidate (1 to 9): each candidate's value is the mean over its runs at
+        /// seeds 1..K, compared with the reference value within two standard errors.
+        #[arg(long, default_value_t = 1)]
+        seeds: u32,
     },
 }
 
@@ -200,8 +205,11 @@ fn main() -> ExitCode {
             out,
             store,
             noise_seeds,
+            seeds,
         } => (|| {
             use hvi_study::accuracy::{self, Variant};
+            accuracy::check_seeds(seeds)?;
+            let noise_seeds = noise_seeds.max(seeds.saturating_sub(1));
             let mut list: Vec<Variant> = accuracy::reference_variants(noise_seeds)?;
             if variants.is_empty() {
                 list.extend(accuracy::default_candidates());
@@ -217,7 +225,8 @@ fn main() -> ExitCode {
             let store = store.unwrap_or_else(|| PathBuf::from("runs/accuracy").join(stem));
             let pool = thread_pool(threads)?;
             let threads = pool.current_num_threads();
-            let report = accuracy::accuracy(&scene, &sets, &list, threads, &store, &report_dir)?;
+            let report =
+                accuracy::accuracy(&scene, &sets, &list, seeds, threads, &store, &report_dir)?;
             print!("{}", accuracy::markdown(&report));
             println!("report: {}", report_dir.join("accuracy.md").display());
             Ok(())
