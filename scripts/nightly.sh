@@ -16,9 +16,9 @@
 # rewritten after every stage, so it shows how far the night got), $HVI_NIGHTLY_DIR/previous
 # (the night before), $HVI_NIGHTLY_DIR/nightly.lock. The runs are kept in the study store
 # (runs/reproduce/<tier>, by fingerprint): a night simulates only what is missing. The paper
-# tier's first complete pass takes days on two cores (report.md states the estimate), so it
-# spreads over several nights: while a night's reproduction still runs, the next one is
-# skipped. Once complete, a night redraws every figure from the stored runs in minutes, and
+# tier's first complete pass takes hours on two cores (report.md states the estimate and the
+# measured time; it fits in one night); should it overrun, it spreads over several nights:
+# while a night's reproduction still runs, the next one is skipped. Once complete, a night redraws every figure from the stored runs in minutes, and
 # re-simulates only what a change of the engine version invalidates.
 set -euo pipefail
 cd "$(dirname "$0")/.."

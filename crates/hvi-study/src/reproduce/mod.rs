@@ -42,7 +42,7 @@ use stages::Ctx;
 #[derive(Args, Debug, Clone)]
 pub struct ReproduceArgs {
     /// The tier, as named in the config: `quick` (CI, a few minutes) or `paper` (the paper's
-    /// resolutions: days on two cores).
+    /// resolutions: hours on two cores; `--dry-run` prints the estimate).
     #[arg(long)]
     pub tier: String,
     /// The report directory: report.md, reproduce.json and the figures (default
