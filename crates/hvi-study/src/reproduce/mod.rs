@@ -307,13 +307,7 @@ pub fn estimate(plans: &Plans, tier: &str, cfg: &EstimateConfig) -> Result<Estim
         let costs: Vec<(usize, f64)> = plan
             .runs
             .par_iter()
-            .map(|r| {
-                let setup = r.scene.build()?;
-                Ok((
-                    setup.particles.len(),
-                    setup.particles.len() as f64 * setup.derived.steps as f64,
-                ))
-            })
+            .map(|r| crate::study::exec::run_cost(&r.scene))
             .collect::<Result<_>>()?;
         let particle_steps: f64 = costs.iter().map(|c| c.1).sum();
         rows.push(EstimateRow {

@@ -5,6 +5,14 @@
 //! pool of max(1, T / min(T, P)) threads (so a single run, e.g. one refinement step of
 //! `calibrate`, uses every core, and a grid spreads runs across cores). Results do not depend
 //! on the thread counts (the engine is bit-identical at any count).
+//!
+//! Order ([`schedule`]): a run's pool cannot grow once it started, so a run that costs more
+//! than the others' share would finish last on one pool while the other cores idle. The runs
+//! to do are therefore ordered by cost (particles x base steps, [`run_cost`]), largest first;
+//! and while the largest costs more than 1/(runs at once) of what is left, it runs alone on
+//! every thread before the rest (unless `--jobs` fixes the runs at once). Fig. 5's
+//! convergence stage, say, is one 7.5e5-particle run and four smaller ones that together cost
+//! less than half of it.
 
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -12,6 +20,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use rayon::prelude::*;
 
 use super::store::{Job, Record, RunStatus, Store};
 
@@ -65,6 +74,68 @@ impl ExecReport {
     }
 }
 
+/// What a run costs, in particles x base steps (the scene built by the engine, so the base
+/// step is the one it would run with), and its particle count.
+pub fn run_cost(scene: &hvi_engine::scene::SceneSpec) -> Result<(usize, f64)> {
+    let setup = scene.build()?;
+    let n = setup.particles.len();
+    Ok((n, n as f64 * setup.derived.steps as f64))
+}
+
+/// One phase of an execution: runs (indices into the costs), taken in this order by `at_once`
+/// workers of `per_run` threads each.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Phase {
+    /// Runs, in the order they start.
+    pub runs: Vec<usize>,
+    /// Runs at once.
+    pub at_once: usize,
+    /// Threads per run.
+    pub per_run: usize,
+}
+
+/// A run goes alone on every thread when it costs more than this times its share of what is
+/// left (1/(runs at once)). Above 1, because a run on T threads goes at less than T times
+/// its speed on one (0.75-0.9 of it on 2 threads): on 2 threads, alone wins from about 0.55
+/// to 0.6 of what is left.
+pub const ALONE_ABOVE_SHARE: f64 = 1.2;
+
+/// The order and thread split of runs costing `costs`: first, alone on every thread, each
+/// run that costs more than [`ALONE_ABOVE_SHARE`] times its share of what is left (only when
+/// `jobs` is not fixed); then the rest, largest first (ties in the given order), split by
+/// [`thread_split`].
+pub fn schedule(threads: usize, jobs: Option<usize>, costs: &[f64]) -> Vec<Phase> {
+    let mut order: Vec<usize> = (0..costs.len()).collect();
+    order.sort_by(|&a, &b| costs[b].total_cmp(&costs[a]).then(a.cmp(&b)));
+    let mut phases = Vec::new();
+    let mut rest: &[usize] = &order;
+    if jobs.is_none() {
+        let (_, all) = thread_split(threads, Some(1), 1);
+        while let Some((&first, tail)) = rest.split_first() {
+            let (at_once, _) = thread_split(threads, None, rest.len());
+            let left: f64 = rest.iter().map(|&i| costs[i]).sum();
+            if at_once < 2 || costs[first] <= ALONE_ABOVE_SHARE * left / at_once as f64 {
+                break;
+            }
+            phases.push(Phase {
+                runs: vec![first],
+                at_once: 1,
+                per_run: all,
+            });
+            rest = tail;
+        }
+    }
+    if !rest.is_empty() {
+        let (at_once, per_run) = thread_split(threads, jobs, rest.len());
+        phases.push(Phase {
+            runs: rest.to_vec(),
+            at_once,
+            per_run,
+        });
+    }
+    phases
+}
+
 /// The thread split: (runs at once, threads per run).
 pub fn thread_split(threads: usize, jobs: Option<usize>, pending: usize) -> (usize, usize) {
     let threads = if threads == 0 {
@@ -104,7 +175,29 @@ pub fn execute(
         }
     }
     let cached = records.iter().filter(|r| r.is_some()).count();
-    let (at_once, per_run) = thread_split(opts.threads, opts.jobs, pending.len());
+    // Largest first, the dominant ones alone (see the module's doc). Costing builds each
+    // scene once, in parallel: seconds against the runs' minutes.
+    let phases = if pending.len() > 1 {
+        let costs: Vec<f64> = pending
+            .par_iter()
+            // A scene that does not build costs nothing here; its run fails with the reason.
+            .map(|&i| run_cost(&jobs[i].scene).map_or(0.0, |c| c.1))
+            .collect();
+        schedule(opts.threads, opts.jobs, &costs)
+            .into_iter()
+            .map(|p| Phase {
+                runs: p.runs.iter().map(|&k| pending[k]).collect(),
+                ..p
+            })
+            .collect()
+    } else {
+        let (at_once, per_run) = thread_split(opts.threads, opts.jobs, pending.len());
+        vec![Phase {
+            runs: pending.clone(),
+            at_once,
+            per_run,
+        }]
+    };
 
     let bar = if opts.progress && !pending.is_empty() {
         let target = if std::io::stderr().is_terminal() {
@@ -134,20 +227,49 @@ pub fn execute(
         }
     };
     if opts.progress {
+        let solo: Vec<&Phase> = phases.iter().take_while(|p| p.at_once == 1).collect();
+        let mut parts: Vec<String> = Vec::new();
+        if phases.len() > 1 && !solo.is_empty() {
+            parts.push(format!(
+                "{} one at a time on {} threads",
+                solo.len(),
+                solo[0].per_run
+            ));
+        }
+        let shared = if phases.len() > 1 {
+            &phases[solo.len()..]
+        } else {
+            &phases[..]
+        };
+        for p in shared {
+            parts.push(format!(
+                "{} at once, {} thread{} each",
+                p.at_once,
+                p.per_run,
+                if p.per_run == 1 { "" } else { "s" }
+            ));
+        }
         say(format!(
-            "{} runs: {} cached, {} to run ({} at once, {} threads each)",
+            "{} runs: {} cached, {} to run ({}{})",
             jobs.len(),
             cached,
             pending.len(),
-            if pending.is_empty() { 0 } else { at_once },
-            per_run
+            if pending.is_empty() {
+                "0 at once".to_string()
+            } else {
+                parts.join(", then ")
+            },
+            if phases.len() > 1 {
+                "; largest first"
+            } else {
+                ""
+            }
         ));
     }
 
     let done = AtomicUsize::new(0);
-    let next = AtomicUsize::new(0);
     let failed_now = AtomicUsize::new(0);
-    let run_one = |i: usize| -> Result<Record> {
+    let run_one = |i: usize, per_run: usize| -> Result<Record> {
         let r = store.execute(&jobs[i], per_run);
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
         let line = match &r {
@@ -191,31 +313,36 @@ pub fn execute(
         }
         r
     };
-    // One plain OS thread per concurrent run, each taking the next pending run in plan order;
-    // the run itself goes to its own rayon pool. (Outer rayon workers would, while waiting
-    // for a run's pool, steal further runs onto their stacks and start every run at once.)
-    let results: Vec<(usize, Result<Record>)> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (0..at_once)
-            .map(|_| {
-                scope.spawn(|| {
-                    let mut out = Vec::new();
-                    loop {
-                        let k = next.fetch_add(1, Ordering::Relaxed);
-                        let Some(&i) = pending.get(k) else { break };
-                        out.push((i, run_one(i)));
-                    }
-                    out
+    // Per phase, one plain OS thread per concurrent run, each taking the phase's next run; the
+    // run itself goes to its own rayon pool. (Outer rayon workers would, while waiting for a
+    // run's pool, steal further runs onto their stacks and start every run at once.)
+    let mut results: Vec<(usize, Result<Record>)> = Vec::new();
+    for phase in &phases {
+        let next = AtomicUsize::new(0);
+        let done_phase: Vec<(usize, Result<Record>)> = std::thread::scope(|scope| {
+            let workers: Vec<_> = (0..phase.at_once)
+                .map(|_| {
+                    scope.spawn(|| {
+                        let mut out = Vec::new();
+                        loop {
+                            let k = next.fetch_add(1, Ordering::Relaxed);
+                            let Some(&i) = phase.runs.get(k) else { break };
+                            out.push((i, run_one(i, phase.per_run)));
+                        }
+                        out
+                    })
                 })
-            })
-            .collect();
-        workers
-            .into_iter()
-            .flat_map(|w| match w.join() {
-                Ok(v) => v,
-                Err(p) => std::panic::resume_unwind(p),
-            })
-            .collect()
-    });
+                .collect();
+            workers
+                .into_iter()
+                .flat_map(|w| match w.join() {
+                    Ok(v) => v,
+                    Err(p) => std::panic::resume_unwind(p),
+                })
+                .collect()
+        });
+        results.extend(done_phase);
+    }
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
@@ -267,5 +394,61 @@ mod tests {
         assert_eq!(thread_split(8, None, 3), (3, 2));
         assert_eq!(thread_split(8, Some(1), 3), (1, 8));
         assert_eq!(thread_split(4, None, 0), (1, 4));
+    }
+
+    #[test]
+    fn dominant_runs_go_alone_and_the_rest_largest_first() {
+        // Fig. 5's stage: counts 3.4e4 .. 7.5e5, cost ~ N^(4/3): each run costs more than 0.6
+        // of what is left after the larger ones, so all go one at a time, largest first.
+        let costs = [1.0, 2.5, 6.4, 16.0, 62.0];
+        let p = schedule(2, None, &costs);
+        let order: Vec<usize> = p.iter().flat_map(|p| p.runs.clone()).collect();
+        assert_eq!(order, vec![4, 3, 2, 1, 0]);
+        assert!(p.iter().all(|p| p.at_once == 1 && p.per_run == 2), "{p:?}");
+        // One large run among many: alone, then the others two at once, largest first.
+        assert_eq!(
+            schedule(2, None, &[1.0, 2.0, 30.0, 3.0, 2.0, 1.0]),
+            vec![
+                Phase {
+                    runs: vec![2],
+                    at_once: 1,
+                    per_run: 2
+                },
+                Phase {
+                    runs: vec![3, 1, 4, 0, 5],
+                    at_once: 2,
+                    per_run: 1
+                },
+            ]
+        );
+        // Equal costs: one phase, the given order.
+        let even = [3.0; 4];
+        assert_eq!(
+            schedule(2, None, &even),
+            vec![Phase {
+                runs: vec![0, 1, 2, 3],
+                at_once: 2,
+                per_run: 1
+            }]
+        );
+        // Up to 1.2 times its share it stays with the others; --jobs fixes the split; one
+        // thread leaves nothing to move.
+        assert_eq!(schedule(2, None, &[1.0, 1.0]).len(), 1);
+        assert_eq!(schedule(2, None, &[1.4, 1.0]).len(), 1);
+        assert_eq!(schedule(2, None, &[1.6, 1.0]).len(), 2);
+        assert_eq!(schedule(2, Some(2), &costs).len(), 1);
+        assert_eq!(schedule(2, Some(2), &costs)[0].runs, vec![4, 3, 2, 1, 0]);
+        assert_eq!(schedule(1, None, &costs).len(), 1);
+        // Two dominant runs on 4 threads: 40 of 52 (above 1.2 x 52/4), then 10 of 12 (above
+        // 1.2 x 12/3); the last two share.
+        let p = schedule(4, None, &[40.0, 10.0, 1.0, 1.0]);
+        assert_eq!(p.len(), 3);
+        assert_eq!((p[0].runs.clone(), p[0].per_run), (vec![0], 4));
+        assert_eq!((p[1].runs.clone(), p[1].per_run), (vec![1], 4));
+        assert_eq!(
+            (p[2].runs.clone(), p[2].at_once, p[2].per_run),
+            (vec![2, 3], 2, 2)
+        );
+        assert!(schedule(2, None, &[]).is_empty());
     }
 }
