@@ -344,6 +344,38 @@ pub fn sizing(
     })
 }
 
+/// Key points of a log axis from `lo` to `hi`: 1, 2 and 5 times each power of ten.
+fn log_keys_125(lo: f64, hi: f64) -> Vec<f64> {
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return Vec::new();
+    }
+    let (e0, e1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+    (e0..=e1)
+        .flat_map(|e| [1.0, 2.0, 5.0].map(|k| k * 10f64.powi(e)))
+        .filter(|&v| v >= lo && v <= hi)
+        .collect()
+}
+
+/// A log axis's label: `1e5`, `2e5`, `5e5` at 1, 2 and 5 times a power of ten, nothing
+/// elsewhere.
+fn log_label_125(v: f64) -> String {
+    if !(v > 0.0 && v.is_finite()) {
+        return String::new();
+    }
+    let e = v.log10().floor();
+    let m = v / 10f64.powf(e);
+    [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .find(|&&k| (m - k).abs() < 1e-6 * k)
+        .map_or(String::new(), |&k| {
+            if k == 10.0 {
+                format!("1e{}", e as i32 + 1)
+            } else {
+                format!("{}e{}", k as i32, e as i32)
+            }
+        })
+}
+
 /// Fig. 5: F against the particle count (log axis), the tier's convergence count (where F
 /// changes by less than the tolerance from then on) and the paper's.
 pub fn convergence(
@@ -372,7 +404,12 @@ pub fn convergence(
             .margin_bottom(45)
             .x_label_area_size(60)
             .y_label_area_size(90)
-            .build_cartesian_2d((x_lo..x_hi).log_scale(), 0.0..y_hi)?;
+            .build_cartesian_2d(
+                (x_lo..x_hi)
+                    .log_scale()
+                    .with_key_points(log_keys_125(x_lo, x_hi)),
+                0.0..y_hi,
+            )?;
         chart
             .configure_mesh()
             .light_line_style(RGBColor(235, 235, 235))
@@ -380,7 +417,9 @@ pub fn convergence(
             .y_desc("fragmentation F = N_frag / N_part")
             .label_style((FAMILY, 17))
             .axis_desc_style((FAMILY, 19))
-            .x_label_formatter(&|v| format!("{v:.0e}"))
+            // Labels at 1, 2 and 5 per decade: the default key points left the lowest counts
+            // unlabelled and crowded the decade's end.
+            .x_label_formatter(&|v| log_label_125(*v))
             .y_label_formatter(&|v| format!("{v:.2}"))
             .draw()?;
         let pts: Vec<(f64, f64)> = points.iter().copied().filter(|p| p.1.is_finite()).collect();
@@ -473,4 +512,24 @@ pub fn front_velocity(path: &Path, points: &[(f64, f64)], title: &str, note: &st
         ))?;
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_axis_labels_at_1_2_5() {
+        assert_eq!(log_label_125(1e5), "1e5");
+        assert_eq!(log_label_125(2e4), "2e4");
+        assert_eq!(log_label_125(5.000000001e5), "5e5");
+        assert_eq!(log_label_125(9.99999999e5), "1e6");
+        assert_eq!(log_label_125(3e4), "");
+        assert_eq!(log_label_125(0.0), "");
+        assert_eq!(
+            log_keys_125(150.0, 2500.0),
+            vec![200.0, 500.0, 1000.0, 2000.0]
+        );
+        assert!(log_keys_125(0.0, 1.0).is_empty());
+    }
 }
