@@ -8,6 +8,8 @@
 use std::path::Path;
 
 use anyhow::{anyhow, Context, Result};
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint};
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -93,6 +95,57 @@ pub fn colormap(t: f64) -> RGBColor {
     RGBColor(c(0), c(1), c(2))
 }
 
+/// A linear axis (log10 values on a log axis) with the ticks of [`axis_keys`].
+struct KeyedAxis {
+    range: RangedCoordf64,
+    keys: Vec<f64>,
+}
+
+impl KeyedAxis {
+    fn new(a: f64, b: f64, log: bool) -> Self {
+        KeyedAxis {
+            range: (a..b).into(),
+            keys: axis_keys(a, b, log),
+        }
+    }
+}
+
+impl Ranged for KeyedAxis {
+    type FormatOption = DefaultFormatting;
+    type ValueType = f64;
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        self.range.map(value, limit)
+    }
+    fn key_points<Hint: KeyPointHint>(&self, _hint: Hint) -> Vec<f64> {
+        self.keys.clone()
+    }
+    fn range(&self) -> std::ops::Range<f64> {
+        self.range.range()
+    }
+}
+
+/// Tick positions on an axis from `a` to `b` (in log10 when `log`): on a log axis the values
+/// 1, 2 and 5 times a power of ten (every integer multiple when that gives fewer than three),
+/// so labels read 0.01, 0.02, 0.05 rather than 10^(k/5); on a linear axis plotters' own.
+fn axis_keys(a: f64, b: f64, log: bool) -> Vec<f64> {
+    if !log {
+        let r: RangedCoordf64 = (a..b).into();
+        return r.key_points(10);
+    }
+    let within = |mantissas: &[f64]| -> Vec<f64> {
+        (a.floor() as i32..=b.ceil() as i32)
+            .flat_map(|e| mantissas.iter().map(move |m| (m * 10f64.powi(e)).log10()))
+            .filter(|&v| v >= a && v <= b)
+            .collect()
+    };
+    let keys = within(&[1.0, 2.0, 5.0]);
+    if keys.len() >= 3 {
+        keys
+    } else {
+        within(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0])
+    }
+}
+
 fn tick(v: f64, log: bool) -> String {
     let x = if log { 10f64.powf(v) } else { v };
     let a = x.abs();
@@ -142,7 +195,10 @@ where
         .margin_bottom(44)
         .x_label_area_size(70)
         .y_label_area_size(95)
-        .build_cartesian_2d(xa..xb, ya..yb)?;
+        .build_cartesian_2d(
+            KeyedAxis::new(xa, xb, p.x_log),
+            KeyedAxis::new(ya, yb, p.y_log),
+        )?;
     chart
         .configure_mesh()
         .disable_mesh()
@@ -353,6 +409,18 @@ mod tests {
         assert_eq!(tick(0.5, false), "0.5");
         assert_eq!(tick(6500.0, false), "6500");
         assert_eq!(tick(1e4, false), "10000");
+        // Log axes tick at 1, 2, 5 per decade: eps from 0.01 to 1 J.
+        let labels: Vec<String> = axis_keys(-2.1, 0.1, true)
+            .iter()
+            .map(|&v| tick(v, true))
+            .collect();
+        assert_eq!(labels, ["0.01", "0.02", "0.05", "0.1", "0.2", "0.5", "1"]);
+        // Less than a factor 5: every integer multiple.
+        let labels: Vec<String> = axis_keys(6.05, 6.5, true)
+            .iter()
+            .map(|&v| tick(v, true))
+            .collect();
+        assert_eq!(labels, ["2e6", "3e6"]);
     }
 
     #[test]
