@@ -344,18 +344,6 @@ pub fn sizing(
     })
 }
 
-/// Key points of a log axis from `lo` to `hi`: 1, 2 and 5 times each power of ten.
-fn log_keys_125(lo: f64, hi: f64) -> Vec<f64> {
-    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
-        return Vec::new();
-    }
-    let (e0, e1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
-    (e0..=e1)
-        .flat_map(|e| [1.0, 2.0, 5.0].map(|k| k * 10f64.powi(e)))
-        .filter(|&v| v >= lo && v <= hi)
-        .collect()
-}
-
 /// A log axis's label: `1e5`, `2e5`, `5e5` at 1, 2 and 5 times a power of ten, nothing
 /// elsewhere.
 fn log_label_125(v: f64) -> String {
@@ -407,7 +395,7 @@ pub fn convergence(
             .build_cartesian_2d(
                 (x_lo..x_hi)
                     .log_scale()
-                    .with_key_points(log_keys_125(x_lo, x_hi)),
+                    .with_key_points(crate::study::plot::log_ticks(x_lo, x_hi)),
                 0.0..y_hi,
             )?;
         chart
@@ -527,9 +515,9 @@ mod tests {
         assert_eq!(log_label_125(3e4), "");
         assert_eq!(log_label_125(0.0), "");
         assert_eq!(
-            log_keys_125(150.0, 2500.0),
+            crate::study::plot::log_ticks(150.0, 2500.0),
             vec![200.0, 500.0, 1000.0, 2000.0]
         );
-        assert!(log_keys_125(0.0, 1.0).is_empty());
+        assert!(crate::study::plot::log_ticks(0.0, 1.0).is_empty());
     }
 }

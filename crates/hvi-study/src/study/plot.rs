@@ -124,18 +124,16 @@ impl Ranged for KeyedAxis {
     }
 }
 
-/// Tick positions on an axis from `a` to `b` (in log10 when `log`): on a log axis the values
-/// 1, 2 and 5 times a power of ten (every integer multiple when that gives fewer than three),
-/// so labels read 0.01, 0.02, 0.05 rather than 10^(k/5); on a linear axis plotters' own.
-fn axis_keys(a: f64, b: f64, log: bool) -> Vec<f64> {
-    if !log {
-        let r: RangedCoordf64 = (a..b).into();
-        return r.key_points(10);
+/// Tick values of a log axis from `lo` to `hi` (physical values): 1, 2 and 5 times each power
+/// of ten, or every integer multiple when that gives fewer than three.
+pub(crate) fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return Vec::new();
     }
     let within = |mantissas: &[f64]| -> Vec<f64> {
-        (a.floor() as i32..=b.ceil() as i32)
-            .flat_map(|e| mantissas.iter().map(move |m| (m * 10f64.powi(e)).log10()))
-            .filter(|&v| v >= a && v <= b)
+        (lo.log10().floor() as i32..=hi.log10().ceil() as i32)
+            .flat_map(|e| mantissas.iter().map(move |m| m * 10f64.powi(e)))
+            .filter(|&v| v >= lo && v <= hi)
             .collect()
     };
     let keys = within(&[1.0, 2.0, 5.0]);
@@ -143,6 +141,21 @@ fn axis_keys(a: f64, b: f64, log: bool) -> Vec<f64> {
         keys
     } else {
         within(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0])
+    }
+}
+
+/// Tick positions on an axis from `a` to `b` (in log10 when `log`): on a log axis
+/// [`log_ticks`], so labels read 0.01, 0.02, 0.05 rather than 10^(k/5); on a linear axis
+/// plotters' own.
+fn axis_keys(a: f64, b: f64, log: bool) -> Vec<f64> {
+    if log {
+        log_ticks(10f64.powf(a), 10f64.powf(b))
+            .into_iter()
+            .map(f64::log10)
+            .collect()
+    } else {
+        let r: RangedCoordf64 = (a..b).into();
+        r.key_points(10)
     }
 }
 
