@@ -517,19 +517,19 @@ pub fn accuracy(
         results.push(m);
     }
     let completed = |m: &&Measured| m.status == RunStatus::Completed;
-    // The runs of each variant, in order.
-    let runs_of = |i: usize| -> Vec<&Measured> {
+    // The runs of each variant, in seed order.
+    let runs_of = |i: usize| -> Vec<(u32, &Measured)> {
         jobs.iter()
             .zip(&results)
             .filter(|((j, _, _), _)| *j == i)
-            .map(|(_, m)| m)
+            .map(|((_, seed, _), m)| (*seed, m))
             .collect()
     };
     let reference_index = variants
         .iter()
         .position(|v| v.role == Role::Reference)
         .unwrap_or(0);
-    let reference = runs_of(reference_index)[0].clone();
+    let reference = runs_of(reference_index)[0].1.clone();
     if reference.status != RunStatus::Completed {
         bail!(
             "the reference run failed: {}",
@@ -555,7 +555,13 @@ pub fn accuracy(
     let mut candidate_groups: Vec<Vec<&Measured>> = Vec::new();
     for (i, v) in variants.iter().enumerate() {
         if v.role == Role::Candidate {
-            candidate_groups.push(runs_of(i).into_iter().filter(completed).collect());
+            candidate_groups.push(
+                runs_of(i)
+                    .into_iter()
+                    .map(|(_, m)| m)
+                    .filter(completed)
+                    .collect(),
+            );
         }
     }
     let mut scatter_dof = 0;
@@ -585,11 +591,11 @@ pub fn accuracy(
     let mut run_rows: Vec<RunRow> = Vec::new();
     for (i, v) in variants.iter().enumerate() {
         let all = runs_of(i);
-        for ((_, seed, _), m) in jobs.iter().zip(&results).filter(|((j, _, _), _)| *j == i) {
+        for &(seed, m) in &all {
             run_rows.push(RunRow {
                 variant: v.name.clone(),
                 role: v.role,
-                seed: *seed,
+                seed,
                 status: if m.status == RunStatus::Completed {
                     "completed"
                 } else {
@@ -606,7 +612,7 @@ pub fn accuracy(
                 cached: m.cached,
             });
         }
-        let done: Vec<&Measured> = all.iter().copied().filter(completed).collect();
+        let done: Vec<&Measured> = all.iter().map(|&(_, m)| m).filter(completed).collect();
         let all_completed = !done.is_empty() && done.len() == all.len();
         let obs = |key: &str| mean(done.iter().filter_map(|m| m.obs.get(key)));
         let errs: Vec<Option<f64>> = reference_values
@@ -656,7 +662,7 @@ pub fn accuracy(
                 .iter()
                 .try_fold(0.0f64, |a, e| e.map(|e| a.max(e))),
             within_tolerance: within,
-            cached: all.iter().all(|m| m.cached),
+            cached: all.iter().all(|(_, m)| m.cached),
         });
     }
     let recommended = rows

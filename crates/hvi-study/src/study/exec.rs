@@ -9,8 +9,9 @@
 //! Order ([`schedule`]): a run's pool cannot grow once it started, so a run that costs more
 //! than the others' share would finish last on one pool while the other cores idle. The runs
 //! to do are therefore ordered by cost (particles x base steps, [`run_cost`]), largest first;
-//! and while the largest costs more than 1/(runs at once) of what is left, it runs alone on
-//! every thread before the rest (unless `--jobs` fixes the runs at once). Fig. 5's
+//! and while the largest costs more than [`ALONE_ABOVE_SHARE`] times its share of what is left
+//! (1/(runs at once)), it runs alone on every thread before the rest (unless `--jobs` fixes the
+//! runs at once). Fig. 5's
 //! convergence stage, say, is one 7.5e5-particle run and four smaller ones that together cost
 //! less than half of it.
 
@@ -176,28 +177,23 @@ pub fn execute(
     }
     let cached = records.iter().filter(|r| r.is_some()).count();
     // Largest first, the dominant ones alone (see the module's doc). Costing builds each
-    // scene once, in parallel: seconds against the runs' minutes.
-    let phases = if pending.len() > 1 {
-        let costs: Vec<f64> = pending
+    // scene once, in parallel: seconds against the runs' minutes; a single run needs no order.
+    let costs: Vec<f64> = if pending.len() > 1 {
+        pending
             .par_iter()
             // A scene that does not build costs nothing here; its run fails with the reason.
             .map(|&i| run_cost(&jobs[i].scene).map_or(0.0, |c| c.1))
-            .collect();
-        schedule(opts.threads, opts.jobs, &costs)
-            .into_iter()
-            .map(|p| Phase {
-                runs: p.runs.iter().map(|&k| pending[k]).collect(),
-                ..p
-            })
             .collect()
     } else {
-        let (at_once, per_run) = thread_split(opts.threads, opts.jobs, pending.len());
-        vec![Phase {
-            runs: pending.clone(),
-            at_once,
-            per_run,
-        }]
+        vec![0.0; pending.len()]
     };
+    let phases: Vec<Phase> = schedule(opts.threads, opts.jobs, &costs)
+        .into_iter()
+        .map(|p| Phase {
+            runs: p.runs.iter().map(|&k| pending[k]).collect(),
+            ..p
+        })
+        .collect();
 
     let bar = if opts.progress && !pending.is_empty() {
         let target = if std::io::stderr().is_terminal() {
