@@ -2,12 +2,12 @@
 //! thread counts, bond breaking, blow-up detection. Small scenes, release-optimised.
 
 use glam::DVec3;
+use hvi_analysis::decide::{curve_deviation, EnergySample};
 use hvi_engine::potential::{ContactForm, Interaction};
 use hvi_engine::scene::{Derived, RunSettings, SceneSpec};
 use hvi_engine::sim::{Energy, Simulation};
 use hvi_engine::state::{Body, Particles, BONDS_PER_PARTICLE, NO_BOND};
 use hvi_engine::EngineError;
-use hvi_study::reproduce::decide::{curve_deviation, EnergySample};
 use hvi_study::reproduce::sizing;
 
 fn sphere_scene(particles: f64, end_time_s: f64) -> SceneSpec {

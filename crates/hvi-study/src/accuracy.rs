@@ -39,18 +39,19 @@ use anyhow::{anyhow, bail, Context, Result};
 use plotters::prelude::*;
 use serde::Serialize;
 
-use crate::output::{write_atomic_bytes, write_csv_atomic};
-use crate::render::{fonts, write_png, FAMILY};
-use crate::scene_file::parse_scene;
-use crate::study::plan::fingerprint;
-use crate::study::store::{read_summary, Job, Observables, RunStatus, Store};
+use hvi_analysis::observable::{Observable, Observables};
+use hvi_plot::render::{fonts, write_png, FAMILY};
+use hvi_run::output::{write_atomic_bytes, write_csv_atomic};
+use hvi_run::plan::fingerprint;
+use hvi_run::scene_file::parse_scene;
+use hvi_run::store::{read_summary, Job, RunStatus, Store};
 
 /// Observables compared with the reference, with their relative tolerance.
-pub const TOLERANCES: [(&str, &str, f64); 4] = [
-    ("length_ratio", "R", 0.01),
-    ("front_velocity_ratio", "va/v0", 0.01),
-    ("fragmentation", "F", 0.01),
-    ("largest_fragment_mass_fraction", "largest fragment", 0.01),
+pub const TOLERANCES: [(Observable, f64); 4] = [
+    (Observable::LengthRatio, 0.01),
+    (Observable::FrontVelocityRatio, 0.01),
+    (Observable::Fragmentation, 0.01),
+    (Observable::LargestFragmentMassFraction, 0.01),
 ];
 
 /// Largest |relative energy-ledger drift| over the run that a variant may have: the
@@ -346,17 +347,17 @@ pub struct AccuracyReport {
     /// Completed runs at the reference step (`K_r`).
     pub reference_runs: usize,
     /// Reference value per observable: the mean over the runs at the reference step.
-    pub reference_values: Vec<(String, Option<f64>)>,
+    pub reference_values: Vec<(Observable, Option<f64>)>,
     /// Seed scatter per observable: the standard deviation of one run about its setting's
     /// mean, pooled over every setting with two or more runs, relative to the reference value.
-    pub seed_scatter: Vec<(String, f64)>,
+    pub seed_scatter: Vec<(Observable, f64)>,
     /// Degrees of freedom of the pooled seed scatter (0: no setting ran twice).
     pub scatter_dof: usize,
     /// Noise floor per observable for a candidate at `seeds` seeds: two standard errors of the
     /// difference of its mean and the reference value, `2 s sqrt(1/K + 1/K_r)`.
-    pub noise_floor: Vec<(String, f64)>,
+    pub noise_floor: Vec<(Observable, f64)>,
     /// Tolerance per observable (relative).
-    pub tolerances: Vec<(String, f64)>,
+    pub tolerances: Vec<(Observable, f64)>,
     /// Energy drift bound.
     pub energy_drift_bound: f64,
     /// The rows, one per variant.
@@ -544,11 +545,11 @@ pub fn accuracy(
         .map(|(_, m)| m)
         .collect();
     let reference_runs = at_reference_step.len();
-    let reference_values: Vec<(String, Option<f64>)> = TOLERANCES
+    let reference_values: Vec<(Observable, Option<f64>)> = TOLERANCES
         .iter()
-        .map(|(key, _, _)| {
+        .map(|&(key, _)| {
             let value = mean(at_reference_step.iter().filter_map(|m| m.obs.get(key)));
-            (key.to_string(), value)
+            (key, value)
         })
         .collect();
     // The seed scatter, pooled over the reference step and every candidate's seeds.
@@ -565,9 +566,9 @@ pub fn accuracy(
         }
     }
     let mut scatter_dof = 0;
-    let seed_scatter: Vec<(String, f64)> = reference_values
+    let seed_scatter: Vec<(Observable, f64)> = reference_values
         .iter()
-        .map(|(key, value)| {
+        .map(|&(key, value)| {
             let groups: Vec<Vec<f64>> = std::iter::once(&at_reference_step)
                 .chain(&candidate_groups)
                 .map(|g| g.iter().filter_map(|m| m.obs.get(key)).collect())
@@ -575,10 +576,10 @@ pub fn accuracy(
             let (s, dof) = pooled_scatter(&groups);
             scatter_dof = scatter_dof.max(dof);
             let rel = match value {
-                Some(r) if *r != 0.0 => s / r.abs(),
+                Some(r) if r != 0.0 => s / r.abs(),
                 _ => 0.0,
             };
-            (key.clone(), rel)
+            (key, rel)
         })
         .collect();
     let floor_for = |k: usize| -> Vec<f64> {
@@ -604,20 +605,20 @@ pub fn accuracy(
                 .into(),
                 steps: m.steps,
                 wall_s: m.wall_s,
-                length_ratio: m.obs.length_ratio,
-                front_velocity_ratio: m.obs.front_velocity_ratio,
-                fragmentation: m.obs.fragmentation,
-                largest_fragment_mass_fraction: m.obs.largest_fragment_mass_fraction,
+                length_ratio: m.obs.get(Observable::LengthRatio),
+                front_velocity_ratio: m.obs.get(Observable::FrontVelocityRatio),
+                fragmentation: m.obs.get(Observable::Fragmentation),
+                largest_fragment_mass_fraction: m.obs.get(Observable::LargestFragmentMassFraction),
                 energy_max_drift: m.max_drift,
                 cached: m.cached,
             });
         }
         let done: Vec<&Measured> = all.iter().map(|&(_, m)| m).filter(completed).collect();
         let all_completed = !done.is_empty() && done.len() == all.len();
-        let obs = |key: &str| mean(done.iter().filter_map(|m| m.obs.get(key)));
+        let obs = |key: Observable| mean(done.iter().filter_map(|m| m.obs.get(key)));
         let errs: Vec<Option<f64>> = reference_values
             .iter()
-            .map(|(k, value)| rel_err(obs(k), *value))
+            .map(|&(k, value)| rel_err(obs(k), value))
             .collect();
         let max_drift = if all_completed {
             done.iter()
@@ -632,7 +633,7 @@ pub fn accuracy(
                 .iter()
                 .zip(&errs)
                 .zip(floor_for(done.len()))
-                .all(|(((_, _, tol), e), floor)| e.is_some_and(|e| e <= tol.max(floor)))
+                .all(|(((_, tol), e), floor)| e.is_some_and(|e| e <= tol.max(floor)))
             && max_drift.is_some_and(|d| d <= ENERGY_DRIFT_BOUND);
         rows.push(AccuracyRow {
             variant: v.name.clone(),
@@ -649,10 +650,10 @@ pub fn accuracy(
                 (Some(r), Some(w)) if w > 0.0 => Some(r / w),
                 _ => None,
             },
-            length_ratio: obs("length_ratio"),
-            front_velocity_ratio: obs("front_velocity_ratio"),
-            fragmentation: obs("fragmentation"),
-            largest_fragment_mass_fraction: obs("largest_fragment_mass_fraction"),
+            length_ratio: obs(Observable::LengthRatio),
+            front_velocity_ratio: obs(Observable::FrontVelocityRatio),
+            fragmentation: obs(Observable::Fragmentation),
+            largest_fragment_mass_fraction: obs(Observable::LargestFragmentMassFraction),
             energy_max_drift: max_drift,
             err_length_ratio: errs[0],
             err_front_velocity_ratio: errs[1],
@@ -674,7 +675,7 @@ pub fn accuracy(
     let noise_floor = seed_scatter
         .iter()
         .zip(floor_for(seeds as usize))
-        .map(|((k, _), f)| (k.clone(), f))
+        .map(|(&(k, _), f)| (k, f))
         .collect();
     let report = AccuracyReport {
         scene: scene_path.display().to_string(),
@@ -686,10 +687,7 @@ pub fn accuracy(
         seed_scatter,
         scatter_dof,
         noise_floor,
-        tolerances: TOLERANCES
-            .iter()
-            .map(|(k, _, t)| (k.to_string(), *t))
-            .collect(),
+        tolerances: TOLERANCES.to_vec(),
         energy_drift_bound: ENERGY_DRIFT_BOUND,
         rows,
         runs: run_rows,
@@ -786,10 +784,7 @@ pub fn markdown(r: &AccuracyReport) -> String {
         .zip(&r.reference_values)
         .zip(&r.seed_scatter)
     {
-        let label = TOLERANCES
-            .iter()
-            .find(|x| x.0 == k)
-            .map_or(k.as_str(), |x| x.1);
+        let label = k.symbol();
         let _ = writeln!(
             s,
             "| {label} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
@@ -842,7 +837,7 @@ pub fn pareto_plot(path: &Path, r: &AccuracyReport) -> Result<()> {
     let x_range = (w_lo * 0.7).max(1e-3).log10()..(w_hi * 1.4).log10();
     // Errors of 0 (the reference) are drawn at the floor of the axis.
     let e_floor = 1e-5f64;
-    let tol = TOLERANCES[0].2;
+    let tol = TOLERANCES[0].1;
     let y_range = e_floor.log10()..1.0f64.log10();
     let ly = |e: f64| e.max(e_floor).log10();
     {
@@ -959,16 +954,17 @@ pub fn pareto_plot(path: &Path, r: &AccuracyReport) -> Result<()> {
                     RGBColor(44, 160, 44),
                     RGBColor(148, 103, 189),
                 ];
-                for (k, (key, label, _)) in TOLERANCES.iter().enumerate() {
+                for (k, &(key, _)) in TOLERANCES.iter().enumerate() {
+                    let label = key.symbol();
                     let c = colors[k % colors.len()];
                     let pts: Vec<(f64, f64)> = rows
                         .iter()
                         .filter(|x| x.role == Role::Candidate)
                         .filter_map(|x| {
-                            let e = match *key {
-                                "length_ratio" => x.err_length_ratio,
-                                "front_velocity_ratio" => x.err_front_velocity_ratio,
-                                "fragmentation" => x.err_fragmentation,
+                            let e = match key {
+                                Observable::LengthRatio => x.err_length_ratio,
+                                Observable::FrontVelocityRatio => x.err_front_velocity_ratio,
+                                Observable::Fragmentation => x.err_fragmentation,
                                 _ => x.err_largest_fragment_mass_fraction,
                             }?;
                             Some((x.wall_s?.log10(), ly(e)))

@@ -1,13 +1,12 @@
 //! # hvi-study
 //!
-//! Everything around the engine: scene files, runs and their output files, and (later)
-//! studies, scoring and plots. The `hvi-study` binary is a thin layer over this library.
+//! The `hvi-study` command's workflows, each joining running ([`hvi_run`]), analysis
+//! ([`hvi_analysis`]) and pictures ([`hvi_plot`]): sweeps, calibration, the validity map, the
+//! stability map, the accuracy benchmark and the reproduction of the paper. The binary parses
+//! arguments ([`cli`]) and dispatches here.
 
 pub mod accuracy;
-pub mod bench;
-pub mod output;
-pub mod render;
+pub mod cli;
+pub mod commands;
 pub mod reproduce;
-pub mod run;
-pub mod scene_file;
 pub mod study;

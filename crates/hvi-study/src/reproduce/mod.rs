@@ -17,64 +17,24 @@
 //! Every paper number comes from `hvi_engine::paper`.
 
 pub mod config;
-pub mod decide;
-pub mod plots;
 pub mod report;
 pub mod sizing;
 pub mod stages;
 
+use crate::cli::ReproduceArgs;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
-use clap::Args;
 use hvi_engine::paper;
 use rayon::prelude::*;
 
-use crate::study::exec::ExecOptions;
-use crate::study::plan::{build_plan, Plan, PlanRequest};
-use crate::study::spec::{json_to_override, Axis, Study, Tier};
 use config::{Config, EstimateConfig};
+use hvi_run::exec::ExecOptions;
+use hvi_run::plan::{build_plan, Plan, PlanRequest};
+use hvi_run::spec::{json_to_override, Axis, Study, Tier};
 use report::{fmt_duration, Estimate, EstimateRow, Figure, Machine, Reproduction, Verdict};
 use stages::Ctx;
-
-/// `hvi-study reproduce` arguments.
-#[derive(Args, Debug, Clone)]
-pub struct ReproduceArgs {
-    /// The tier, as named in the config: `quick` (CI, a few minutes) or `paper` (the paper's
-    /// resolutions: hours on two cores; `--dry-run` prints the estimate).
-    #[arg(long)]
-    pub tier: String,
-    /// The report directory: report.md, reproduce.json and the figures (default
-    /// `reports/<tier>`).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Where the runs are kept, one study store per stage (default `runs/reproduce/<tier>`).
-    #[arg(long)]
-    pub runs: Option<PathBuf>,
-    /// A previous report directory: list what changed since its reproduce.json.
-    #[arg(long, value_name = "DIR")]
-    pub previous: Option<PathBuf>,
-    /// With --previous: fail (exit code 2) when a verdict or deciding number changed, e.g. to
-    /// check in CI that a committed report is current.
-    #[arg(long, requires = "previous")]
-    pub fail_on_change: bool,
-    /// The reproduction's config.
-    #[arg(long, default_value = "studies/reproduce.toml")]
-    pub config: PathBuf,
-    /// Worker threads in all (default: every core).
-    #[arg(long)]
-    pub threads: Option<usize>,
-    /// Runs at once (default: as many as threads).
-    #[arg(long)]
-    pub jobs: Option<usize>,
-    /// Validate every run and print the expected wall time; run nothing.
-    #[arg(long)]
-    pub dry_run: bool,
-    /// No progress output.
-    #[arg(long)]
-    pub quiet: bool,
-}
 
 /// The plans of a tier: every run of every figure, validated.
 #[derive(Debug, Clone)]
@@ -307,7 +267,7 @@ pub fn estimate(plans: &Plans, tier: &str, cfg: &EstimateConfig) -> Result<Estim
         let costs: Vec<(usize, f64)> = plan
             .runs
             .par_iter()
-            .map(|r| crate::study::exec::run_cost(&r.scene))
+            .map(|r| hvi_run::exec::run_cost(&r.scene))
             .collect::<Result<_>>()?;
         let particle_steps: f64 = costs.iter().map(|c| c.1).sum();
         rows.push(EstimateRow {
@@ -561,7 +521,7 @@ pub fn reproduce(args: &ReproduceArgs) -> Result<Reproduction> {
         let study = Study::load(&plans.calibration_study)?;
         let cfg = crate::study::calibrate::CalibrateConfig::of(&study)?;
         let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-        crate::study::score::Targets::load(&base.join(&cfg.targets))?
+        hvi_run::output::load_targets(&base.join(&cfg.targets))?
     };
     let fig13_gap = targets
         .gaps

@@ -8,7 +8,9 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 
-use crate::output::write_atomic_bytes;
+pub use hvi_analysis::number::{fmt_num, short};
+
+use hvi_run::output::write_atomic_bytes;
 
 /// How a figure compares with the paper.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -75,37 +77,6 @@ impl Value {
             Value::Flag(b) => (if *b { "yes" } else { "no" }).into(),
             Value::Text(s) => s.clone(),
         }
-    }
-}
-
-/// A parameter value in its shortest form, to six significant digits: `0.01`, `1`,
-/// `4.56e6`, `2.5e5`, `16.1`.
-pub fn short(x: f64) -> String {
-    let x = crate::study::spec::round_sig(x, 6);
-    let a = x.abs();
-    if a != 0.0 && !(1e-2..1e4).contains(&a) {
-        format!("{x:e}")
-    } else {
-        format!("{x}")
-    }
-}
-
-/// A number as the report prints it: whole numbers below 1e6 as they are, else four
-/// significant digits, in exponent form outside [1e-3, 1e5).
-pub fn fmt_num(x: f64) -> String {
-    if !x.is_finite() {
-        return "n/a".into();
-    }
-    let a = x.abs();
-    if x.fract() == 0.0 && a < 1e6 {
-        format!("{x:.0}")
-    } else if a != 0.0 && !(1e-3..1e5).contains(&a) {
-        format!("{x:.3e}")
-    } else if a == 0.0 {
-        "0".into()
-    } else {
-        let digits = (3 - a.log10().floor() as i32).max(0) as usize;
-        format!("{x:.digits$}")
     }
 }
 

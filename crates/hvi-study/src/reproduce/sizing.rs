@@ -3,7 +3,7 @@
 //! potential energy curves coincide; without it they do not.
 //!
 //! One scene, used by the physics test (`tests/physics.rs`) and by `hvi-study reproduce`;
-//! [`super::decide::curve_deviation`] is their common measure of "coincide".
+//! [`hvi_analysis::decide::curve_deviation`] is their common measure of "coincide".
 
 use std::path::Path;
 
@@ -11,7 +11,7 @@ use anyhow::{anyhow, Context, Result};
 use hvi_engine::paper;
 use hvi_engine::scene::{Analysis, Geometry, Material, Resolution, RunSettings, SceneSpec};
 
-use super::decide::EnergySample;
+use hvi_analysis::decide::EnergySample;
 
 /// The collision and the first rebound: the time the energy curves are compared over, s.
 pub const END_TIME_S: f64 = 0.8e-6;
@@ -112,7 +112,7 @@ mod tests {
     #[test]
     fn scene_round_trips_through_toml_and_validates() {
         let text = plates_scene_toml(500.0, false).expect("toml");
-        let back = crate::scene_file::parse_scene(&text, &[]).expect("parses");
+        let back = hvi_run::scene_file::parse_scene(&text, &[]).expect("parses");
         assert_eq!(back, plates_scene(500.0, false));
         let setup = back.build().expect("valid");
         assert!(setup.particles.len() > 300);

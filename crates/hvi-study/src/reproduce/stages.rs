@@ -1,8 +1,9 @@
 //! The stages of the reproduction. Each runs its study through the study runner and its
 //! store (finished runs are reused), draws or collects its figures into the report directory,
 //! and turns the runs' numbers into [`Figure`]s: the paper's result (from `hvi_engine::paper`),
-//! ours, the deciding numbers ([`super::decide`]) and a verdict.
+//! ours, the deciding numbers ([`hvi_analysis::decide`]) and a verdict.
 
+use hvi_analysis::observable::Observable;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -11,21 +12,24 @@ use hvi_engine::paper;
 use hvi_engine::potential::{ContactForm, Interaction};
 use serde_json::Value as Json;
 
-use super::decide::{self, EnergySample};
-use super::plots::{self, SizingCurve};
 use super::report::{fmt_num, short, Figure, StageTiming, Value, Verdict};
 use super::sizing;
-use crate::output::{write_atomic, write_atomic_bytes};
-use crate::study::calibrate::{calibrate, CalibrateArgs, CalibrateConfig};
-use crate::study::cli::StudyArgs;
-use crate::study::contour::Field;
-use crate::study::exec::ExecOptions;
+use crate::cli::StudyArgs;
+use crate::cli::{CalibrateArgs, ValidityArgs};
+use crate::study::calibrate::{calibrate, CalibrateConfig};
 use crate::study::figures::field_of;
-use crate::study::plan::Plan;
-use crate::study::score::{objective, Targets};
-use crate::study::store::{Record, RunStatus, Store};
-use crate::study::validity::{validity_map, ValidityArgs};
-use crate::study::{execute_plan, spec::Study};
+use crate::study::validity::validity_map;
+use hvi_analysis::contour::Field;
+use hvi_analysis::decide::{self, EnergySample};
+use hvi_analysis::score::{objective, Targets};
+use hvi_plot::paper as plots;
+use hvi_plot::paper::SizingCurve;
+use hvi_run::exec::ExecOptions;
+use hvi_run::output::{write_atomic, write_atomic_bytes};
+use hvi_run::plan::Plan;
+use hvi_run::spec::Study;
+use hvi_run::store::{Record, RunStatus, Store};
+use hvi_run::study::execute_plan;
 
 /// What the stages share: where things go and how to execute.
 #[derive(Debug, Clone)]
@@ -126,7 +130,7 @@ fn timing(
 
 /// A number from a run's `summary.json` by JSON pointer (e.g. `/dt_s`).
 fn summary_number(run_dir: &Path, pointer: &str) -> Option<f64> {
-    crate::study::store::read_summary(run_dir)?
+    hvi_run::store::read_summary(run_dir)?
         .pointer(pointer)
         .and_then(Json::as_f64)
 }
@@ -282,7 +286,10 @@ pub fn fig4(ctx: &Ctx, plan: &Plan) -> Result<(Vec<Figure>, StageTiming)> {
         }
         let samples = sizing::curve_from_energy_csv(&dir.join(&run.dir).join("energy.csv"))?;
         curves.push(SizingCurve {
-            particles: rec.observables.particles.unwrap_or(f64::NAN) as usize,
+            particles: rec
+                .observables
+                .get(Observable::Particles)
+                .unwrap_or(f64::NAN) as usize,
             sizing: sized,
             samples,
         });
@@ -449,12 +456,22 @@ pub fn fig5_11_12(ctx: &Ctx, plan: &Plan, targets: &Targets) -> Result<(Vec<Figu
     let records = report.records;
     // Runs by particle count (the axis is sorted ascending by construction; sort anyway).
     let mut order: Vec<usize> = (0..records.len()).collect();
-    let count = |i: usize| records[i].observables.particles.unwrap_or(f64::NAN);
+    let count = |i: usize| {
+        records[i]
+            .observables
+            .get(Observable::Particles)
+            .unwrap_or(f64::NAN)
+    };
     order.sort_by(|&a, &b| count(a).total_cmp(&count(b)));
     let ns: Vec<f64> = order.iter().map(|&i| count(i)).collect();
     let fs: Vec<f64> = order
         .iter()
-        .map(|&i| records[i].observables.fragmentation.unwrap_or(f64::NAN))
+        .map(|&i| {
+            records[i]
+                .observables
+                .get(Observable::Fragmentation)
+                .unwrap_or(f64::NAN)
+        })
         .collect();
     let changes = decide::relative_changes(&fs);
     let conv = decide::converged_from(&fs, decide::CONVERGENCE_TOLERANCE);
@@ -594,7 +611,7 @@ pub fn fig5_11_12(ctx: &Ctx, plan: &Plan, targets: &Targets) -> Result<(Vec<Figu
             }
         }
         let o = &rec.observables;
-        let n = o.particles.unwrap_or(f64::NAN);
+        let n = o.get(Observable::Particles).unwrap_or(f64::NAN);
         f11.number(
             "particles",
             Value::num(Some(n)),
@@ -612,29 +629,29 @@ pub fn fig5_11_12(ctx: &Ctx, plan: &Plan, targets: &Targets) -> Result<(Vec<Figu
         f11.number("steps", Value::num(summary_number(&run_dir, "/steps")), "");
         f11.number(
             "analysis time \u{3c4} (\u{b5}s)",
-            Value::num(o.tau_s.map(|t| t * 1e6)),
+            Value::num(o.get(Observable::Tau).map(|t| t * 1e6)),
             format!("paper: {}", paper::ANALYSIS_TIME_S * 1e6),
         );
         for (name, x, note) in [
             (
                 "R = La/Lr",
-                o.length_ratio,
+                o.get(Observable::LengthRatio),
                 format!("the experiment: {}", paper::CALIBRATION_SHOT_LENGTH_RATIO),
             ),
-            ("F", o.fragmentation, String::new()),
+            ("F", o.get(Observable::Fragmentation), String::new()),
             (
                 "va/v0",
-                o.front_velocity_ratio,
+                o.get(Observable::FrontVelocityRatio),
                 "the experiment's: a documented gap".to_string(),
             ),
             (
                 "largest fragment / impactor mass",
-                o.largest_fragment_mass_fraction,
+                o.get(Observable::LargestFragmentMassFraction),
                 "the witness plate: no large central fragment".to_string(),
             ),
             (
                 "mean fragment diameter (mm)",
-                o.mean_fragment_diameter_m.map(|d| d * 1e3),
+                o.get(Observable::MeanFragmentDiameter).map(|d| d * 1e3),
                 "the witness plate: ~1 mm craters".to_string(),
             ),
         ] {
@@ -670,10 +687,12 @@ pub fn fig5_11_12(ctx: &Ctx, plan: &Plan, targets: &Targets) -> Result<(Vec<Figu
         let met = score.objective <= 1.0;
         f11.ours = format!(
             "N = {n}, R = {}, F = {}, va/v0 = {}, largest fragment {} of the impactor, J = {}",
-            o.length_ratio.map_or("n/a".into(), fmt_num),
-            o.fragmentation.map_or("n/a".into(), fmt_num),
-            o.front_velocity_ratio.map_or("n/a".into(), fmt_num),
-            o.largest_fragment_mass_fraction
+            o.get(Observable::LengthRatio).map_or("n/a".into(), fmt_num),
+            o.get(Observable::Fragmentation)
+                .map_or("n/a".into(), fmt_num),
+            o.get(Observable::FrontVelocityRatio)
+                .map_or("n/a".into(), fmt_num),
+            o.get(Observable::LargestFragmentMassFraction)
                 .map_or("n/a".into(), |x| format!("{:.1} %", 100.0 * x)),
             fmt_num(score.objective)
         );
@@ -794,11 +813,11 @@ pub fn fig7_9_10(
     let study = Study::load(study_path)?;
     let cfg = CalibrateConfig::of(&study)?;
     let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-    let targets = Targets::load(&base.join(&cfg.targets))?;
+    let targets = hvi_run::output::load_targets(&base.join(&cfg.targets))?;
     let bound = targets
         .targets
         .iter()
-        .find(|t| t.observable == "largest_fragment_mass_fraction")
+        .find(|t| t.observable == Observable::LargestFragmentMassFraction)
         .map(|t| t.value);
 
     let mut files7 = Vec::new();
@@ -818,18 +837,28 @@ pub fn fig7_9_10(
     }
 
     let largest = calibration_field(plan, &records, |r| {
-        r.observables.largest_fragment_mass_fraction
+        r.observables.get(Observable::LargestFragmentMassFraction)
     })?;
-    let frag = calibration_field(plan, &records, |r| r.observables.fragmentation)?;
-    let mean_d = calibration_field(plan, &records, |r| r.observables.mean_fragment_diameter_m)?;
-    let rr = calibration_field(plan, &records, |r| r.observables.length_ratio)?;
-    let va = calibration_field(plan, &records, |r| r.observables.front_velocity_ratio)?;
+    let frag = calibration_field(plan, &records, |r| {
+        r.observables.get(Observable::Fragmentation)
+    })?;
+    let mean_d = calibration_field(plan, &records, |r| {
+        r.observables.get(Observable::MeanFragmentDiameter)
+    })?;
+    let rr = calibration_field(plan, &records, |r| {
+        r.observables.get(Observable::LengthRatio)
+    })?;
+    let va = calibration_field(plan, &records, |r| {
+        r.observables.get(Observable::FrontVelocityRatio)
+    })?;
     let at = |field: &Field, (e, k): (f64, f64)| -> Option<f64> {
         let c = index_of(&field.x, e)?;
         let r = index_of(&field.y, k)?;
         Some(field.z[r][c]).filter(|v| v.is_finite())
     };
-    let particles = records.iter().find_map(|r| r.observables.particles);
+    let particles = records
+        .iter()
+        .find_map(|r| r.observables.get(Observable::Particles));
     let sigma = plan
         .runs
         .first()
@@ -1151,7 +1180,9 @@ pub fn fig13(ctx: &Ctx, plan: &Plan, gap: Option<String>) -> Result<(Vec<Figure>
         .map(|(run, rec)| {
             (
                 run.values[k].as_f64().unwrap_or(f64::NAN),
-                rec.observables.front_velocity_ratio.unwrap_or(f64::NAN),
+                rec.observables
+                    .get(Observable::FrontVelocityRatio)
+                    .unwrap_or(f64::NAN),
             )
         })
         .collect();
@@ -1161,7 +1192,9 @@ pub fn fig13(ctx: &Ctx, plan: &Plan, gap: Option<String>) -> Result<(Vec<Figure>
         Some(_) => "experimental points (Piekutowski): not available here, a documented gap in experiments_data",
         None => "experimental points: none recorded in experiments_data",
     };
-    let tau = records.iter().find_map(|r| r.observables.tau_s);
+    let tau = records
+        .iter()
+        .find_map(|r| r.observables.get(Observable::Tau));
     plots::front_velocity(
         &ctx.out.join("fig13_front_velocity.png"),
         &pts,
@@ -1284,7 +1317,9 @@ pub fn fig16_17(
     }
     let ax = axis(plan, "scene.v0_m_s")?;
     let ay = axis(plan, "scene.t_over_d")?;
-    let field = field_of(plan, &records, (ax, ay), 0, |r| r.observables.fragmentation)?;
+    let field = field_of(plan, &records, (ax, ay), 0, |r| {
+        r.observables.get(Observable::Fragmentation)
+    })?;
     let cutoff = paper::VALIDITY_FRAGMENTATION_CUTOFF;
 
     // Monotone in v0 along every t/D row.

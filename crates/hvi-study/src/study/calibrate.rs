@@ -19,26 +19,27 @@
 //! the grid's box (each refined axis between its smallest and largest grid value): a point
 //! outside, or one whose scene the engine rejects, costs [`OUTSIDE_COST`] without a run.
 
+use hvi_analysis::observable::Observable;
 use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use crate::cli::CalibrateArgs;
 use anyhow::{anyhow, bail, Result};
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
-use clap::Args;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use super::cli::{print_failures, StudyArgs};
-use super::exec::thread_split;
-use super::execute_plan;
-use super::plan::{fingerprint, validated_scene, Plan};
-use super::score::{objective, Score, Targets, MISSING_TERM};
-use super::spec::{json_to_override, round_sig, Study};
-use super::store::{Job, Record, RunStatus, Store};
-use super::table::Table;
-use crate::output::{write_atomic, write_atomic_bytes};
+use super::sweep::print_failures;
+use hvi_analysis::score::{objective, Score, Targets, MISSING_TERM};
+use hvi_run::exec::thread_split;
+use hvi_run::output::{write_atomic, write_atomic_bytes};
+use hvi_run::plan::{fingerprint, validated_scene, Plan};
+use hvi_run::spec::{json_to_override, round_sig, Study};
+use hvi_run::store::{Job, Record, RunStatus, Store};
+use hvi_run::study::execute_plan;
+use hvi_run::table::Table;
 
 /// The cost of a point outside the grid's box or with an invalid scene (no run is made).
 pub const OUTSIDE_COST: f64 = 10.0 * MISSING_TERM;
@@ -112,20 +113,6 @@ impl CalibrateConfig {
     }
 }
 
-/// `hvi-study calibrate` arguments.
-#[derive(Args, Debug, Clone)]
-pub struct CalibrateArgs {
-    /// The study, tier, output and threads.
-    #[command(flatten)]
-    pub study: StudyArgs,
-    /// Only the grid stage: score the grid, no refinement.
-    #[arg(long)]
-    pub no_refine: bool,
-    /// Nelder-Mead iterations at most (overrides calibrate.max_iters).
-    #[arg(long)]
-    pub max_iters: Option<u64>,
-}
-
 /// One evaluated point: a grid run or a refinement step.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Evaluation {
@@ -159,9 +146,9 @@ pub struct CalibrationResult {
     /// The target file.
     pub targets_file: PathBuf,
     /// The targets' names, kinds, values, tolerances and weights.
-    pub targets: Vec<super::score::Target>,
+    pub targets: Vec<hvi_analysis::score::Target>,
     /// The documented gaps (not scored).
-    pub gaps: Vec<super::score::Gap>,
+    pub gaps: Vec<hvi_analysis::score::Gap>,
     /// The best point over grid and refinement.
     pub best: Evaluation,
     /// The best grid point.
@@ -298,7 +285,7 @@ impl Refinement<'_> {
                 ),
             },
             cached,
-            dir: Some(super::plan::run_dir_name(&fp)),
+            dir: Some(hvi_run::plan::run_dir_name(&fp)),
         };
         Ok(e)
     }
@@ -394,7 +381,8 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
     let (study, plan, out) = args.study.plan()?;
     let cfg = CalibrateConfig::of(&study)?;
     let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-    let targets = Targets::load(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
+    let targets =
+        hvi_run::output::load_targets(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
     let progress = !args.study.quiet;
 
     // Which axes the refinement moves, and in which coordinates.
@@ -608,7 +596,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
                 .ok()
                 .and_then(|t| serde_json::from_str::<Record>(&t).ok())
         })
-        .and_then(|r| r.observables.particles);
+        .and_then(|r| r.observables.get(Observable::Particles));
     let result = CalibrationResult {
         study: plan.study.clone(),
         tier: plan.tier.clone(),
@@ -732,7 +720,7 @@ fn calibration_snapshots(
 ) -> Result<PathBuf> {
     let axes = super::figures::map_axes(plan)?;
     let slice = result.best_grid.step;
-    let (cols, rows, tiles) = super::snapshots::plan_tiles(plan, out, axes, slice, |i| {
+    let (cols, rows, tiles) = super::figures::plan_tiles(plan, out, axes, slice, |i| {
         let r = &records[i];
         let f = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.2}"));
         let j = objective(&result.targets, |n| r.observables.get(n)).objective;
@@ -740,19 +728,19 @@ fn calibration_snapshots(
             (i == slice).then_some(plotters::style::RED),
             format!(
                 "F = {}, R = {}, J = {j:.2}",
-                f(r.observables.fragmentation),
-                f(r.observables.length_ratio)
+                f(r.observables.get(Observable::Fragmentation)),
+                f(r.observables.get(Observable::LengthRatio))
             ),
         )
     })?;
     let tau = records
         .iter()
-        .find_map(|r| r.observables.tau_s)
+        .find_map(|r| r.observables.get(Observable::Tau))
         .map_or("the end".to_string(), |t| {
             format!("\u{3c4} = {:.1} \u{b5}s", t * 1e6)
         });
     let path = out.join("snapshots.png");
-    super::snapshots::snapshot_matrix(
+    hvi_plot::snapshots::snapshot_matrix(
         &path,
         &format!(
             "Debris clouds at {tau} over ({}, {}) (Fig. 7), tier `{}`; red frame: best grid point",

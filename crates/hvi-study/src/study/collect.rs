@@ -6,58 +6,18 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
-use clap::{Args, ValueEnum};
 use serde_json::Value;
 
 use super::calibrate::{score_table, CalibrateConfig};
-use super::cli::{print_failures, StudyArgs};
-use super::plan::{describe_values, Plan, DIR_DIGITS};
-use super::score::Targets;
-use super::slurm::{QueueView, TaskState};
-use super::spec::Study;
-use super::store::{Observables, Record, RunStatus, Store};
-use super::table::results_table;
+use super::sweep::print_failures;
 use super::validity::{validity_outputs, ValidityConfig};
-
-/// `hvi-study status` arguments.
-#[derive(Args, Debug, Clone)]
-pub struct StatusArgs {
-    /// The study (a study file with the flags `sweep` takes, or a study directory or its
-    /// plan.json).
-    #[command(flatten)]
-    pub study: StudyArgs,
-    /// One line per run: its state, where it runs, its directory.
-    #[arg(long, short)]
-    pub verbose: bool,
-}
-
-/// Which command's outputs `collect` writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum CollectAs {
-    /// results.csv / results.json, as `sweep`.
-    Sweep,
-    /// The results with the objective and each target's score, as the grid stage of
-    /// `calibrate` (the refinement needs new runs: `hvi-study calibrate` does it).
-    Calibrate,
-    /// The results with `valid`, the map, its boundary and the snapshots, as `validity-map`.
-    ValidityMap,
-}
-
-/// `hvi-study collect` arguments.
-#[derive(Args, Debug, Clone)]
-pub struct CollectArgs {
-    /// The study (a study file with the flags `sweep` takes, or a study directory or its
-    /// plan.json).
-    #[command(flatten)]
-    pub study: StudyArgs,
-    /// Write what this command writes (default: `calibrate` for a study with `[calibrate]`,
-    /// `validity-map` for one with `[validity]`, else `sweep`).
-    #[arg(long = "as", value_enum, value_name = "COMMAND")]
-    pub kind: Option<CollectAs>,
-    /// The validity cut-off (with `--as validity-map`; default: the study's, else 0.3).
-    #[arg(long)]
-    pub cutoff: Option<f64>,
-}
+use crate::cli::{CollectArgs, CollectAs, StatusArgs, StudyArgs};
+use hvi_analysis::observable::Observables;
+use hvi_run::plan::{describe_values, Plan, DIR_DIGITS};
+use hvi_run::slurm::{QueueView, TaskState};
+use hvi_run::spec::Study;
+use hvi_run::store::{Record, RunStatus, Store};
+use hvi_run::table::results_table;
 
 /// Reads a plan and its study directory: a study directory or its `plan.json` as is, or a
 /// study file planned like every other command (which writes plan.json).
@@ -287,7 +247,7 @@ pub fn status(args: &StatusArgs) -> Result<()> {
 /// A stand-in record for a run without a result, so the figures draw a gap there.
 fn missing_record(plan: &Plan, i: usize) -> Record {
     Record {
-        format: super::plan::STUDY_FORMAT_VERSION,
+        format: hvi_run::plan::STUDY_FORMAT_VERSION,
         fingerprint: plan.runs[i].fingerprint.clone(),
         study: plan.study.clone(),
         tier: plan.tier.clone(),
@@ -346,7 +306,8 @@ pub fn collect(args: &CollectArgs) -> Result<()> {
             let study = study()?;
             let cfg = CalibrateConfig::of(&study)?;
             let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-            let targets = Targets::load(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
+            let targets = hvi_run::output::load_targets(&base.join(&cfg.targets))?
+                .with_weights(&cfg.weights)?;
             score_table(&mut table, &filled, &targets);
             // A run without a result has no score (a failed run scores as it does locally).
             let scored: Vec<usize> = (0..table.columns.len())
@@ -372,7 +333,7 @@ pub fn collect(args: &CollectArgs) -> Result<()> {
         CollectAs::ValidityMap => {
             let cfg = ValidityConfig::of(&study()?)?;
             let cutoff = cfg.cutoff(args.cutoff)?;
-            validity_outputs(&plan, &dir, &cfg.observable, cutoff, table, &filled, quiet)?;
+            validity_outputs(&plan, &dir, cfg.observable, cutoff, table, &filled, quiet)?;
         }
     }
     if !missing.is_empty() {

@@ -1,17 +1,19 @@
 //! The study figures: fields of an observable over two axes of a plan (the runs' records), and
 //! the calibration's three maps (Figs. 9 and 10, the objective with the optimum).
 
+use hvi_analysis::observable::Observable;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, Result};
 use plotters::style::RGBColor;
 
 use super::calibrate::CalibrationResult;
-use super::contour::Field;
-use super::plan::Plan;
-use super::plot::{contour_plot, ContourPlot, Marker};
-use super::score::objective;
-use super::store::{Record, RunStatus};
+use hvi_analysis::contour::Field;
+use hvi_analysis::score::objective;
+use hvi_plot::contour::{contour_plot, ContourPlot, Marker};
+use hvi_plot::snapshots::Tile;
+use hvi_run::plan::Plan;
+use hvi_run::store::{Record, RunStatus};
 
 /// The two axes a map is drawn over: the first two with more than one value. Other axes are
 /// held at the value of run `slice_run` (the best run for the calibration).
@@ -144,7 +146,7 @@ pub fn calibration_maps(
         .filter(|e| e.score.is_some())
         .filter_map(at)
         .collect();
-    let target_of = |observable: &str| {
+    let target_of = |observable: Observable| {
         result
             .targets
             .iter()
@@ -153,7 +155,7 @@ pub fn calibration_maps(
     let mut stems = Vec::new();
 
     // Fig. 9: R.
-    let r_target = target_of("length_ratio");
+    let r_target = target_of(Observable::LengthRatio);
     let plot = ContourPlot {
         title: "Debris-cloud length ratio R = La/Lr (Fig. 9)".into(),
         subtitle: format!(
@@ -165,7 +167,7 @@ pub fn calibration_maps(
         x_log: lx,
         y_log: ly,
         field: field_of(plan, records, (ax, ay), slice, |r| {
-            r.observables.length_ratio
+            r.observables.get(Observable::LengthRatio)
         })?,
         value_label: "R".into(),
         levels: 6,
@@ -178,7 +180,7 @@ pub fn calibration_maps(
     stems.push(stem);
 
     // Fig. 10: va / v0 (no experimental value available: no red line, said so).
-    let va_target = target_of("front_velocity_ratio");
+    let va_target = target_of(Observable::FrontVelocityRatio);
     let plot = ContourPlot {
         title: "Axial front velocity va/v0 (Fig. 10)".into(),
         subtitle: match va_target {
@@ -189,7 +191,7 @@ pub fn calibration_maps(
         },
         highlight: va_target.map(|t| (t.value, format!("experiment va/v0 = {}", t.value))),
         field: field_of(plan, records, (ax, ay), slice, |r| {
-            r.observables.front_velocity_ratio
+            r.observables.get(Observable::FrontVelocityRatio)
         })?,
         value_label: "va/v0".into(),
         ..plot
@@ -218,4 +220,49 @@ pub fn calibration_maps(
     contour_plot(&stem, &plot)?;
     stems.push(stem);
     Ok(stems)
+}
+
+/// The tiles of a plan's runs over axes (ax, ay) at run `slice_run`'s other axis values.
+pub fn plan_tiles(
+    plan: &Plan,
+    dir: &Path,
+    (ax, ay): (usize, usize),
+    slice_run: usize,
+    verdict: impl Fn(usize) -> (Option<RGBColor>, String),
+) -> Result<(Vec<String>, Vec<String>, Vec<Tile>)> {
+    let sorted = |k: usize| -> Vec<usize> {
+        let mut idx: Vec<usize> = (0..plan.axes[k].values.len()).collect();
+        idx.sort_by(|&a, &b| {
+            let f = |i: usize| plan.axes[k].values[i].as_f64().unwrap_or(f64::NAN);
+            f(a).total_cmp(&f(b))
+        });
+        idx
+    };
+    let (xs, ys) = (sorted(ax), sorted(ay));
+    let label = |k: usize, i: usize| format!("{}", plan.axes[k].values[i]);
+    let cols = xs.iter().map(|&i| label(ax, i)).collect();
+    let rows = ys.iter().map(|&i| label(ay, i)).collect();
+    let slice = &plan.run(slice_run)?.coords;
+    let mut tiles = Vec::new();
+    for run in &plan.runs {
+        let others = run
+            .coords
+            .iter()
+            .enumerate()
+            .all(|(k, &c)| k == ax || k == ay || c == slice[k]);
+        if !others {
+            continue;
+        }
+        let col = xs.iter().position(|&i| i == run.coords[ax]).unwrap_or(0);
+        let row = ys.iter().position(|&i| i == run.coords[ay]).unwrap_or(0);
+        let (frame, caption) = verdict(run.index);
+        tiles.push(Tile {
+            col,
+            row,
+            picture: Some(dir.join(&run.dir).join("cloud_side.png")),
+            frame,
+            caption,
+        });
+    }
+    Ok((cols, rows, tiles))
 }

@@ -8,41 +8,19 @@
 //! drift, red where the run stopped), `stability.csv` (every cell) and `stability.md` (per
 //! slice: cells, stopped runs, the largest drift, the verdict against the ledger bound).
 
+use hvi_analysis::observable::Observable;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use clap::Args;
 use plotters::prelude::*;
 use serde::Serialize;
 
-use super::cli::StudyArgs;
-use super::execute_plan;
-use super::store::{read_summary, RunStatus, Store};
-use crate::output::{write_atomic_bytes, write_csv_atomic};
-use crate::render::{fonts, write_png, FAMILY};
-
-/// `hvi-study stability` arguments.
-#[derive(Args, Debug, Clone)]
-pub struct StabilityArgs {
-    /// Slice study files (default: every studies/stability/*.toml).
-    pub studies: Vec<PathBuf>,
-    /// Tier of every slice (default: each study's default tier, `quick`).
-    #[arg(long)]
-    pub tier: Option<String>,
-    /// Report directory.
-    #[arg(long, default_value = "reports/stability")]
-    pub out: PathBuf,
-    /// Run stores, one directory per slice under this.
-    #[arg(long, default_value = "runs/stability")]
-    pub store: PathBuf,
-    /// Worker threads in all (default: every core).
-    #[arg(long)]
-    pub threads: Option<usize>,
-    /// No progress output.
-    #[arg(long)]
-    pub quiet: bool,
-}
+use crate::cli::{StabilityArgs, StudyArgs};
+use hvi_plot::render::{fonts, write_png, FAMILY};
+use hvi_run::output::{write_atomic_bytes, write_csv_atomic};
+use hvi_run::store::{read_summary, RunStatus, Store};
+use hvi_run::study::execute_plan;
 
 /// One cell of the stress matrix.
 #[derive(Debug, Clone, Serialize)]
@@ -96,7 +74,7 @@ fn default_slices() -> Result<Vec<PathBuf>> {
 fn value_text(v: &serde_json::Value) -> String {
     match v {
         serde_json::Value::Number(n) => n.as_f64().map_or(n.to_string(), |f| {
-            format!("{}", super::spec::round_sig(f, 4))
+            format!("{}", hvi_run::spec::round_sig(f, 4))
         }),
         serde_json::Value::String(s) => s.clone(),
         other => other.to_string(),
@@ -172,7 +150,7 @@ pub fn stability(args: &StabilityArgs) -> Result<Vec<Cell>> {
                 max_drift: num("/energy/max_abs_relative_drift"),
                 dt_s: dt,
                 dt_over_bound: dt.zip(bound).map(|(a, b)| a / b),
-                broken_fraction: rec.observables.bonds_broken_fraction,
+                broken_fraction: rec.observables.get(Observable::BondsBrokenFraction),
                 trouble: rec.error.clone().unwrap_or_default(),
                 at: (run.coords[0], run.coords[1]),
             });

@@ -13,27 +13,29 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Result};
-use clap::Args;
 use serde::Deserialize;
 use serde_json::Value;
 
-use super::cli::{print_failures, StudyArgs};
-use super::contour::Point;
-use super::execute_plan;
+use super::figures::plan_tiles;
 use super::figures::{field_of, map_axes};
-use super::plan::Plan;
-use super::plot::{contour_plot, ContourPlot};
-use super::snapshots::{plan_tiles, snapshot_matrix};
-use super::store::{Record, RunStatus, OBSERVABLE_NAMES};
-use super::table::Table;
-use crate::output::write_atomic;
+use super::sweep::print_failures;
+use crate::cli::ValidityArgs;
+use hvi_analysis::contour::Point;
+use hvi_analysis::observable::Observable;
+use hvi_plot::contour::{contour_plot, ContourPlot};
+use hvi_plot::snapshots::snapshot_matrix;
+use hvi_run::output::write_atomic;
+use hvi_run::plan::Plan;
+use hvi_run::store::{Record, RunStatus};
+use hvi_run::study::execute_plan;
+use hvi_run::table::Table;
 use plotters::style::{BLUE, RED};
 
 /// The paper's cut-off of the validity region (section 5, Fig. 16): F = 0.3.
 pub const PAPER_CUTOFF: f64 = hvi_engine::paper::VALIDITY_FRAGMENTATION_CUTOFF;
 
-fn default_observable() -> String {
-    "fragmentation".into()
+fn default_observable() -> Observable {
+    Observable::Fragmentation
 }
 fn default_cutoff() -> f64 {
     PAPER_CUTOFF
@@ -45,7 +47,7 @@ fn default_cutoff() -> f64 {
 pub struct ValidityConfig {
     /// The observable mapped (default `fragmentation`).
     #[serde(default = "default_observable")]
-    pub observable: String,
+    pub observable: Observable,
     /// The cut-off level (default 0.3).
     #[serde(default = "default_cutoff")]
     pub cutoff: f64,
@@ -53,7 +55,7 @@ pub struct ValidityConfig {
 
 impl ValidityConfig {
     /// Reads `[validity]` of a study (the defaults without one) and checks the observable.
-    pub fn of(study: &super::spec::Study) -> Result<ValidityConfig> {
+    pub fn of(study: &hvi_run::spec::Study) -> Result<ValidityConfig> {
         let cfg: ValidityConfig = match &study.validity {
             Some(v) => serde_path_to_error::deserialize(v.clone()).map_err(|e| {
                 let p = e.path().to_string();
@@ -64,12 +66,6 @@ impl ValidityConfig {
             })?,
             None => ValidityConfig::default(),
         };
-        if !OBSERVABLE_NAMES.contains(&cfg.observable.as_str()) {
-            bail!(
-                "study key `validity.observable`: `{}` (allowed: {OBSERVABLE_NAMES:?})",
-                cfg.observable
-            );
-        }
         Ok(cfg)
     }
 
@@ -90,17 +86,6 @@ impl Default for ValidityConfig {
             cutoff: default_cutoff(),
         }
     }
-}
-
-/// `hvi-study validity-map` arguments.
-#[derive(Args, Debug, Clone)]
-pub struct ValidityArgs {
-    /// The study, tier, output and threads.
-    #[command(flatten)]
-    pub study: StudyArgs,
-    /// The cut-off of the observable (default: the study's, else the paper's F = 0.3).
-    #[arg(long)]
-    pub cutoff: Option<f64>,
 }
 
 /// Writes the boundary polylines as CSV: `polyline, point, <x key>, <y key>`.
@@ -144,7 +129,7 @@ pub fn validity_map(args: &ValidityArgs) -> Result<ValidityMap> {
     validity_outputs(
         &plan,
         &out,
-        &cfg.observable,
+        cfg.observable,
         cutoff,
         table,
         &report.records,
@@ -158,7 +143,7 @@ pub fn validity_map(args: &ValidityArgs) -> Result<ValidityMap> {
 pub fn validity_outputs(
     plan: &Plan,
     out: &Path,
-    observable: &str,
+    observable: Observable,
     cutoff: f64,
     mut table: Table,
     records: &[Record],
@@ -190,17 +175,17 @@ pub fn validity_outputs(
     write_boundary(&out.join("validity_boundary.csv"), (kx, ky), &boundary)?;
     let particles = records
         .iter()
-        .filter_map(|r| r.observables.particles)
+        .filter_map(|r| r.observables.get(Observable::Particles))
         .fold((f64::INFINITY, 0.0f64), |(lo, hi), n| {
             (lo.min(n), hi.max(n))
         });
     let plot = ContourPlot {
         title: format!(
             "{} over ({}, {}) (Fig. 16b)",
-            if observable == "fragmentation" {
+            if observable == Observable::Fragmentation {
                 "Fragmentation F"
             } else {
-                observable
+                observable.name()
             },
             plan.axes[axes.0].label,
             plan.axes[axes.1].label
@@ -214,7 +199,7 @@ pub fn validity_outputs(
         x_log: false,
         y_log: false,
         field,
-        value_label: if observable == "fragmentation" {
+        value_label: if observable == Observable::Fragmentation {
             "F".into()
         } else {
             observable.to_string()

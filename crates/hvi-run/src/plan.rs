@@ -14,9 +14,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use super::spec::{json_to_override, override_key, Axis, Study};
 use crate::output::write_atomic_bytes;
 use crate::scene_file::parse_scene;
+use crate::spec::{json_to_override, override_key, Axis, Study};
 
 /// Version of the plan and run-record formats, and of what the fingerprint covers. Bump it
 /// when either changes meaning, so old results are not mistaken for new ones.

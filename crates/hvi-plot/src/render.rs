@@ -29,11 +29,12 @@ use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::output::write_atomic_bytes;
+use crate::save::write_atomic_bytes;
 
 /// DejaVu Sans (Bitstream Vera licence, see `assets/fonts/LICENSE-DejaVu.txt`).
 pub(crate) const FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
-pub(crate) const FAMILY: &str = "sans-serif";
+/// The font family every picture uses (DejaVu Sans, embedded).
+pub const FAMILY: &str = "sans-serif";
 
 const IMPACTOR_RGB: [u8; 3] = [214, 39, 40];
 const PLATE_RGB: [u8; 3] = [31, 96, 196];
@@ -45,7 +46,7 @@ const GUIDE: RGBColor = RGBColor(90, 90, 90);
 const MEASURE: RGBColor = RGBColor(0, 130, 60);
 
 /// Registers the embedded font with plotters once (every picture of the crate calls it).
-pub(crate) fn fonts() -> Result<()> {
+pub fn fonts() -> Result<()> {
     static DONE: OnceLock<bool> = OnceLock::new();
     let ok = *DONE
         .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
@@ -178,7 +179,7 @@ fn format_mm(mm: f64) -> String {
 }
 
 /// Encodes an RGB buffer as PNG and writes it atomically.
-pub(crate) fn write_png(path: &Path, rgb: &[u8], w: u32, h: u32) -> Result<()> {
+pub fn write_png(path: &Path, rgb: &[u8], w: u32, h: u32) -> Result<()> {
     let mut bytes = Vec::new();
     {
         let mut enc = png::Encoder::new(&mut bytes, w, h);

@@ -18,8 +18,9 @@
 //! numbers are not available) are listed and never scored.
 //!
 //! ```
-//! use hvi_study::study::score::{Target, TargetKind, objective};
-//! let r = Target { name: "length_ratio".into(), observable: "length_ratio".into(),
+//! use hvi_analysis::observable::Observable;
+//! use hvi_analysis::score::{Target, TargetKind, objective};
+//! let r = Target { name: "length_ratio".into(), observable: Observable::LengthRatio,
 //!     kind: TargetKind::Value, value: 1.55, tolerance: 0.1, weight: 1.0, source: String::new() };
 //! let s = objective(&[r], |_| Some(1.45));
 //! assert!((s.objective - 1.0).abs() < 1e-12);
@@ -31,7 +32,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
-use super::store::OBSERVABLE_NAMES;
+use crate::observable::Observable;
 
 /// The term of a target whose observable is missing: larger than any plausible score.
 pub const MISSING_TERM: f64 = 1e3;
@@ -54,8 +55,8 @@ pub enum TargetKind {
 pub struct Target {
     /// The term's name (a column `score_<name>` in the tables).
     pub name: String,
-    /// The observable it scores (one of the run observables).
-    pub observable: String,
+    /// The observable it scores.
+    pub observable: Observable,
     /// How.
     pub kind: TargetKind,
     /// The target value or bound, in the observable's unit.
@@ -75,7 +76,7 @@ pub struct Gap {
     /// Name.
     pub name: String,
     /// The observable it would score.
-    pub observable: String,
+    pub observable: Observable,
     /// Where it is (or would be) published.
     pub source: String,
     /// Why it is missing and what is done instead.
@@ -131,12 +132,6 @@ impl Targets {
         t.path = path.to_path_buf();
         for (i, x) in t.targets.iter().enumerate() {
             let key = format!("targets[{i}] ({})", x.name);
-            if !OBSERVABLE_NAMES.contains(&x.observable.as_str()) {
-                bail!(
-                    "{key}: unknown observable `{}` (allowed: {OBSERVABLE_NAMES:?})",
-                    x.observable
-                );
-            }
             if !x.value.is_finite() {
                 bail!("{key}: value must be a finite number");
             }
@@ -161,13 +156,6 @@ impl Targets {
             bail!("target file has no target with a weight > 0");
         }
         Ok(t)
-    }
-
-    /// Reads a target file.
-    pub fn load(path: &Path) -> Result<Targets> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read target file {}", path.display()))?;
-        Targets::parse(&text, path).with_context(|| format!("in target file {}", path.display()))
     }
 
     /// Overrides weights by target name (a study's `[calibrate.weights]`).
@@ -230,14 +218,14 @@ pub fn term(t: &Target, x: Option<f64>) -> f64 {
     (u * u).min(MISSING_TERM)
 }
 
-/// Scores observables (looked up by name) against targets.
-pub fn objective(targets: &[Target], observable: impl Fn(&str) -> Option<f64>) -> Score {
+/// Scores observables against targets.
+pub fn objective(targets: &[Target], observable: impl Fn(Observable) -> Option<f64>) -> Score {
     let mut sum = 0.0;
     let mut wsum = 0.0;
     let terms = targets
         .iter()
         .map(|t| {
-            let x = observable(&t.observable);
+            let x = observable(t.observable);
             let v = term(t, x);
             sum += t.weight * v;
             wsum += t.weight;
@@ -262,7 +250,7 @@ mod tests {
     fn target(kind: TargetKind, value: f64, tolerance: f64, weight: f64) -> Target {
         Target {
             name: format!("{kind:?}"),
-            observable: "length_ratio".into(),
+            observable: Observable::LengthRatio,
             kind,
             value,
             tolerance,
@@ -276,18 +264,18 @@ mod tests {
         let r = target(TargetKind::Value, 1.55, 0.1, 1.0);
         let big = Target {
             name: "big".into(),
-            observable: "largest_fragment_mass_fraction".into(),
+            observable: Observable::LargestFragmentMassFraction,
             ..target(TargetKind::AtMost, 0.05, 0.05, 1.0)
         };
         let size = Target {
             name: "size".into(),
-            observable: "mean_fragment_diameter_m".into(),
+            observable: Observable::MeanFragmentDiameter,
             ..target(TargetKind::LogValue, 1e-3, 3.0, 0.5)
         };
-        let obs = |name: &str| match name {
-            "length_ratio" => Some(1.35),                  // 2 tolerances off: 4
-            "largest_fragment_mass_fraction" => Some(0.2), // 3 tolerances over: 9
-            "mean_fragment_diameter_m" => Some(9e-3),      // a factor 9 = 3^2: 4
+        let obs = |name: Observable| match name {
+            Observable::LengthRatio => Some(1.35), // 2 tolerances off: 4
+            Observable::LargestFragmentMassFraction => Some(0.2), // 3 tolerances over: 9
+            Observable::MeanFragmentDiameter => Some(9e-3), // a factor 9 = 3^2: 4
             _ => None,
         };
         let s = objective(&[r.clone(), big.clone(), size.clone()], obs);
@@ -297,7 +285,7 @@ mod tests {
         assert!((s.objective - (4.0 + 9.0 + 0.5 * 4.0) / 2.5).abs() < 1e-9);
         // Under the bound, an at_most term is zero; the log term is symmetric.
         let s = objective(&[big.clone(), size.clone()], |n| match n {
-            "largest_fragment_mass_fraction" => Some(0.01),
+            Observable::LargestFragmentMassFraction => Some(0.01),
             _ => Some(1e-3 / 3.0),
         });
         assert_eq!(s.terms[0].term, 0.0);
@@ -312,11 +300,12 @@ mod tests {
     fn the_shipped_target_file_parses_and_names_its_gaps() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../experiments_data/calibration-shot.toml");
-        let t = Targets::load(&path).expect("parses");
+        let text = std::fs::read_to_string(&path).expect("shipped file");
+        let t = Targets::parse(&text, &path).expect("parses");
         let r = t
             .targets
             .iter()
-            .find(|x| x.observable == "length_ratio")
+            .find(|x| x.observable == Observable::LengthRatio)
             .expect("R target");
         assert_eq!(r.value, 1.55);
         assert_eq!(t.shot.v0_m_s, 6500.0);
@@ -324,12 +313,12 @@ mod tests {
         assert!(t
             .gaps
             .iter()
-            .any(|g| g.observable == "front_velocity_ratio"));
+            .any(|g| g.observable == Observable::FrontVelocityRatio));
         // No target invents a front velocity.
         assert!(t
             .targets
             .iter()
-            .all(|x| x.observable != "front_velocity_ratio"));
+            .all(|x| x.observable != Observable::FrontVelocityRatio));
     }
 
     #[test]

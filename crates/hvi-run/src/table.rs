@@ -7,9 +7,10 @@ use std::path::Path;
 use anyhow::Result;
 use serde_json::Value;
 
-use super::plan::Plan;
-use super::store::{Record, RunStatus, OBSERVABLE_NAMES};
 use crate::output::write_atomic;
+use crate::plan::Plan;
+use crate::store::{Record, RunStatus};
+use hvi_analysis::observable::Observable;
 
 /// A table: named columns, rows of JSON values (null where there is nothing).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -83,7 +84,7 @@ pub fn results_table(plan: &Plan, records: &[Option<Record>]) -> Table {
     let mut columns = vec!["index".to_string()];
     columns.extend(plan.axes.iter().map(|a| a.key.clone()));
     columns.extend(["status", "fingerprint", "dir"].map(String::from));
-    columns.extend(OBSERVABLE_NAMES.iter().map(|s| s.to_string()));
+    columns.extend(Observable::names().map(String::from));
     columns.extend(["wall_seconds", "error"].map(String::from));
     let rows = plan
         .runs
@@ -100,8 +101,8 @@ pub fn results_table(plan: &Plan, records: &[Option<Record>]) -> Table {
             row.push(Value::String(status.into()));
             row.push(Value::String(run.fingerprint.clone()));
             row.push(Value::String(run.dir.clone()));
-            for name in OBSERVABLE_NAMES {
-                row.push(num(rec.as_ref().and_then(|r| r.observables.get(name))));
+            for o in Observable::ALL {
+                row.push(num(rec.as_ref().and_then(|r| r.observables.get(o))));
             }
             row.push(num(rec.as_ref().map(|r| r.wall_seconds)));
             row.push(

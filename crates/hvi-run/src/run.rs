@@ -19,7 +19,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 
 use crate::output::{write_atomic_bytes, write_csv_atomic, write_lammps_data, write_xyz};
-use crate::render::{self, Frame, SceneInfo};
+use hvi_plot::render::{self, Frame, SceneInfo};
 
 /// How to run and what to write besides the summary.
 #[derive(Debug, Clone, Default)]

@@ -12,8 +12,8 @@ use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::decide::EnergySample;
 use crate::render::{fonts, write_png, FAMILY};
+use hvi_analysis::decide::EnergySample;
 
 const BLUE_LINE: RGBColor = RGBColor(31, 96, 196);
 const RED_LINE: RGBColor = RGBColor(214, 39, 40);
@@ -395,7 +395,7 @@ pub fn convergence(
             .build_cartesian_2d(
                 (x_lo..x_hi)
                     .log_scale()
-                    .with_key_points(crate::study::plot::log_ticks(x_lo, x_hi)),
+                    .with_key_points(crate::contour::log_ticks(x_lo, x_hi)),
                 0.0..y_hi,
             )?;
         chart
@@ -424,7 +424,7 @@ pub fn convergence(
             )))?
             .label(format!(
                 "the paper: converges from about {} particles",
-                super::report::short(paper)
+                hvi_analysis::number::short(paper)
             ))
             .legend(|(x, y)| dashed_legend(x, y, RED_LINE));
         if let Some(n) = ours {
@@ -515,9 +515,9 @@ mod tests {
         assert_eq!(log_label_125(3e4), "");
         assert_eq!(log_label_125(0.0), "");
         assert_eq!(
-            crate::study::plot::log_ticks(150.0, 2500.0),
+            crate::contour::log_ticks(150.0, 2500.0),
             vec![200.0, 500.0, 1000.0, 2000.0]
         );
-        assert!(crate::study::plot::log_ticks(0.0, 1.0).is_empty());
+        assert!(crate::contour::log_ticks(0.0, 1.0).is_empty());
     }
 }

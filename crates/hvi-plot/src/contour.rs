@@ -13,8 +13,8 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::contour::{Field, Point};
-use crate::output::write_atomic_bytes;
+use crate::save::write_atomic_bytes;
+use hvi_analysis::contour::{Field, Point};
 
 /// DejaVu Sans, shared with `render` (same file; registered here too so plots do not depend
 /// on a picture having been drawn first).

@@ -1,5 +1,5 @@
 //! Snapshot matrices (Figs. 7 and 17): each run's side view (the left panel of the
-//! `cloud_side.png` that `hvi_study::render` draws for it) tiled over two axes of the study,
+//! `cloud_side.png` that `hvi_plot::render` draws for it) tiled over two axes of the study,
 //! optionally framed by a verdict (Fig. 17: valid red, invalid blue). Pictures only; the
 //! numbers come from the runs.
 
@@ -9,8 +9,7 @@ use std::path::Path;
 use anyhow::{anyhow, bail, Context, Result};
 use plotters::prelude::*;
 
-use super::plan::Plan;
-use crate::output::write_atomic_bytes;
+use crate::save::write_atomic_bytes;
 
 /// An RGB image.
 #[derive(Debug, Clone)]
@@ -118,7 +117,7 @@ pub fn snapshot_matrix(
     (y_label, rows): (&str, &[String]),
     tiles: &[Tile],
 ) -> Result<usize> {
-    super::plot::fonts()?;
+    crate::render::fonts()?;
     let tw = if cols.len() > 4 { 260 } else { 380 };
     // The side view's left panel: the projection along y (render::side_view's layout).
     let crop =
@@ -206,51 +205,6 @@ pub fn snapshot_matrix(
     }
     write_atomic_bytes(path, &bytes)?;
     Ok(pictures.iter().filter(|p| p.is_some()).count())
-}
-
-/// The tiles of a plan's runs over axes (ax, ay) at run `slice_run`'s other axis values.
-pub fn plan_tiles(
-    plan: &Plan,
-    dir: &Path,
-    (ax, ay): (usize, usize),
-    slice_run: usize,
-    verdict: impl Fn(usize) -> (Option<RGBColor>, String),
-) -> Result<(Vec<String>, Vec<String>, Vec<Tile>)> {
-    let sorted = |k: usize| -> Vec<usize> {
-        let mut idx: Vec<usize> = (0..plan.axes[k].values.len()).collect();
-        idx.sort_by(|&a, &b| {
-            let f = |i: usize| plan.axes[k].values[i].as_f64().unwrap_or(f64::NAN);
-            f(a).total_cmp(&f(b))
-        });
-        idx
-    };
-    let (xs, ys) = (sorted(ax), sorted(ay));
-    let label = |k: usize, i: usize| format!("{}", plan.axes[k].values[i]);
-    let cols = xs.iter().map(|&i| label(ax, i)).collect();
-    let rows = ys.iter().map(|&i| label(ay, i)).collect();
-    let slice = &plan.run(slice_run)?.coords;
-    let mut tiles = Vec::new();
-    for run in &plan.runs {
-        let others = run
-            .coords
-            .iter()
-            .enumerate()
-            .all(|(k, &c)| k == ax || k == ay || c == slice[k]);
-        if !others {
-            continue;
-        }
-        let col = xs.iter().position(|&i| i == run.coords[ax]).unwrap_or(0);
-        let row = ys.iter().position(|&i| i == run.coords[ay]).unwrap_or(0);
-        let (frame, caption) = verdict(run.index);
-        tiles.push(Tile {
-            col,
-            row,
-            picture: Some(dir.join(&run.dir).join("cloud_side.png")),
-            frame,
-            caption,
-        });
-    }
-    Ok((cols, rows, tiles))
 }
 
 #[cfg(test)]

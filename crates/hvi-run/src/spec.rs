@@ -31,6 +31,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+pub use hvi_analysis::number::round_sig;
+
 use crate::scene_file::SECTIONS;
 
 /// The tier a study runs at when none is named.
@@ -231,16 +233,6 @@ fn expand_range(key: &str, r: &RangeFile) -> Result<Vec<serde_json::Value>> {
         })
         .collect();
     Ok(values)
-}
-
-/// `x` rounded to `digits` significant digits.
-pub fn round_sig(x: f64, digits: i32) -> f64 {
-    if x == 0.0 || !x.is_finite() {
-        return x;
-    }
-    let e = x.abs().log10().floor() as i32;
-    let scale = 10f64.powi(digits - 1 - e);
-    (x * scale).round() / scale
 }
 
 impl Study {

@@ -28,43 +28,30 @@ use std::process::Command;
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use anyhow::{anyhow, bail, Context, Result};
-use clap::Args;
 use serde::{Deserialize, Serialize};
 
-use super::cli::StudyArgs;
-use super::plan::describe_values;
-use super::store::{RunStatus, Store};
 use crate::output::write_atomic_bytes;
+use crate::plan::describe_values;
+use crate::plan::Plan;
+use crate::store::{RunStatus, Store};
 
-/// `hvi-study submit` arguments.
-#[derive(Args, Debug, Clone)]
-pub struct SubmitArgs {
-    /// The study, tier and output directory (the same flags as `sweep`).
-    #[command(flatten)]
-    pub study: StudyArgs,
-    /// Submit to Slurm with sbatch (the one scheduler hvi-study knows; required, so that the
-    /// command says where the runs go).
-    #[arg(long, required = true)]
-    pub slurm: bool,
-    /// Slurm partition (`#SBATCH --partition`); default: the cluster's default partition.
-    #[arg(long, value_name = "P")]
+/// How `submit --slurm` asks Slurm to run a study's missing runs.
+#[derive(Debug, Clone, Default)]
+pub struct SlurmOptions {
+    /// Slurm partition (`#SBATCH --partition`); `None`: the cluster's default.
     pub partition: Option<String>,
-    /// Time limit of each run, in Slurm's format (`MM`, `HH:MM:SS`, `D-HH:MM`, ...).
-    #[arg(long, value_name = "T")]
+    /// Time limit of each run, in Slurm's format.
     pub time: Option<String>,
-    /// CPUs of each run: its worker threads (results are identical for any count).
-    #[arg(long, value_name = "C", default_value_t = 1)]
+    /// CPUs of each run: its worker threads.
     pub cpus_per_task: usize,
-    /// At most K runs at once (`--array=0-(n-1)%K`); default: as many as Slurm allows.
-    #[arg(long, value_name = "K")]
+    /// At most K runs at once (`--array=0-(n-1)%K`).
     pub array_limit: Option<usize>,
-    /// Any other sbatch option, as an `#SBATCH` line, e.g. `--sbatch-option=--account=proj42`
-    /// (repeatable).
-    #[arg(long = "sbatch-option", value_name = "OPTION")]
+    /// Further `#SBATCH` options.
     pub sbatch_options: Vec<String>,
     /// Print the script and what would be submitted; write nothing, submit nothing.
-    #[arg(long)]
     pub dry_run: bool,
+    /// No per-task lines and hints after submitting.
+    pub quiet: bool,
 }
 
 /// One array task of a submission.
@@ -443,49 +430,46 @@ pub fn absolute(p: &Path) -> Result<PathBuf> {
     }
 }
 
-/// Checks the Slurm options before anything is written.
-fn validate(args: &SubmitArgs) -> Result<()> {
-    if args.study.threads.is_some() {
-        bail!("submit: --threads is not used (each run gets --cpus-per-task threads)");
-    }
-    if args.study.jobs.is_some() {
-        bail!("submit: --jobs is not used (--array-limit K caps the runs at once)");
-    }
-    if args.cpus_per_task == 0 {
-        bail!("invalid value for `--cpus-per-task`: 0 (allowed: an integer >= 1)");
-    }
-    if args.array_limit == Some(0) {
-        bail!("invalid value for `--array-limit`: 0 (allowed: an integer >= 1)");
-    }
-    if let Some(p) = &args.partition {
-        if p.is_empty()
-            || !p
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | ','))
-        {
-            bail!(
-                "invalid value for `--partition`: `{p}` (allowed: partition names of letters, \
-                 digits, `_`, `-`, `.`, comma-separated)"
-            );
+impl SlurmOptions {
+    /// Checks the Slurm options before anything is written.
+    pub fn validate(&self) -> Result<()> {
+        let args = self;
+        if args.cpus_per_task == 0 {
+            bail!("invalid value for `--cpus-per-task`: 0 (allowed: an integer >= 1)");
         }
-    }
-    if let Some(t) = &args.time {
-        if !valid_time(t) {
-            bail!(
+        if args.array_limit == Some(0) {
+            bail!("invalid value for `--array-limit`: 0 (allowed: an integer >= 1)");
+        }
+        if let Some(p) = &args.partition {
+            if p.is_empty()
+                || !p
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | ','))
+            {
+                bail!(
+                    "invalid value for `--partition`: `{p}` (allowed: partition names of letters, \
+                 digits, `_`, `-`, `.`, comma-separated)"
+                );
+            }
+        }
+        if let Some(t) = &args.time {
+            if !valid_time(t) {
+                bail!(
                 "invalid value for `--time`: `{t}` (allowed: Slurm's MM, MM:SS, HH:MM:SS, D-HH, \
                  D-HH:MM, D-HH:MM:SS or UNLIMITED)"
             );
+            }
         }
-    }
-    for o in &args.sbatch_options {
-        if !o.starts_with('-') || o.contains(['\n', '\r']) {
-            bail!(
+        for o in &args.sbatch_options {
+            if !o.starts_with('-') || o.contains(['\n', '\r']) {
+                bail!(
                 "invalid value for `--sbatch-option`: `{o}` (allowed: one sbatch option such as \
                  --account=NAME, on one line)"
             );
+            }
         }
+        Ok(())
     }
-    Ok(())
 }
 
 /// The next free `slurm/submission-NNN` directory (created, unless `create` is false).
@@ -560,19 +544,27 @@ pub fn sbatch(script: &Path) -> Result<String> {
     Ok(id)
 }
 
-/// `hvi-study submit STUDY --slurm`.
-pub fn submit(args: &SubmitArgs) -> Result<()> {
-    validate(args)?;
-    let (_, plan, out) = args.study.build_plan()?;
+/// What a study lacks, as a submission sees it.
+struct Pending {
+    /// Completed runs.
+    done: usize,
+    /// Failed runs (submitted again).
+    failed: usize,
+    /// Plan indices to submit.
+    todo: Vec<usize>,
+    /// Job ids of earlier submissions still running some of the plan's runs, and how many.
+    in_queue: (Vec<String>, usize),
+}
+
+/// The runs of `plan` that `out`'s store lacks and Slurm is not already running.
+fn pending(plan: &Plan, out: &Path) -> Result<Pending> {
     // What is done: read the store only if there is one (a dry run creates nothing).
     let store = if out.join("runs").is_dir() {
-        Some(Store::open(&out)?)
+        Some(Store::open(out)?)
     } else {
         None
     };
-    let mut done = 0;
-    let mut failed = 0;
-    let mut todo = Vec::new();
+    let (mut done, mut failed, mut todo) = (0, 0, Vec::new());
     for r in &plan.runs {
         let rec = match &store {
             Some(s) => s.lookup(&r.fingerprint)?,
@@ -592,68 +584,105 @@ pub fn submit(args: &SubmitArgs) -> Result<()> {
     let queue = if todo.is_empty() {
         QueueView::default()
     } else {
-        QueueView::of(&out)?
+        QueueView::of(out)?
     };
     if let Some(note) = &queue.note {
         eprintln!("note: {note}");
     }
-    let mut in_queue: Vec<&ActiveTask> = Vec::new();
+    let mut jobs = Vec::new();
+    let mut queued = 0;
     todo.retain(|&i| match queue.active.get(&plan.runs[i].fingerprint) {
         Some(t) => {
-            in_queue.push(t);
+            jobs.push(t.job_id.clone());
+            queued += 1;
             false
         }
         None => true,
     });
-    let n = plan.runs.len();
-    let mut status_line = format!(
-        "study `{}` at tier `{}`: {n} runs, {done} done",
-        plan.study, plan.tier
-    );
-    if failed > 0 {
-        let _ = write!(status_line, ", {failed} failed (submitted again)");
-    }
-    if !in_queue.is_empty() {
-        let mut jobs: Vec<&str> = in_queue.iter().map(|t| t.job_id.as_str()).collect();
-        jobs.sort();
-        jobs.dedup();
-        let _ = write!(
-            status_line,
-            ", {} already queued or running in job {}",
-            in_queue.len(),
-            jobs.join(", ")
+    jobs.sort();
+    jobs.dedup();
+    Ok(Pending {
+        done,
+        failed,
+        todo,
+        in_queue: (jobs, queued),
+    })
+}
+
+impl Pending {
+    /// The one line `submit` prints of the study's state.
+    fn status_line(&self, plan: &Plan) -> String {
+        let mut line = format!(
+            "study `{}` at tier `{}`: {} runs, {} done",
+            plan.study,
+            plan.tier,
+            plan.runs.len(),
+            self.done
         );
+        if self.failed > 0 {
+            let _ = write!(line, ", {} failed (submitted again)", self.failed);
+        }
+        let (jobs, queued) = &self.in_queue;
+        if *queued > 0 {
+            let _ = write!(
+                line,
+                ", {queued} already queued or running in job {}",
+                jobs.join(", ")
+            );
+        }
+        if self.todo.is_empty() {
+            line.push_str("; nothing to submit");
+        } else {
+            let _ = write!(line, "; {} to submit", self.todo.len());
+        }
+        line
     }
+}
+
+/// A name safe for `--job-name`: letters, digits, `-`, `_` and `.`, the rest `_`.
+fn job_name_part(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// The `%K` suffix of the array range.
+fn array_suffix(limit: Option<usize>) -> String {
+    limit.map_or(String::new(), |k| format!("%{k}"))
+}
+
+/// `hvi-study submit STUDY --slurm`: the runs the store of `out` lacks (and Slurm is not
+/// already running) as one job array of `run-unit`s; prints the job id.
+pub fn submit(plan: &Plan, out: &Path, opts: &SlurmOptions) -> Result<()> {
+    opts.validate()?;
+    let pending = pending(plan, out)?;
+    eprintln!("{}", pending.status_line(plan));
+    let todo = &pending.todo;
     if todo.is_empty() {
-        eprintln!("{status_line}; nothing to submit");
         return Ok(());
     }
-    let _ = write!(status_line, "; {} to submit", todo.len());
-    eprintln!("{status_line}");
-
-    let study_dir = absolute(&out)?;
+    let study_dir = absolute(out)?;
     let exe = std::env::current_exe()
         .and_then(std::fs::canonicalize)
         .context("cannot find the hvi-study binary's path for the job script")?;
-    let sub_dir = if args.dry_run {
+    let sub_dir = if opts.dry_run {
         submission_dir(&study_dir, false)?
     } else {
-        plan.write(&out)?;
+        plan.write(out)?;
         submission_dir(&study_dir, true)?
     };
-    let clean = |s: &str| -> String {
-        s.chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.' {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .collect()
-    };
     let spec = ScriptSpec {
-        job_name: format!("hvi-{}-{}", clean(&plan.study), clean(&plan.tier)),
+        job_name: format!(
+            "hvi-{}-{}",
+            job_name_part(&plan.study),
+            job_name_part(&plan.tier)
+        ),
         what: format!(
             "hvi-study submit: study `{}` at tier `{}`, {} runs of {} (array task k runs the plan index on line k + 1 of tasks.txt)",
             plan.study,
@@ -663,24 +692,22 @@ pub fn submit(args: &SubmitArgs) -> Result<()> {
         )
         .replace('\n', " "),
         tasks: todo.len(),
-        array_limit: args.array_limit,
-        cpus_per_task: args.cpus_per_task,
-        partition: args.partition.clone(),
-        time: args.time.clone(),
-        extra: args.sbatch_options.clone(),
+        array_limit: opts.array_limit,
+        cpus_per_task: opts.cpus_per_task,
+        partition: opts.partition.clone(),
+        time: opts.time.clone(),
+        extra: opts.sbatch_options.clone(),
         study_dir: study_dir.clone(),
         submission_dir: sub_dir.clone(),
         exe,
     };
-    let script = spec.script();
-    let tasks_text: String = todo.iter().map(|i| format!("{i}\n")).collect();
-    if args.dry_run {
-        print!("{script}");
+    if opts.dry_run {
+        print!("{}", spec.script());
         eprintln!(
             "dry run: would submit {} runs as array 0-{}{} from {} (tasks.txt: {}); nothing written, nothing submitted",
             todo.len(),
             todo.len() - 1,
-            args.array_limit.map_or(String::new(), |k| format!("%{k}")),
+            array_suffix(opts.array_limit),
             sub_dir.display(),
             todo.iter()
                 .map(|i| i.to_string())
@@ -689,18 +716,31 @@ pub fn submit(args: &SubmitArgs) -> Result<()> {
         );
         return Ok(());
     }
+    let job_id = submit_script(plan, todo, &spec)?;
+    if !opts.quiet {
+        print_submitted(plan, todo, opts, &job_id, &sub_dir, &study_dir);
+    }
+    println!("{job_id}");
+    Ok(())
+}
+
+/// Writes the submission's plan, tasks and script, submits it, and records `submission.json`;
+/// returns the job id. A failed `sbatch` leaves no submission directory behind.
+fn submit_script(plan: &Plan, todo: &[usize], spec: &ScriptSpec) -> Result<String> {
+    let sub_dir = &spec.submission_dir;
     write_atomic_bytes(
         &sub_dir.join("plan.json"),
-        serde_json::to_string_pretty(&plan)?.as_bytes(),
+        serde_json::to_string_pretty(plan)?.as_bytes(),
     )?;
+    let tasks_text: String = todo.iter().map(|i| format!("{i}\n")).collect();
     write_atomic_bytes(&sub_dir.join("tasks.txt"), tasks_text.as_bytes())?;
     let script_path = sub_dir.join("job.sbatch");
-    write_atomic_bytes(&script_path, script.as_bytes())?;
+    write_atomic_bytes(&script_path, spec.script().as_bytes())?;
     let job_id = match sbatch(&script_path) {
         Ok(id) => id,
         Err(e) => {
             // Leave no half submission behind (status would not count it anyway).
-            let _ = std::fs::remove_dir_all(&sub_dir);
+            let _ = std::fs::remove_dir_all(sub_dir);
             return Err(e.context("nothing submitted (`--dry-run` prints the job script)"));
         }
     };
@@ -731,29 +771,37 @@ pub fn submit(args: &SubmitArgs) -> Result<()> {
         serde_json::to_string_pretty(&submission)?.as_bytes(),
     )
     .with_context(|| format!("job {job_id} was submitted but its record was not written"))?;
-    if !args.study.quiet {
-        for (task, &i) in todo.iter().enumerate() {
-            eprintln!(
-                "  task {task}: run {i} ({})",
-                describe_values(&plan.axes, &plan.runs[i].values)
-            );
-        }
+    Ok(job_id)
+}
+
+/// What `submit` prints after submitting: each task's run, and how to follow the job.
+fn print_submitted(
+    plan: &Plan,
+    todo: &[usize],
+    opts: &SlurmOptions,
+    job_id: &str,
+    sub_dir: &Path,
+    study_dir: &Path,
+) {
+    for (task, &i) in todo.iter().enumerate() {
         eprintln!(
-            "submitted job {job_id}: {} runs as array 0-{}{}, {} CPU(s) each; logs and record in {}",
-            todo.len(),
-            todo.len() - 1,
-            args.array_limit.map_or(String::new(), |k| format!("%{k}")),
-            args.cpus_per_task,
-            sub_dir.display()
-        );
-        eprintln!(
-            "follow it with `hvi-study status {}`; `hvi-study collect {}` writes the tables when it is done",
-            study_dir.display(),
-            study_dir.display()
+            "  task {task}: run {i} ({})",
+            describe_values(&plan.axes, &plan.runs[i].values)
         );
     }
-    println!("{job_id}");
-    Ok(())
+    eprintln!(
+        "submitted job {job_id}: {} runs as array 0-{}{}, {} CPU(s) each; logs and record in {}",
+        todo.len(),
+        todo.len() - 1,
+        array_suffix(opts.array_limit),
+        opts.cpus_per_task,
+        sub_dir.display()
+    );
+    eprintln!(
+        "follow it with `hvi-study status {}`; `hvi-study collect {}` writes the tables when it is done",
+        study_dir.display(),
+        study_dir.display()
+    );
 }
 
 #[cfg(test)]

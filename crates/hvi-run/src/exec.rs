@@ -15,6 +15,7 @@
 //! convergence stage, say, is one 7.5e5-particle run and four smaller ones that together cost
 //! less than half of it.
 
+use hvi_analysis::observable::Observable;
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -23,7 +24,7 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 
-use super::store::{Job, Record, RunStatus, Store};
+use crate::store::{Job, Record, RunStatus, Store};
 
 /// How to execute.
 #[derive(Debug, Clone, Copy)]
@@ -278,9 +279,9 @@ pub fn execute(
                     i,
                     describe(i),
                     rec.wall_seconds,
-                    f(o.fragmentation),
-                    f(o.length_ratio),
-                    f(o.front_velocity_ratio)
+                    f(o.get(Observable::Fragmentation)),
+                    f(o.get(Observable::LengthRatio)),
+                    f(o.get(Observable::FrontVelocityRatio))
                 )
             }
             Ok(rec) => {

@@ -52,6 +52,14 @@ pub fn write_csv_atomic<T: serde::Serialize>(
     })
 }
 
+/// Reads a target file (`experiments_data/*.toml`, parsed by [`hvi_analysis::score::Targets`]).
+pub fn load_targets(path: &Path) -> Result<hvi_analysis::score::Targets> {
+    let text = fs::read_to_string(path)
+        .with_context(|| format!("cannot read target file {}", path.display()))?;
+    hvi_analysis::score::Targets::parse(&text, path)
+        .with_context(|| format!("in target file {}", path.display()))
+}
+
 /// Order of particles by id (id 0 first), so files list particles stably across re-sorts.
 fn by_id(p: &Particles) -> Vec<u32> {
     p.index_of_id()

@@ -1,86 +1,11 @@
 //! The study subcommands' arguments and entry points (`main.rs` only dispatches here).
 
-use std::path::PathBuf;
-
+use crate::cli::StudyArgs;
 use anyhow::Result;
-use clap::Args;
 
-use super::exec::ExecOptions;
-use super::plan::{build_plan, Plan, PlanRequest};
-use super::spec::Study;
-use super::store::{RunStatus, Store};
-use super::{default_out_dir, execute_plan, job_of};
-
-/// What every study command takes: the study, its tier and where its results go.
-#[derive(Args, Debug, Clone)]
-pub struct StudyArgs {
-    /// Study file (TOML), e.g. studies/calibration.toml.
-    pub study: PathBuf,
-    /// Resolution tier, as named in the study's `[tiers]` (default: its default_tier, `quick`).
-    #[arg(long)]
-    pub tier: Option<String>,
-    /// Override the tier's particle count (resolution.particles).
-    #[arg(long, value_name = "N")]
-    pub particles: Option<f64>,
-    /// Override a scene key in every run: section.key=value (not an axis key).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub sets: Vec<String>,
-    /// Output directory (default: `runs/studies/<study>/<tier>`).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Worker threads in all (default: every core).
-    #[arg(long)]
-    pub threads: Option<usize>,
-    /// Runs at once (default: as many as threads; the rest of the threads go inside runs).
-    #[arg(long)]
-    pub jobs: Option<usize>,
-    /// No progress output.
-    #[arg(long)]
-    pub quiet: bool,
-}
-
-impl StudyArgs {
-    /// Loads the study, builds and validates its plan, and writes `plan.json`.
-    pub fn plan(&self) -> Result<(Study, Plan, PathBuf)> {
-        let (study, plan, out) = self.build_plan()?;
-        plan.write(&out)?;
-        Ok((study, plan, out))
-    }
-
-    /// Loads the study and builds and validates its plan; returns it with the output
-    /// directory, writing nothing.
-    pub fn build_plan(&self) -> Result<(Study, Plan, PathBuf)> {
-        if self.threads == Some(0) {
-            anyhow::bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
-        }
-        if self.jobs == Some(0) {
-            anyhow::bail!("invalid value for `--jobs`: 0 (allowed: an integer >= 1)");
-        }
-        let study = Study::load(&self.study)?;
-        let plan = build_plan(
-            &study,
-            &PlanRequest {
-                tier: self.tier.clone(),
-                particles: self.particles,
-                set: self.sets.clone(),
-            },
-        )?;
-        let out = self
-            .out
-            .clone()
-            .unwrap_or_else(|| default_out_dir(&plan.study, &plan.tier, self.particles));
-        Ok((study, plan, out))
-    }
-
-    /// Execution options from the flags.
-    pub fn exec_options(&self) -> ExecOptions {
-        ExecOptions {
-            threads: self.threads.unwrap_or(0),
-            jobs: self.jobs,
-            progress: !self.quiet,
-        }
-    }
-}
+use hvi_run::plan::Plan;
+use hvi_run::store::{RunStatus, Store};
+use hvi_run::study::{execute_plan, job_of};
 
 /// `hvi-study plan`: validates a study and writes its plan.json without running anything.
 pub fn plan(args: &StudyArgs) -> Result<()> {
@@ -120,7 +45,7 @@ pub fn sweep(args: &StudyArgs) -> Result<()> {
 }
 
 /// Prints each failed run's error (a failed run does not fail the study).
-pub fn print_failures(records: &[super::store::Record]) {
+pub fn print_failures(records: &[hvi_run::store::Record]) {
     for (i, r) in records.iter().enumerate() {
         if r.status == RunStatus::Failed {
             eprintln!(

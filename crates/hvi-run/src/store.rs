@@ -5,7 +5,7 @@
 //! ```text
 //! runs/<first 16 hex digits of the fingerprint>/
 //!     record.json      the run's record: fingerprint, status, error, observables (written last)
-//!     summary.json     the engine run's summary (hvi_study::run::run_scene)
+//!     summary.json     the engine run's summary (hvi_run::run::run_scene)
 //!     energy.csv, cloud_track.csv, fragments.csv, cloud_side.png and the other pictures
 //! runs/.tmp-<digits>-<pid>-<n>-<host>/   a run in progress
 //! ```
@@ -25,11 +25,12 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
+use hvi_analysis::observable::{Observable, Observables};
 use hvi_engine::scene::SceneSpec;
 use serde::{Deserialize, Serialize};
 
-use super::plan::{DIR_DIGITS, ENGINE_VERSION, STUDY_FORMAT_VERSION};
 use crate::output::write_atomic_bytes;
+use crate::plan::{DIR_DIGITS, ENGINE_VERSION, STUDY_FORMAT_VERSION};
 use crate::run::{run_scene, RunOptions};
 
 /// How a run ended.
@@ -42,122 +43,39 @@ pub enum RunStatus {
     Failed,
 }
 
-/// What the study reads of a run's `summary.json`: the debris-cloud observables
-/// (`hvi_engine::cloud`, MODEL.md section 5) and a few health numbers. `None` where the run
-/// did not measure it (failed run, no cloud, or an older summary).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct Observables {
-    /// Particles in the run.
-    pub particles: Option<f64>,
-    /// Fragmentation F = N_frag / N_part (eq. 21).
-    pub fragmentation: Option<f64>,
-    /// Particles in the debris cloud.
-    pub n_part: Option<f64>,
-    /// Fragments in the debris cloud.
-    pub n_frag: Option<f64>,
-    /// Axial length La, m.
-    pub length_axial_m: Option<f64>,
-    /// Radial length Lr, m.
-    pub length_radial_m: Option<f64>,
-    /// R = La / Lr.
-    pub length_ratio: Option<f64>,
-    /// Front velocity va, m/s.
-    pub front_velocity_m_s: Option<f64>,
-    /// va / v0.
-    pub front_velocity_ratio: Option<f64>,
-    /// Largest fragment's mass over the impactor mass.
-    pub largest_fragment_mass_fraction: Option<f64>,
-    /// Largest fragment's volume-equivalent diameter, m.
-    pub largest_fragment_diameter_m: Option<f64>,
-    /// Mass-weighted mean fragment diameter, m.
-    pub mean_fragment_diameter_m: Option<f64>,
-    /// Time since first contact of the cloud measurement, s.
-    pub tau_s: Option<f64>,
-    /// Bonds broken over bonds at t = 0.
-    pub bonds_broken_fraction: Option<f64>,
-    /// Relative drift of the energy ledger at the end.
-    pub energy_relative_drift: Option<f64>,
-}
-
-/// The observables' names, in table order (the fields of [`Observables`]).
-pub const OBSERVABLE_NAMES: [&str; 15] = [
-    "particles",
-    "fragmentation",
-    "n_part",
-    "n_frag",
-    "length_axial_m",
-    "length_radial_m",
-    "length_ratio",
-    "front_velocity_m_s",
-    "front_velocity_ratio",
-    "largest_fragment_mass_fraction",
-    "largest_fragment_diameter_m",
-    "mean_fragment_diameter_m",
-    "tau_s",
-    "bonds_broken_fraction",
-    "energy_relative_drift",
-];
-
-impl Observables {
-    /// Reads the observables out of a `summary.json` document. The cloud's fields are looked
-    /// up by name in `cloud` (flattened) or in `cloud.measurement`, so this reads every
-    /// summary layout the run module has written.
-    pub fn from_summary(s: &serde_json::Value) -> Observables {
-        let num = |v: Option<&serde_json::Value>| v.and_then(serde_json::Value::as_f64);
-        let cloud = s.get("cloud").filter(|c| c.is_object());
-        let c = |name: &str| {
-            cloud.and_then(|c| {
-                num(c.get(name)).or_else(|| num(c.get("measurement").and_then(|m| m.get(name))))
-            })
-        };
-        let bonds0 = num(s.get("bonds_initial"));
-        let broken = num(s.get("bonds_broken"));
-        Observables {
-            particles: num(s.get("particles")),
-            fragmentation: c("fragmentation"),
-            n_part: c("n_part"),
-            n_frag: c("n_frag"),
-            length_axial_m: c("length_axial_m"),
-            length_radial_m: c("length_radial_m"),
-            length_ratio: c("length_ratio"),
-            front_velocity_m_s: c("front_velocity_m_s"),
-            front_velocity_ratio: c("front_velocity_ratio"),
-            largest_fragment_mass_fraction: c("largest_fragment_mass_fraction"),
-            largest_fragment_diameter_m: c("largest_fragment_diameter_m"),
-            mean_fragment_diameter_m: c("mean_fragment_diameter_m"),
-            tau_s: c("tau_s"),
-            bonds_broken_fraction: match (broken, bonds0) {
+/// Reads the observables out of a `summary.json` document: the debris cloud's (its fields
+/// are looked up by name in `cloud`, flattened, or in `cloud.measurement`, so this reads every
+/// summary layout the run module has written) and the run's health numbers.
+pub fn observables_of_summary(s: &serde_json::Value) -> Observables {
+    let num = |v: Option<&serde_json::Value>| v.and_then(serde_json::Value::as_f64);
+    let cloud = s.get("cloud").filter(|c| c.is_object());
+    let c = |name: &str| {
+        cloud.and_then(|c| {
+            num(c.get(name)).or_else(|| num(c.get("measurement").and_then(|m| m.get(name))))
+        })
+    };
+    let bonds0 = num(s.get("bonds_initial"));
+    let broken = num(s.get("bonds_broken"));
+    let mut o = Observables::default();
+    for k in Observable::ALL {
+        let value = match k {
+            Observable::Particles => num(s.get("particles")),
+            Observable::BondsBrokenFraction => match (broken, bonds0) {
                 (Some(b), Some(b0)) if b0 > 0.0 => Some(b / b0),
                 _ => None,
             },
-            energy_relative_drift: num(s.get("energy").and_then(|e| e.get("relative_drift"))),
-        }
+            Observable::EnergyRelativeDrift => {
+                num(s.get("energy").and_then(|e| e.get("relative_drift")))
+            }
+            // The cloud's observables carry their `summary.json` names.
+            cloud_observable => c(cloud_observable.name()),
+        };
+        o.set(k, value);
     }
-
-    /// The observable of that name (one of [`OBSERVABLE_NAMES`]).
-    pub fn get(&self, name: &str) -> Option<f64> {
-        match name {
-            "particles" => self.particles,
-            "fragmentation" => self.fragmentation,
-            "n_part" => self.n_part,
-            "n_frag" => self.n_frag,
-            "length_axial_m" => self.length_axial_m,
-            "length_radial_m" => self.length_radial_m,
-            "length_ratio" => self.length_ratio,
-            "front_velocity_m_s" => self.front_velocity_m_s,
-            "front_velocity_ratio" => self.front_velocity_ratio,
-            "largest_fragment_mass_fraction" => self.largest_fragment_mass_fraction,
-            "largest_fragment_diameter_m" => self.largest_fragment_diameter_m,
-            "mean_fragment_diameter_m" => self.mean_fragment_diameter_m,
-            "tau_s" => self.tau_s,
-            "bonds_broken_fraction" => self.bonds_broken_fraction,
-            "energy_relative_drift" => self.energy_relative_drift,
-            _ => None,
-        }
-    }
+    o
 }
 
-/// A run directory's `summary.json` (`hvi_study::run::run_scene`), if it has a readable one.
+/// A run directory's `summary.json` (`hvi_run::run::run_scene`), if it has a readable one.
 /// Numbers are read from it by JSON pointer, e.g. `.pointer("/energy/max_abs_relative_drift")`.
 pub fn read_summary(run_dir: &Path) -> Option<serde_json::Value> {
     let text = fs::read_to_string(run_dir.join("summary.json")).ok()?;
@@ -194,7 +112,7 @@ pub struct Record {
 /// A run to execute: its scene and its identity.
 #[derive(Debug, Clone)]
 pub struct Job {
-    /// The full fingerprint ([`super::plan::fingerprint`]).
+    /// The full fingerprint ([`crate::plan::fingerprint`]).
     pub fingerprint: String,
     /// The scene as it runs.
     pub scene: SceneSpec,
@@ -430,7 +348,7 @@ impl Store {
         let summary = read_summary(&tmp);
         let observables = summary
             .as_ref()
-            .map(Observables::from_summary)
+            .map(observables_of_summary)
             .unwrap_or_default();
         let record = Record {
             format: STUDY_FORMAT_VERSION,
@@ -529,21 +447,21 @@ mod tests {
             "cloud": {"fragmentation": 0.5, "n_part": 10, "length_ratio": 1.2,
                       "front_velocity_ratio": 1.01}
         });
-        let o = Observables::from_summary(&flat);
-        assert_eq!(o.fragmentation, Some(0.5));
-        assert_eq!(o.n_part, Some(10.0));
-        assert_eq!(o.bonds_broken_fraction, Some(0.25));
-        assert_eq!(o.energy_relative_drift, Some(1e-6));
-        assert_eq!(o.get("front_velocity_ratio"), Some(1.01));
+        let o = observables_of_summary(&flat);
+        assert_eq!(o.get(Observable::Fragmentation), Some(0.5));
+        assert_eq!(o.get(Observable::NPart), Some(10.0));
+        assert_eq!(o.get(Observable::BondsBrokenFraction), Some(0.25));
+        assert_eq!(o.get(Observable::EnergyRelativeDrift), Some(1e-6));
+        assert_eq!(o.get(Observable::FrontVelocityRatio), Some(1.01));
         let nested = serde_json::json!({"cloud": {"measurement": {"fragmentation": 0.7},
                                                   "front_velocity_ratio": 0.9}});
-        let o = Observables::from_summary(&nested);
-        assert_eq!(o.fragmentation, Some(0.7));
-        assert_eq!(o.front_velocity_ratio, Some(0.9));
-        let none = Observables::from_summary(&serde_json::json!({"cloud": null}));
-        assert_eq!(none.fragmentation, None);
-        for name in OBSERVABLE_NAMES {
-            assert_eq!(none.get(name), None, "{name}");
+        let o = observables_of_summary(&nested);
+        assert_eq!(o.get(Observable::Fragmentation), Some(0.7));
+        assert_eq!(o.get(Observable::FrontVelocityRatio), Some(0.9));
+        let none = observables_of_summary(&serde_json::json!({"cloud": null}));
+        assert_eq!(none.get(Observable::Fragmentation), None);
+        for (name, value) in none.iter() {
+            assert_eq!(value, None, "{name}");
         }
     }
 }

@@ -1,0 +1,12 @@
+//! # hvi-analysis
+//!
+//! Pure functions from run observables to the numbers a study decides on: the typed
+//! observables ([`observable`]), the objective against experiments ([`score`]), contours on a
+//! grid ([`contour`]) and the reproduction's deciding numbers ([`decide`]). Nothing here reads
+//! or writes a file or parses a command line.
+
+pub mod contour;
+pub mod decide;
+pub mod number;
+pub mod observable;
+pub mod score;

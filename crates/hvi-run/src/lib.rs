@@ -1,0 +1,19 @@
+//! # hvi-run
+//!
+//! Runs scenes and studies and keeps their results: scene files with `--set` overrides
+//! ([`scene_file`]), one run and its files ([`run`], [`output`]), study files and their
+//! validated plans ([`spec`], [`plan`]), the run store that keeps each result once
+//! ([`store`]), parallel execution ([`exec`]), results tables ([`table`]), Slurm job arrays
+//! ([`slurm`]) and the engine benchmark ([`bench`]).
+
+pub mod bench;
+pub mod exec;
+pub mod output;
+pub mod plan;
+pub mod run;
+pub mod scene_file;
+pub mod slurm;
+pub mod spec;
+pub mod store;
+pub mod study;
+pub mod table;

@@ -1,0 +1,416 @@
+//! Every command-line argument of `hvi-study`, in one place (clap). The structs here are raw
+//! flags; each workflow validates its own into a plan or options before it runs anything.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use hvi_run::exec::ExecOptions;
+use hvi_run::plan::{build_plan, Plan, PlanRequest};
+use hvi_run::slurm::SlurmOptions;
+use hvi_run::spec::Study;
+use hvi_run::study::default_out_dir;
+
+/// Hypervelocity impact with the discrete element method (Watson & Steinhauser 2017).
+#[derive(Parser, Debug)]
+#[command(name = "hvi-study", version, about, long_about = None)]
+pub struct Cli {
+    /// The subcommand.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Run one scene and write summary.json, energy.csv, cloud_track.csv and fragments.csv
+    /// into --out.
+    Run(RunArgs),
+    /// Validate a study and write its plan.json (every run's scene checked), running nothing.
+    Plan(StudyArgs),
+    /// Run every run of a study (in parallel, finished runs reused) and write results.csv/json.
+    Sweep(StudyArgs),
+    /// Calibrate: the study's grid scored against experiments_data, then a Nelder-Mead
+    /// refinement from the best grid point; writes calibration.json and evaluations.csv.
+    Calibrate(CalibrateArgs),
+    /// Validity map: the study's grid over (v0, t/D), F contour with the cut-off in red
+    /// (Fig. 16b), the boundary as validity_boundary.csv, runs marked valid in results.csv.
+    ValidityMap(ValidityArgs),
+    /// Stability map: every slice of studies/stability/ (v0 x t/D, v0 x step, eps x kappa)
+    /// run through the study store; writes a map per slice, stability.csv and stability.md.
+    Stability(StabilityArgs),
+    /// Reproduce every figure of the paper through the study runner and its store, and write
+    /// report.md: per figure the paper's result, ours, the deciding numbers and a verdict.
+    Reproduce(ReproduceArgs),
+    /// Run one run of a written plan.json by its index (for an external scheduler).
+    RunUnit(RunUnitArgs),
+    /// Submit the runs a study lacks to a Slurm cluster as one job array (one task per run,
+    /// each `hvi-study run-unit`); prints the job id.
+    Submit(SubmitArgs),
+    /// A study's progress: done, failed, running and pending runs, from its run store (and
+    /// Slurm's queue for its submissions).
+    Status(StatusArgs),
+    /// Write a study's tables (and figures) from its run store, running nothing.
+    Collect(CollectArgs),
+    /// Engine throughput: run a scene at several thread counts and print particle-steps/s.
+    ///
+    /// Defaults to the paper's calibration scene (2.7e5 particles) through the first 1 us of
+    /// the impact. Also checks that every thread count gives bit-identical physics.
+    Bench(BenchArgs),
+    /// Run time against error: a reference run at the paper's step, other seeds (the noise
+    /// floor) and variants of the accuracy knobs, each run to the analysis time; writes
+    /// accuracy.csv/json/md and pareto.png and names the cheapest setting within tolerance.
+    ///
+    /// Finished runs are stored (fingerprinted) and reused, so a rerun or a killed benchmark
+    /// picks up where it stopped.
+    Accuracy(AccuracyArgs),
+}
+
+/// What every study command takes: the study, its tier and where its results go.
+#[derive(Args, Debug, Clone)]
+pub struct StudyArgs {
+    /// Study file (TOML), e.g. studies/calibration.toml.
+    pub study: PathBuf,
+    /// Resolution tier, as named in the study's `[tiers]` (default: its default_tier, `quick`).
+    #[arg(long)]
+    pub tier: Option<String>,
+    /// Override the tier's particle count (resolution.particles).
+    #[arg(long, value_name = "N")]
+    pub particles: Option<f64>,
+    /// Override a scene key in every run: section.key=value (not an axis key).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// Output directory (default: `runs/studies/<study>/<tier>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Worker threads in all (default: every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Runs at once (default: as many as threads; the rest of the threads go inside runs).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// No progress output.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+impl StudyArgs {
+    /// Loads the study, builds and validates its plan, and writes `plan.json`.
+    pub fn plan(&self) -> Result<(Study, Plan, PathBuf)> {
+        let (study, plan, out) = self.build_plan()?;
+        plan.write(&out)?;
+        Ok((study, plan, out))
+    }
+
+    /// Loads the study and builds and validates its plan; returns it with the output
+    /// directory, writing nothing.
+    pub fn build_plan(&self) -> Result<(Study, Plan, PathBuf)> {
+        if self.threads == Some(0) {
+            anyhow::bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
+        }
+        if self.jobs == Some(0) {
+            anyhow::bail!("invalid value for `--jobs`: 0 (allowed: an integer >= 1)");
+        }
+        let study = Study::load(&self.study)?;
+        let plan = build_plan(
+            &study,
+            &PlanRequest {
+                tier: self.tier.clone(),
+                particles: self.particles,
+                set: self.sets.clone(),
+            },
+        )?;
+        let out = self
+            .out
+            .clone()
+            .unwrap_or_else(|| default_out_dir(&plan.study, &plan.tier, self.particles));
+        Ok((study, plan, out))
+    }
+
+    /// Execution options from the flags.
+    pub fn exec_options(&self) -> ExecOptions {
+        ExecOptions {
+            threads: self.threads.unwrap_or(0),
+            jobs: self.jobs,
+            progress: !self.quiet,
+        }
+    }
+}
+
+/// `hvi-study calibrate` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct CalibrateArgs {
+    /// The study, tier, output and threads.
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// Only the grid stage: score the grid, no refinement.
+    #[arg(long)]
+    pub no_refine: bool,
+    /// Nelder-Mead iterations at most (overrides calibrate.max_iters).
+    #[arg(long)]
+    pub max_iters: Option<u64>,
+}
+
+/// `hvi-study validity-map` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct ValidityArgs {
+    /// The study, tier, output and threads.
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// The cut-off of the observable (default: the study's, else the paper's F = 0.3).
+    #[arg(long)]
+    pub cutoff: Option<f64>,
+}
+
+/// `hvi-study status` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct StatusArgs {
+    /// The study (a study file with the flags `sweep` takes, or a study directory or its
+    /// plan.json).
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// One line per run: its state, where it runs, its directory.
+    #[arg(long, short)]
+    pub verbose: bool,
+}
+
+/// Which command's outputs `collect` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CollectAs {
+    /// results.csv / results.json, as `sweep`.
+    Sweep,
+    /// The results with the objective and each target's score, as the grid stage of
+    /// `calibrate` (the refinement needs new runs: `hvi-study calibrate` does it).
+    Calibrate,
+    /// The results with `valid`, the map, its boundary and the snapshots, as `validity-map`.
+    ValidityMap,
+}
+
+/// `hvi-study collect` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct CollectArgs {
+    /// The study (a study file with the flags `sweep` takes, or a study directory or its
+    /// plan.json).
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// Write what this command writes (default: `calibrate` for a study with `[calibrate]`,
+    /// `validity-map` for one with `[validity]`, else `sweep`).
+    #[arg(long = "as", value_enum, value_name = "COMMAND")]
+    pub kind: Option<CollectAs>,
+    /// The validity cut-off (with `--as validity-map`; default: the study's, else 0.3).
+    #[arg(long)]
+    pub cutoff: Option<f64>,
+}
+
+/// `hvi-study stability` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct StabilityArgs {
+    /// Slice study files (default: every studies/stability/*.toml).
+    pub studies: Vec<PathBuf>,
+    /// Tier of every slice (default: each study's default tier, `quick`).
+    #[arg(long)]
+    pub tier: Option<String>,
+    /// Report directory.
+    #[arg(long, default_value = "reports/stability")]
+    pub out: PathBuf,
+    /// Run stores, one directory per slice under this.
+    #[arg(long, default_value = "runs/stability")]
+    pub store: PathBuf,
+    /// Worker threads in all (default: every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No progress output.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// `hvi-study reproduce` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct ReproduceArgs {
+    /// The tier, as named in the config: `quick` (CI, a few minutes) or `paper` (the paper's
+    /// resolutions: hours on two cores; `--dry-run` prints the estimate).
+    #[arg(long)]
+    pub tier: String,
+    /// The report directory: report.md, reproduce.json and the figures (default
+    /// `reports/<tier>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Where the runs are kept, one study store per stage (default `runs/reproduce/<tier>`).
+    #[arg(long)]
+    pub runs: Option<PathBuf>,
+    /// A previous report directory: list what changed since its reproduce.json.
+    #[arg(long, value_name = "DIR")]
+    pub previous: Option<PathBuf>,
+    /// With --previous: fail (exit code 2) when a verdict or deciding number changed, e.g. to
+    /// check in CI that a committed report is current.
+    #[arg(long, requires = "previous")]
+    pub fail_on_change: bool,
+    /// The reproduction's config.
+    #[arg(long, default_value = "studies/reproduce.toml")]
+    pub config: PathBuf,
+    /// Worker threads in all (default: every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Runs at once (default: as many as threads).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Validate every run and print the expected wall time; run nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// No progress output.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// `hvi-study submit` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct SubmitArgs {
+    /// The study, tier and output directory (the same flags as `sweep`).
+    #[command(flatten)]
+    pub study: StudyArgs,
+    /// Submit to Slurm with sbatch (the one scheduler hvi-study knows; required, so that the
+    /// command says where the runs go).
+    #[arg(long, required = true)]
+    pub slurm: bool,
+    /// Slurm partition (`#SBATCH --partition`); default: the cluster's default partition.
+    #[arg(long, value_name = "P")]
+    pub partition: Option<String>,
+    /// Time limit of each run, in Slurm's format (`MM`, `HH:MM:SS`, `D-HH:MM`, ...).
+    #[arg(long, value_name = "T")]
+    pub time: Option<String>,
+    /// CPUs of each run: its worker threads (results are identical for any count).
+    #[arg(long, value_name = "C", default_value_t = 1)]
+    pub cpus_per_task: usize,
+    /// At most K runs at once (`--array=0-(n-1)%K`); default: as many as Slurm allows.
+    #[arg(long, value_name = "K")]
+    pub array_limit: Option<usize>,
+    /// Any other sbatch option, as an `#SBATCH` line, e.g. `--sbatch-option=--account=proj42`
+    /// (repeatable).
+    #[arg(long = "sbatch-option", value_name = "OPTION")]
+    pub sbatch_options: Vec<String>,
+    /// Print the script and what would be submitted; write nothing, submit nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+}
+
+impl SubmitArgs {
+    /// The Slurm options, with the flags `submit` does not use refused.
+    pub fn slurm_options(&self) -> Result<SlurmOptions> {
+        if self.study.threads.is_some() {
+            bail!("submit: --threads is not used (each run gets --cpus-per-task threads)");
+        }
+        if self.study.jobs.is_some() {
+            bail!("submit: --jobs is not used (--array-limit K caps the runs at once)");
+        }
+        let opts = SlurmOptions {
+            partition: self.partition.clone(),
+            time: self.time.clone(),
+            cpus_per_task: self.cpus_per_task,
+            array_limit: self.array_limit,
+            sbatch_options: self.sbatch_options.clone(),
+            dry_run: self.dry_run,
+            quiet: self.study.quiet,
+        };
+        opts.validate()?;
+        Ok(opts)
+    }
+}
+
+/// `hvi-study run` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct RunArgs {
+    /// Scene file (TOML), e.g. studies/scenes/default.toml.
+    pub scene: PathBuf,
+    /// Output directory.
+    #[arg(long, default_value = "runs/last")]
+    pub out: PathBuf,
+    /// Override a scene key: section.key=value (e.g. scene.v0_m_s=6500, run.dt_s=auto).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// Worker threads (default: all cores). Results are identical for any count.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Write an extended XYZ snapshot every K steps (OVITO, ASE).
+    #[arg(long, value_name = "K")]
+    pub dump_every: Option<u64>,
+    /// Write the initial state as a LAMMPS data file (units si, atom_style bond).
+    #[arg(long, value_name = "FILE")]
+    pub lammps_data: Option<PathBuf>,
+    /// No progress output.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Write pictures: cloud_side.png (the cloud at the end, Figs. 7/11), cloud_series.png
+    /// (3-D views at analysis.render_times_s, Fig. 12), fragments.png, cloud_track.png.
+    #[arg(long)]
+    pub render: bool,
+}
+
+/// `hvi-study bench` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct BenchArgs {
+    /// Scene file.
+    #[arg(default_value = "studies/scenes/calibration.toml")]
+    pub scene: PathBuf,
+    /// Override a scene key: section.key=value.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// Simulated time after first contact, s.
+    #[arg(long, default_value_t = 1e-6)]
+    pub end_time: f64,
+    /// Thread counts to run, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    pub threads: Vec<usize>,
+    /// Where the runs and bench.csv go.
+    #[arg(long, default_value = "runs/bench")]
+    pub out: PathBuf,
+}
+
+/// `hvi-study accuracy` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct AccuracyArgs {
+    /// Scene file.
+    #[arg(default_value = "studies/scenes/default.toml")]
+    pub scene: PathBuf,
+    /// Override a scene key on every run: section.key=value.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// A candidate NAME:key=value[;key=value...] (repeatable); replaces the default
+    /// candidates (dt_factor 2..16, skin, ballistic cut-off). The reference and the
+    /// noise-floor seeds (`--noise-seeds`) always run.
+    #[arg(long = "variant", value_name = "NAME:KEY=VALUE[;...]")]
+    pub variants: Vec<String>,
+    /// Worker threads per run (default: every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Report directory (default: reports/accuracy/<scene file stem>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Run store (default: runs/accuracy/<scene file stem>).
+    #[arg(long)]
+    pub store: Option<PathBuf>,
+    /// Noise-floor runs: other seeds at the paper's step (0 to 8). With 0 the tolerance
+    /// alone applies; for scenes whose reference takes hours. Raised to seeds - 1 when
+    /// `--seeds` asks for more.
+    #[arg(long, default_value_t = 2)]
+    pub noise_seeds: u32,
+    /// Seeds per candidate (1 to 9): each candidate's value is the mean over its runs at
+    /// seeds 1..K, compared with the reference value within two standard errors.
+    #[arg(long, default_value_t = 1)]
+    pub seeds: u32,
+}
+
+/// `hvi-study rununit` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct RunUnitArgs {
+    /// The plan.json of a study's output directory.
+    pub plan: PathBuf,
+    /// The run's index in the plan.
+    pub index: usize,
+    /// Worker threads (default: every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// The study directory whose run store receives the result (default: the plan's
+    /// directory; `submit --slurm` runs frozen copies of the plan kept beside its scripts).
+    #[arg(long, value_name = "DIR")]
+    pub study_dir: Option<PathBuf>,
+}

@@ -1,0 +1,142 @@
+//! What each subcommand does with its arguments: `main` parses the command line into
+//! [`Command`] and calls [`dispatch`]; each arm is one small function here or a workflow of
+//! [`crate::study`], [`crate::accuracy`] or [`crate::reproduce`].
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use hvi_run::run::{run_scene, RunOptions};
+use hvi_run::scene_file::load_scene;
+
+use crate::cli::{AccuracyArgs, BenchArgs, Command, RunArgs, RunUnitArgs, SubmitArgs};
+
+/// Runs one subcommand.
+pub fn dispatch(command: Command) -> Result<()> {
+    match command {
+        Command::Run(args) => run(args),
+        Command::Bench(args) => bench(args),
+        Command::Accuracy(args) => accuracy(args),
+        Command::Stability(args) => crate::study::stability::stability(&args).map(|cells| {
+            let stopped = cells.iter().filter(|c| c.status != "stable").count();
+            println!(
+                "{} cells, {} stopped; report: {}",
+                cells.len(),
+                stopped,
+                args.out.join("stability.md").display()
+            );
+        }),
+        Command::Plan(args) => crate::study::sweep::plan(&args),
+        Command::Sweep(args) => crate::study::sweep::sweep(&args),
+        Command::Calibrate(args) => crate::study::calibrate::calibrate(&args).map(|_| ()),
+        Command::ValidityMap(args) => crate::study::validity::validity_map(&args).map(|_| ()),
+        Command::Submit(args) => submit(&args),
+        Command::Status(args) => crate::study::collect::status(&args),
+        Command::Collect(args) => crate::study::collect::collect(&args),
+        Command::Reproduce(args) => crate::reproduce::reproduce(&args).map(|_| ()),
+        Command::RunUnit(args) => run_unit(&args),
+    }
+}
+
+/// A rayon pool of `threads` workers (default: every core).
+fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    if threads == Some(0) {
+        anyhow::bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
+    }
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.unwrap_or(0))
+        .build()
+        .context("cannot start worker threads")
+}
+
+/// `hvi-study run`.
+fn run(args: RunArgs) -> Result<()> {
+    if args.dump_every == Some(0) {
+        anyhow::bail!("invalid value for `--dump-every`: 0 (allowed: an integer >= 1)");
+    }
+    let spec = load_scene(&args.scene, &args.sets)?;
+    let pool = thread_pool(args.threads)?;
+    let opts = RunOptions {
+        out_dir: args.out.clone(),
+        dump_every: args.dump_every,
+        lammps_data: args.lammps_data,
+        progress: !args.quiet,
+        render: args.render,
+    };
+    pool.install(|| run_scene(&spec, &opts))?;
+    println!("{}", args.out.join("summary.json").display());
+    Ok(())
+}
+
+/// `hvi-study bench`.
+fn bench(mut args: BenchArgs) -> Result<()> {
+    args.sets
+        .push(format!("run.end_time_s={:e}", args.end_time));
+    let spec = load_scene(&args.scene, &args.sets)?;
+    let (_, table) = hvi_run::bench::bench(&spec, &args.threads, &args.out)?;
+    print!("{table}");
+    println!("table: {}", args.out.join("bench.csv").display());
+    Ok(())
+}
+
+/// `hvi-study accuracy`.
+fn accuracy(args: AccuracyArgs) -> Result<()> {
+    use crate::accuracy::{self, Variant};
+    accuracy::check_seeds(args.seeds)?;
+    let noise_seeds = args.noise_seeds.max(args.seeds.saturating_sub(1));
+    let mut list: Vec<Variant> = accuracy::reference_variants(noise_seeds)?;
+    if args.variants.is_empty() {
+        list.extend(accuracy::default_candidates());
+    } else {
+        for v in &args.variants {
+            list.push(Variant::parse(v)?);
+        }
+    }
+    let report_dir = args
+        .out
+        .unwrap_or_else(|| accuracy::default_report_dir(&args.scene));
+    let stem = report_dir
+        .file_name()
+        .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+    let store = args
+        .store
+        .unwrap_or_else(|| PathBuf::from("runs/accuracy").join(stem));
+    let pool = thread_pool(args.threads)?;
+    let threads = pool.current_num_threads();
+    let report = accuracy::accuracy(
+        &args.scene,
+        &args.sets,
+        &list,
+        args.seeds,
+        threads,
+        &store,
+        &report_dir,
+    )?;
+    print!("{}", accuracy::markdown(&report));
+    println!("report: {}", report_dir.join("accuracy.md").display());
+    Ok(())
+}
+
+/// `hvi-study submit --slurm`.
+fn submit(args: &SubmitArgs) -> Result<()> {
+    let opts = args.slurm_options()?;
+    let (_, plan, out) = args.study.build_plan()?;
+    hvi_run::slurm::submit(&plan, &out, &opts)
+}
+
+/// `hvi-study run-unit`: a failed run is an error (recorded in its directory).
+fn run_unit(args: &RunUnitArgs) -> Result<()> {
+    let completed = crate::study::sweep::run_unit(
+        &args.plan,
+        args.index,
+        args.threads,
+        args.study_dir.as_deref(),
+    )?;
+    if completed {
+        Ok(())
+    } else {
+        Err(anyhow::anyhow!(
+            "run {} failed (recorded in its directory)",
+            args.index
+        ))
+    }
+}
