@@ -51,12 +51,9 @@ use crate::scene::{Analysis, Derived};
 use crate::sim::Simulation;
 use crate::state::{Body, Particles};
 
-/// Default quantile of the front and of the radial extent (MODEL.md section 5: "for instance
-/// 99.5 %").
-pub const DEFAULT_QUANTILE: f64 = 0.995;
-/// Default times since first contact at which the front is located for va, s (MODEL.md
-/// section 5: "for instance 28 and 32 us", like the experiment's X-ray pair).
-pub const DEFAULT_FRONT_TIMES_S: [f64; 2] = [28e-6, 32e-6];
+// The analysis defaults live with the settings that use them (`scene::Analysis`); also here,
+// where they were defined before.
+pub use crate::scene::{DEFAULT_FRONT_TIMES_S, DEFAULT_QUANTILE};
 /// Fragments listed one by one in the summary (largest first).
 pub const LARGEST_FRAGMENTS_LISTED: usize = 10;
 
@@ -394,37 +391,50 @@ pub struct CloudAnalysis {
     pub fragments: Vec<Fragment>,
 }
 
-/// Measures the cloud marked in `members` (see the module's definitions). Sums run in id order.
-pub fn measure(
+/// One fragment's sums while the cloud's particles are visited in id order.
+struct FragmentSum {
+    label: u32,
+    particles: usize,
+    impactor: usize,
+    mass: f64,
+    moment: glam::DVec3,
+    momentum: glam::DVec3,
+    crossing: bool,
+}
+
+impl FragmentSum {
+    fn into_fragment(self, rho: f64) -> Fragment {
+        Fragment {
+            label: self.label,
+            particles: self.particles,
+            impactor_particles: self.impactor,
+            mass_kg: self.mass,
+            diameter_m: equivalent_diameter_m(self.mass, rho),
+            centroid_m: (self.moment / self.mass).to_array(),
+            velocity_m_s: (self.momentum / self.mass).to_array(),
+        }
+    }
+}
+
+/// The cloud's fragments (their cloud parts), largest first (ties: smaller label first), and
+/// how many of them straddle the rear face. `order` is the particles' indices in id order.
+fn cloud_fragments(
     p: &Particles,
     members: &CloudMembers,
-    reference: &CloudReference,
-    q: f64,
-    time_s: f64,
-    tau_s: f64,
-) -> CloudAnalysis {
+    order: &[usize],
+    rho: f64,
+) -> (Vec<Fragment>, usize) {
     let n = p.len();
-    let rho = reference.density_kg_m3;
-    struct Acc {
-        label: u32,
-        particles: usize,
-        impactor: usize,
-        mass: f64,
-        moment: glam::DVec3,
-        momentum: glam::DVec3,
-        crossing: bool,
-    }
     let mut slot_of_label = vec![u32::MAX; n];
-    let mut acc: Vec<Acc> = Vec::new();
-    let order: Vec<usize> = ids_in_order(p).collect();
-    for &i in &order {
+    let mut acc: Vec<FragmentSum> = Vec::new();
+    for &i in order {
         if !members.in_cloud[i] {
             continue;
         }
         let l = members.labels[i] as usize;
         if slot_of_label[l] == u32::MAX {
             slot_of_label[l] = acc.len() as u32;
-            acc.push(Acc {
+            acc.push(FragmentSum {
                 label: l as u32,
                 particles: 0,
                 impactor: 0,
@@ -448,20 +458,24 @@ pub fn measure(
             acc[s as usize].crossing = true;
         }
     }
-    let fragments_crossing_rear_face = acc.iter().filter(|a| a.crossing).count();
-    let mut fragments: Vec<Fragment> = acc
-        .into_iter()
-        .map(|a| Fragment {
-            label: a.label,
-            particles: a.particles,
-            impactor_particles: a.impactor,
-            mass_kg: a.mass,
-            diameter_m: equivalent_diameter_m(a.mass, rho),
-            centroid_m: (a.moment / a.mass).to_array(),
-            velocity_m_s: (a.momentum / a.mass).to_array(),
-        })
-        .collect();
+    let crossing = acc.iter().filter(|a| a.crossing).count();
+    let mut fragments: Vec<Fragment> = acc.into_iter().map(|a| a.into_fragment(rho)).collect();
     fragments.sort_by(|a, b| b.mass_kg.total_cmp(&a.mass_kg).then(a.label.cmp(&b.label)));
+    (fragments, crossing)
+}
+
+/// Measures the cloud marked in `members` (see the module's definitions). Sums run in id order.
+pub fn measure(
+    p: &Particles,
+    members: &CloudMembers,
+    reference: &CloudReference,
+    q: f64,
+    time_s: f64,
+    tau_s: f64,
+) -> CloudAnalysis {
+    let rho = reference.density_kg_m3;
+    let order: Vec<usize> = ids_in_order(p).collect();
+    let (fragments, fragments_crossing_rear_face) = cloud_fragments(p, members, &order, rho);
 
     let ext = extent(p, &members.in_cloud, reference.plate_rear_z_m, q);
     let n_part = ext.n_part;
@@ -658,6 +672,29 @@ pub fn step_at_tau(derived: &Derived, tau_s: f64) -> u64 {
 /// Watches a run: samples the cloud track every `analysis.track_every` steps, locates the front
 /// at the two front times, and measures the cloud at the end. Call [`CloudObserver::observe`]
 /// at step 0 and after every step; it does nothing (two comparisons) unless a sample is due.
+///
+/// ```
+/// use hvi_engine::cloud::CloudObserver;
+/// use hvi_engine::scene::SceneSpec;
+/// use hvi_engine::sim::Simulation;
+///
+/// let spec = SceneSpec::calibration(500.0, 2e-7);
+/// let mut sim = Simulation::new(spec.build()?)?;
+/// let mut observer = CloudObserver::new(&sim, &spec.analysis, spec.run.end_time_s);
+/// observer.observe(&sim);
+/// let end = sim.derived.steps;
+/// while sim.step < end {
+///     // An adaptive step must land on every step at which a sample is due.
+///     let next = observer.next_due(sim.step).map_or(end, |due| due.min(end));
+///     sim.step_until(next)?;
+///     observer.observe(&sim);
+/// }
+/// let cloud = observer.finish(&sim).expect("analysis.cloud is on by default");
+/// // 0.2 us after first contact nothing has passed the plate's rear face yet.
+/// assert_eq!(cloud.report.measurement.n_part, 0);
+/// assert_eq!(observer.track.last().map(|row| row.step), Some(end));
+/// # Ok::<(), hvi_engine::EngineError>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct CloudObserver {
     reference: CloudReference,

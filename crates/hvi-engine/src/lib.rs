@@ -35,7 +35,9 @@ pub mod paper;
 pub mod potential;
 pub mod rng;
 pub mod scene;
+pub mod shadowgraph;
 pub mod sim;
 pub mod state;
+pub mod step;
 
 pub use error::{EngineError, Result};

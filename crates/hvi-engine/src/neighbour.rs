@@ -151,8 +151,28 @@ impl NeighbourList {
             self.far_dv = 0.0;
             return;
         }
+        let mut blocks = self.block_means(p, block);
+        // In key order for the walk below (keys are distinct).
+        blocks.par_sort_unstable_by_key(|b| b.0);
+        let near = adjacent_blocks_dv(&blocks);
+        let (lo, hi) = blocks.par_iter().map(|&(_, u)| (u, u)).reduce(
+            || (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |a, b| (a.0.min(b.0), a.1.max(b.1)),
+        );
+        self.near_dv = near;
+        self.far_dv = if blocks.is_empty() {
+            0.0
+        } else {
+            (hi - lo).length()
+        };
+    }
+
+    /// Each block's key and mean velocity (in order of first appearance), and each particle's
+    /// frame velocity (its block's mean) into `frame_vel`.
+    fn block_means(&mut self, p: &Particles, block: f64) -> Vec<(u64, DVec3)> {
+        let n = p.len();
         let inv_b = 1.0 / block;
-        let mut keys = std::mem::take(&mut self.block_keys);
+        let keys = &mut self.block_keys;
         keys.clear();
         keys.par_extend(p.pos.par_iter().map(|&x| cell_key(x, inv_b).0));
         // Sums in particle order (fixed by the sort), one map update per run of equal block:
@@ -160,7 +180,7 @@ impl NeighbourList {
         // appearance, so the per-particle pass below indexes a vector instead of the map.
         let mut index: FxHashMap<u64, u32> = FxHashMap::default();
         let mut blocks: Vec<(u64, DVec3, f64)> = Vec::new();
-        let mut block_of = std::mem::take(&mut self.block_of);
+        let block_of = &mut self.block_of;
         block_of.clear();
         block_of.resize(n, 0);
         let mut i = 0;
@@ -181,59 +201,11 @@ impl NeighbourList {
             block_of[i..j].fill(b);
             i = j;
         }
-        let mut blocks: Vec<(u64, DVec3)> =
-            blocks.into_iter().map(|(k, s, c)| (k, s / c)).collect();
+        let blocks: Vec<(u64, DVec3)> = blocks.into_iter().map(|(k, s, c)| (k, s / c)).collect();
         let blocks_r = &blocks;
         self.frame_vel
-            .par_extend(block_of.par_iter().map(|&b| blocks_r[b as usize].1));
-        self.block_of = block_of;
-        self.block_keys = keys;
-        // In key order for the walk below (keys are distinct).
-        blocks.par_sort_unstable_by_key(|b| b.0);
-        let blocks_r = &blocks;
-        // Adjacent blocks: for each block the forward half of its 26 neighbours (the other
-        // half sees this block), found by pointers that only move forward as the sorted
-        // blocks are walked, as in the cell search. Maxima do not depend on the order.
-        let nb = blocks.len();
-        let offsets = forward_rows();
-        let near = (0..nb.div_ceil(CELL_CHUNK))
-            .into_par_iter()
-            .map(|chunk| {
-                let c0 = chunk * CELL_CHUNK;
-                let c1 = (c0 + CELL_CHUNK).min(nb);
-                let first = |k: i64, r: usize| if r == 0 { k + 1 } else { k + offsets[r] - 1 };
-                let k0 = blocks_r[c0].0 as i64;
-                let mut ptr = [0usize; FORWARD_ROWS];
-                for (r, p) in ptr.iter_mut().enumerate() {
-                    *p = blocks_r.partition_point(|b| (b.0 as i64) < first(k0, r));
-                }
-                let mut near: f64 = 0.0;
-                for &(k, u) in &blocks_r[c0..c1] {
-                    let k = k as i64;
-                    for (r, p) in ptr.iter_mut().enumerate() {
-                        while *p < nb && (blocks_r[*p].0 as i64) < first(k, r) {
-                            *p += 1;
-                        }
-                        let mut b = *p;
-                        while b < nb && blocks_r[b].0 as i64 <= k + offsets[r] + 1 {
-                            near = near.max((u - blocks_r[b].1).length());
-                            b += 1;
-                        }
-                    }
-                }
-                near
-            })
-            .reduce(|| 0.0, f64::max);
-        let (lo, hi) = blocks.par_iter().map(|&(_, u)| (u, u)).reduce(
-            || (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |a, b| (a.0.min(b.0), a.1.max(b.1)),
-        );
-        self.near_dv = near;
-        self.far_dv = if blocks.is_empty() {
-            0.0
-        } else {
-            (hi - lo).length()
-        };
+            .par_extend(self.block_of.par_iter().map(|&b| blocks_r[b as usize].1));
+        blocks
     }
 
     /// Rebuilds the list: clears bond slots broken since the last build (those pairs join the
@@ -247,10 +219,36 @@ impl NeighbourList {
         self.builds += 1;
         let n = p.len();
         p.clear_broken_slots();
-        let inv_h = 1.0 / radius;
+        self.sort_into_cells(p, 1.0 / radius);
+        self.split_coordinates(p);
+        let search = PairSearch {
+            xs: &self.xs,
+            ys: &self.ys,
+            zs: &self.zs,
+            bonds: &p.bonds,
+            vel: &p.vel,
+            r2: radius * radius,
+            measure_speed,
+        };
+        let ncell = self.cell_keys.len();
+        let pairs: Vec<(Vec<(u32, u32)>, f64)> = (0..ncell.div_ceil(CELL_CHUNK))
+            .into_par_iter()
+            .map(|chunk| self.search_cells(&search, chunk))
+            .collect();
+        self.pair_speed = pairs.iter().fold(0.0f64, |a, c| a.max(c.1)).sqrt();
+        self.fill_lists(&pairs, n);
+        self.pos_at_build.clear();
+        self.pos_at_build.par_extend(p.pos.par_iter().copied());
+        self.build_frames(p, block);
+    }
+
+    /// Sorts the particles by the key of their cell (`inv_h` = 1 / cell side), reorders the
+    /// particle arrays accordingly and finds the cells: runs of equal key.
+    fn sort_into_cells(&mut self, p: &mut Particles, inv_h: f64) {
+        let n = p.len();
         // Sort by (key, index); the input is nearly sorted from the previous build. Elements are
         // distinct, so the result does not depend on the algorithm or the thread count.
-        let mut order = std::mem::take(&mut self.order);
+        let order = &mut self.order;
         order.clear();
         order.par_extend(p.pos.par_iter().enumerate().map(|(i, &x)| {
             let (key, ok) = cell_key(x, inv_h);
@@ -268,124 +266,83 @@ impl NeighbourList {
         // A merge sort finds the long sorted runs of a nearly sorted input (rayon's parallel
         // quicksort does not: ten times the work here); rayon's merges in parallel.
         order.par_sort();
-        let mut perm = std::mem::take(&mut self.perm);
+        let perm = &mut self.perm;
         perm.clear();
         perm.par_extend(order.par_iter().map(|o| o.1));
         if perm.par_iter().enumerate().any(|(k, &o)| k as u32 != o) {
-            p.permute(&perm, &mut self.scratch);
+            p.permute(perm, &mut self.scratch);
         }
         // Cells: runs of equal key.
-        let mut cell_start = std::mem::take(&mut self.cell_start);
-        let mut cell_key_list = std::mem::take(&mut self.cell_keys);
-        cell_start.clear();
-        cell_key_list.clear();
+        self.cell_start.clear();
+        self.cell_keys.clear();
         for (i, o) in order.iter().enumerate() {
             if i == 0 || o.0 != order[i - 1].0 {
-                cell_start.push(i as u32);
-                cell_key_list.push(o.0);
+                self.cell_start.push(i as u32);
+                self.cell_keys.push(o.0);
             }
         }
-        cell_start.push(n as u32);
-        // Coordinates as separate arrays: the candidate loop below runs over contiguous
-        // ranges of them.
-        let (mut xs, mut ys, mut zs) = (
-            std::mem::take(&mut self.xs),
-            std::mem::take(&mut self.ys),
-            std::mem::take(&mut self.zs),
-        );
-        xs.clear();
-        ys.clear();
-        zs.clear();
-        xs.par_extend(p.pos.par_iter().map(|x| x.x));
-        ys.par_extend(p.pos.par_iter().map(|x| x.y));
-        zs.par_extend(p.pos.par_iter().map(|x| x.z));
-        let ncell = cell_key_list.len();
-        let r2 = radius * radius;
-        let bonds = &p.bonds;
-        let (xs_r, ys_r, zs_r) = (&xs, &ys, &zs);
-        // Half stencil: rows whose keys follow the cell's own (same row from x - 1, the next
-        // row, and the three rows of the next plane). Sorted order is key order, so these hold
-        // exactly the candidates j > i: each pair is examined once and entered on both lists.
-        const ROWS: usize = FORWARD_ROWS;
+        self.cell_start.push(n as u32);
+    }
+
+    /// Coordinates as separate arrays: the candidate loop of the search runs over contiguous
+    /// ranges of them.
+    fn split_coordinates(&mut self, p: &Particles) {
+        self.xs.clear();
+        self.ys.clear();
+        self.zs.clear();
+        self.xs.par_extend(p.pos.par_iter().map(|x| x.x));
+        self.ys.par_extend(p.pos.par_iter().map(|x| x.y));
+        self.zs.par_extend(p.pos.par_iter().map(|x| x.z));
+    }
+
+    /// The pairs found from the cells of chunk `chunk` (`CELL_CHUNK` cells), and the largest
+    /// squared relative speed among them when measured.
+    ///
+    /// Half stencil: rows whose keys follow the cell's own (same row from x - 1, the next
+    /// row, and the three rows of the next plane). Sorted order is key order, so these hold
+    /// exactly the candidates j > i: each pair is examined once and entered on both lists.
+    fn search_cells(&self, search: &PairSearch, chunk: usize) -> (Vec<(u32, u32)>, f64) {
+        let (cell_start, cell_keys) = (&self.cell_start, &self.cell_keys);
+        let ncell = cell_keys.len();
+        let c0 = chunk * CELL_CHUNK;
+        let c1 = (c0 + CELL_CHUNK).min(ncell);
+        let mut found = Vec::with_capacity((cell_start[c1] - cell_start[c0]) as usize * 2);
+        let mut max_w2: f64 = 0.0;
         let offsets = forward_rows();
-        let vel = &p.vel;
-        let pairs: Vec<(Vec<(u32, u32)>, f64)> = (0..ncell.div_ceil(CELL_CHUNK))
-            .into_par_iter()
-            .map(|chunk| {
-                let c0 = chunk * CELL_CHUNK;
-                let c1 = (c0 + CELL_CHUNK).min(ncell);
-                let mut found = Vec::with_capacity((cell_start[c1] - cell_start[c0]) as usize * 2);
-                let mut max_w2: f64 = 0.0;
-                let k0 = cell_key_list[c0] as i64;
-                let mut ptr = [0usize; ROWS];
-                for (r, off) in offsets.iter().enumerate() {
-                    let lo = (k0 + off - 1) as u64;
-                    ptr[r] = cell_key_list.partition_point(|&k| k < lo);
+        let k0 = cell_keys[c0] as i64;
+        let mut ptr = [0usize; FORWARD_ROWS];
+        for (r, off) in offsets.iter().enumerate() {
+            let lo = (k0 + off - 1) as u64;
+            ptr[r] = cell_keys.partition_point(|&k| k < lo);
+        }
+        for c in c0..c1 {
+            let key = cell_keys[c] as i64;
+            let mut ranges = [(0usize, 0usize); FORWARD_ROWS];
+            for (r, off) in offsets.iter().enumerate() {
+                let lo = (key + off - 1) as u64;
+                let hi = (key + off + 1) as u64;
+                let mut a = ptr[r];
+                while a < ncell && cell_keys[a] < lo {
+                    a += 1;
                 }
-                let (xs, ys, zs) = (xs_r, ys_r, zs_r);
-                for c in c0..c1 {
-                    let key = cell_key_list[c] as i64;
-                    let mut ranges = [(0usize, 0usize); ROWS];
-                    for (r, off) in offsets.iter().enumerate() {
-                        let lo = (key + off - 1) as u64;
-                        let hi = (key + off + 1) as u64;
-                        let mut a = ptr[r];
-                        while a < ncell && cell_key_list[a] < lo {
-                            a += 1;
-                        }
-                        ptr[r] = a;
-                        let mut b = a;
-                        while b < ncell && cell_key_list[b] <= hi {
-                            b += 1;
-                        }
-                        ranges[r] = (cell_start[a] as usize, cell_start[b] as usize);
-                    }
-                    for i in cell_start[c] as usize..cell_start[c + 1] as usize {
-                        let (px, py, pz) = (xs[i], ys[i], zs[i]);
-                        let slots: &[u32; BONDS_PER_PARTICLE] = bonds
-                            [i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE]
-                            .try_into()
-                            .expect("BONDS_PER_PARTICLE slots");
-                        for (r, &(a, b)) in ranges.iter().enumerate() {
-                            // The own row holds cells x - 1 .. x + 1: only j > i is forward.
-                            let a = if r == 0 { a.max(i + 1) } else { a };
-                            // Branch-free compaction of the candidates within the radius
-                            // (a sixth of them, so a branch would be mispredicted often), in
-                            // blocks; then the few hits are checked against the bonds.
-                            let mut a0 = a;
-                            while a0 < b {
-                                let a1 = (a0 + HIT_BLOCK).min(b);
-                                let (cx, cy, cz) = (&xs[a0..a1], &ys[a0..a1], &zs[a0..a1]);
-                                let mut mask = 0u64;
-                                for k in 0..cx.len() {
-                                    let (dx, dy, dz) = (px - cx[k], py - cy[k], pz - cz[k]);
-                                    mask |= u64::from(dx * dx + dy * dy + dz * dz < r2) << k;
-                                }
-                                while mask != 0 {
-                                    let j = (a0 + mask.trailing_zeros() as usize) as u32;
-                                    mask &= mask - 1;
-                                    if measure_speed {
-                                        let w2 = (vel[i] - vel[j as usize]).length_squared();
-                                        max_w2 = max_w2.max(w2);
-                                    }
-                                    // All twelve slots at once (no early exit to mispredict).
-                                    let bonded = slots.iter().fold(false, |acc, &s| acc | (s == j));
-                                    if !bonded {
-                                        found.push((i as u32, j));
-                                    }
-                                }
-                                a0 = a1;
-                            }
-                        }
-                    }
+                ptr[r] = a;
+                let mut b = a;
+                while b < ncell && cell_keys[b] <= hi {
+                    b += 1;
                 }
-                (found, max_w2)
-            })
-            .collect();
-        self.pair_speed = pairs.iter().fold(0.0f64, |a, c| a.max(c.1)).sqrt();
-        // Full lists in compressed-row form: count, prefix-sum, fill in pair order (fixed by
-        // the sorted walk, so the lists are the same at any thread count).
-        let mut fill = std::mem::take(&mut self.fill);
+                ranges[r] = (cell_start[a] as usize, cell_start[b] as usize);
+            }
+            for i in cell_start[c] as usize..cell_start[c + 1] as usize {
+                search.scan(i, &ranges, &mut found, &mut max_w2);
+            }
+        }
+        (found, max_w2)
+    }
+
+    /// Full lists in compressed-row form: count, prefix-sum, fill in pair order (fixed by
+    /// the sorted walk, so the lists are the same at any thread count).
+    fn fill_lists(&mut self, pairs: &[(Vec<(u32, u32)>, f64)], n: usize) {
+        let fill = &mut self.fill;
         fill.clear();
         fill.resize(n + 1, 0);
         for &(i, j) in pairs.iter().flat_map(|c| &c.0) {
@@ -396,7 +353,7 @@ impl NeighbourList {
             fill[k + 1] += fill[k];
         }
         self.start.clear();
-        self.start.extend_from_slice(&fill);
+        self.start.extend_from_slice(fill);
         self.neighbours.clear();
         self.neighbours.resize(fill[n] as usize, 0);
         for &(i, j) in pairs.iter().flat_map(|c| &c.0) {
@@ -405,13 +362,6 @@ impl NeighbourList {
             self.neighbours[fill[j as usize] as usize] = i;
             fill[j as usize] += 1;
         }
-        self.fill = fill;
-        self.pos_at_build.clear();
-        self.pos_at_build.par_extend(p.pos.par_iter().copied());
-        self.build_frames(p, block);
-        (self.order, self.perm, self.cell_start, self.cell_keys) =
-            (order, perm, cell_start, cell_key_list);
-        (self.xs, self.ys, self.zs) = (xs, ys, zs);
     }
 
     /// Pairs closer than `contact_radius` that are neither joined by a bond slot (intact, or
@@ -463,6 +413,107 @@ impl NeighbourList {
     #[inline(always)]
     pub fn of(&self, i: usize) -> &[u32] {
         &self.neighbours[self.start[i] as usize..self.start[i + 1] as usize]
+    }
+}
+
+/// The largest |u_a - u_b| between a block's frame and an adjacent block's, m/s, over
+/// `blocks` sorted by key. For each block the forward half of its 26 neighbours (the other
+/// half sees this block) is found by pointers that only move forward as the sorted blocks are
+/// walked, as in the cell search. Maxima do not depend on the order.
+fn adjacent_blocks_dv(blocks: &[(u64, DVec3)]) -> f64 {
+    let nb = blocks.len();
+    let offsets = forward_rows();
+    (0..nb.div_ceil(CELL_CHUNK))
+        .into_par_iter()
+        .map(|chunk| {
+            let c0 = chunk * CELL_CHUNK;
+            let c1 = (c0 + CELL_CHUNK).min(nb);
+            let first = |k: i64, r: usize| if r == 0 { k + 1 } else { k + offsets[r] - 1 };
+            let k0 = blocks[c0].0 as i64;
+            let mut ptr = [0usize; FORWARD_ROWS];
+            for (r, p) in ptr.iter_mut().enumerate() {
+                *p = blocks.partition_point(|b| (b.0 as i64) < first(k0, r));
+            }
+            let mut near: f64 = 0.0;
+            for &(k, u) in &blocks[c0..c1] {
+                let k = k as i64;
+                for (r, p) in ptr.iter_mut().enumerate() {
+                    while *p < nb && (blocks[*p].0 as i64) < first(k, r) {
+                        *p += 1;
+                    }
+                    let mut b = *p;
+                    while b < nb && blocks[b].0 as i64 <= k + offsets[r] + 1 {
+                        near = near.max((u - blocks[b].1).length());
+                        b += 1;
+                    }
+                }
+            }
+            near
+        })
+        .reduce(|| 0.0, f64::max)
+}
+
+/// What the pair search reads, in the sorted particle order: the coordinates as separate
+/// arrays, the bond slots and the velocities; and the squared list radius.
+struct PairSearch<'a> {
+    xs: &'a [f64],
+    ys: &'a [f64],
+    zs: &'a [f64],
+    bonds: &'a [u32],
+    vel: &'a [DVec3],
+    r2: f64,
+    measure_speed: bool,
+}
+
+impl PairSearch<'_> {
+    /// Adds to `found` the unbonded pairs (i, j > i) within the radius among the candidates
+    /// `ranges` (particle index ranges of the forward rows), and raises `max_w2` to the largest
+    /// squared relative speed of the pairs within the radius when measured.
+    #[inline]
+    fn scan(
+        &self,
+        i: usize,
+        ranges: &[(usize, usize); FORWARD_ROWS],
+        found: &mut Vec<(u32, u32)>,
+        max_w2: &mut f64,
+    ) {
+        let (xs, ys, zs, vel) = (self.xs, self.ys, self.zs, self.vel);
+        let (px, py, pz) = (xs[i], ys[i], zs[i]);
+        let slots: &[u32; BONDS_PER_PARTICLE] = self.bonds
+            [i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE]
+            .try_into()
+            .expect("BONDS_PER_PARTICLE slots");
+        for (r, &(a, b)) in ranges.iter().enumerate() {
+            // The own row holds cells x - 1 .. x + 1: only j > i is forward.
+            let a = if r == 0 { a.max(i + 1) } else { a };
+            // Branch-free compaction of the candidates within the radius (a sixth of them,
+            // so a branch would be mispredicted often), in blocks; then the few hits are
+            // checked against the bonds.
+            let mut a0 = a;
+            while a0 < b {
+                let a1 = (a0 + HIT_BLOCK).min(b);
+                let (cx, cy, cz) = (&xs[a0..a1], &ys[a0..a1], &zs[a0..a1]);
+                let mut mask = 0u64;
+                for k in 0..cx.len() {
+                    let (dx, dy, dz) = (px - cx[k], py - cy[k], pz - cz[k]);
+                    mask |= u64::from(dx * dx + dy * dy + dz * dz < self.r2) << k;
+                }
+                while mask != 0 {
+                    let j = (a0 + mask.trailing_zeros() as usize) as u32;
+                    mask &= mask - 1;
+                    if self.measure_speed {
+                        let w2 = (vel[i] - vel[j as usize]).length_squared();
+                        *max_w2 = max_w2.max(w2);
+                    }
+                    // All the slots at once (no early exit to mispredict).
+                    let bonded = slots.iter().fold(false, |acc, &s| acc | (s == j));
+                    if !bonded {
+                        found.push((i as u32, j));
+                    }
+                }
+                a0 = a1;
+            }
+        }
     }
 }
 

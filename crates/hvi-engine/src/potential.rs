@@ -42,6 +42,19 @@ impl ContactForm {
 }
 
 /// The interaction constants at the actual particle diameter, ready for the kernels.
+///
+/// ```
+/// use hvi_engine::potential::{ContactForm, Interaction};
+///
+/// // sigma = 1, eps = 1, kappa = 10, rcut = 1.5 sigma, in any consistent units.
+/// let ia = Interaction::new(1.0, 1.0, 10.0, 1.5, ContactForm::Printed);
+/// // The repulsion (eq. 3, shifted) is zero at r_eq = 2^(1/6) sigma and eps / 4 at sigma.
+/// assert_eq!(ia.contact_energy(ia.r_eq2()), 0.0);
+/// assert!((ia.contact_energy(1.0) - 0.25).abs() < 1e-15);
+/// // A bond breaking at rcut holds kappa / 2 (rcut - r_eq)^2 (eq. 4).
+/// let stretch = 1.5 - ia.r_eq_m;
+/// assert!((ia.break_energy_at_rcut() - 5.0 * stretch * stretch).abs() < 1e-12);
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Interaction {
     /// Particle diameter sigma, m.

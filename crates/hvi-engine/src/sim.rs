@@ -15,21 +15,20 @@ use serde::{Deserialize, Serialize};
 use crate::error::{EngineError, Result};
 use crate::neighbour::NeighbourList;
 use crate::potential::Interaction;
-use crate::scene::{
-    Derived, RunSettings, Setup, AUTO_STEP_SAFETY, LOOKAHEAD_SKIN_FRACTION, MAX_STEP_OVER_SQRT_M_K,
-};
+use crate::scene::{Derived, RunSettings, Setup};
 use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND, OWNED_BONDS};
+use crate::step::{stiffness_step_s, LOOKAHEAD_SKIN_FRACTION};
+
+// The adaptive step's raise delay, also at the path it had when it was defined here.
+pub use crate::step::STRIDE_RAISE_AFTER;
 
 /// Particles per work unit and per partial sum.
 pub const CHUNK: usize = 1024;
 
 /// The bound this project states for the energy ledger (kinetic + contact + bond + broken):
-/// its relative drift stays below this through a run at the default step. Tested in
-/// `tests/physics.rs` and applied by `hvi-study accuracy` to every candidate setting.
+/// its relative drift stays below this through a run at the default step. The engine's
+/// physics tests check it, and `hvi-study accuracy` applies it to every candidate setting.
 pub const LEDGER_DRIFT_BOUND: f64 = 1e-3;
-/// The adaptive step raises its stride by one base step only after the criterion has
-/// allowed the larger stride for this many consecutive steps; it lowers it at once.
-pub const STRIDE_RAISE_AFTER: u32 = 20;
 /// Owned bonds per vectorised block of the bond kernel.
 const BLOCK_BONDS: usize = 192;
 
@@ -149,6 +148,19 @@ pub struct StrideLimits {
 
 impl Simulation {
     /// Prepares a run: first neighbour build, forces, initial ledger.
+    ///
+    /// ```
+    /// use hvi_engine::scene::SceneSpec;
+    /// use hvi_engine::sim::Simulation;
+    ///
+    /// let setup = SceneSpec::calibration(500.0, 1e-7).build()?;
+    /// let mut sim = Simulation::new(setup)?;
+    /// sim.advance(20)?; // 20 base steps (fewer steps when the adaptive step strides)
+    /// assert_eq!(sim.step, 20);
+    /// let dp = (sim.momentum() - sim.momentum_initial).length();
+    /// assert!(dp < 1e-9 * sim.momentum_initial.length());
+    /// # Ok::<(), hvi_engine::EngineError>(())
+    /// ```
     pub fn new(setup: Setup) -> Result<Self> {
         let Setup {
             spec,
@@ -267,77 +279,51 @@ impl Simulation {
     /// Also applies the second half-kick of velocity Verlet, `half_dt` (0: none).
     fn compute_forces(&mut self, half_dt: f64) -> Result<()> {
         let t0 = Instant::now();
-        let ia = self.interaction;
-        let r_eq2 = ia.r_eq2();
-        let rcut2 = ia.rcut2();
-        let break_energy = ia.break_energy_at_rcut();
-        let p = &mut self.particles;
-        let pos = &p.pos;
-        self.bond_force_over_r
-            .par_chunks_mut(CHUNK * OWNED_BONDS)
-            .zip(p.bonds.par_chunks_mut(CHUNK * BONDS_PER_PARTICLE))
-            .zip(self.bond_partials.par_iter_mut())
-            .enumerate()
-            .for_each(|(c, ((bf, bonds), out))| {
-                let mut part = BondPartial {
-                    min_r2: f64::INFINITY,
-                    ..Default::default()
-                };
-                let nb_total = bf.len();
-                let mut b0 = 0;
-                while b0 < nb_total {
-                    let nb = (nb_total - b0).min(BLOCK_BONDS);
-                    // Stage 1 (scalar gathers): separation, squared distance and which law
-                    // applies. Breaks are booked here (rare, so the branch predicts well).
-                    let mut r2s = [r_eq2; BLOCK_BONDS];
-                    let mut w_contact = [0.0f64; BLOCK_BONDS];
-                    let mut w_spring = [0.0f64; BLOCK_BONDS];
-                    for b in 0..nb {
-                        let owned = b0 + b;
-                        let (k, m) = (owned / OWNED_BONDS, owned % OWNED_BONDS);
-                        let slot = &mut bonds[k * BONDS_PER_PARTICLE + 2 * m];
-                        let s = *slot;
-                        if s == NO_BOND {
-                            continue;
-                        }
-                        let d = pos[c * CHUNK + k] - pos[(s & INDEX_MASK) as usize];
-                        let r2 = d.length_squared();
-                        let intact = s & BROKEN_FLAG == 0;
-                        if intact && r2 > rcut2 {
-                            *slot = s | BROKEN_FLAG;
-                            part.broken += 1;
-                            // Book the energy the bond holds at rcut (MODEL.md 3), not at the
-                            // overshoot r2 > rcut2: velocity Verlet's trapezoidal work over the
-                            // step in which the force drops to zero matches E(rcut) to O(dt^2),
-                            // while E(r) over-books by about kappa (rcut - r_eq) dr / 2.
-                            part.broken_energy += break_energy;
-                            continue;
-                        }
-                        // Compressed (intact or just broken): contact repulsion; stretched and
-                        // intact: spring; stretched and broken: nothing.
-                        let compressed = f64::from(u8::from(r2 < r_eq2));
-                        r2s[b] = r2;
-                        w_contact[b] = compressed;
-                        w_spring[b] = (1.0 - compressed) * f64::from(u8::from(intact));
-                        part.min_r2 = part.min_r2.min(r2);
-                    }
-                    // Stage 2 (vectorised): both laws for every bond, blended by weight. A
-                    // branch here would be mispredicted half the time in a hot lattice.
-                    let fr = &mut bf[b0..b0 + nb];
-                    for b in 0..nb {
-                        let (fc, fs) = ia.contact_and_spring_force_over_r(r2s[b]);
-                        fr[b] = w_contact[b] * fc + w_spring[b] * fs;
-                    }
-                    b0 += nb;
-                }
-                *out = part;
-            });
+        self.bond_forces();
         let t1 = Instant::now();
         self.timing.bonds += t1 - t0;
+        self.contact_forces_and_kick(half_dt);
+        let min_r2 = self.book_chunk_partials();
+        self.timing.contact += t1.elapsed();
+        self.last_min_r2 = min_r2;
+        if min_r2 < self.min_distance2 {
+            return Err(self.unstable(format!(
+                "two particles {:.3} sigma apart (limit run.min_distance_over_sigma = {:.3}); \
+                 the time step is too large for this impact",
+                min_r2.sqrt() / self.derived.sigma_m,
+                self.min_distance2.sqrt() / self.derived.sigma_m
+            )));
+        }
+        Ok(())
+    }
 
-        // Contact over the neighbour list, plus each bond slot's F/r times the separation
-        // (the owner's value for both ends: the pair force is exactly antisymmetric), then the
-        // second half-kick of velocity Verlet, fused here to save a pass over memory.
+    /// F/r of every owned bond into `bond_force_over_r`, breaking those stretched past rcut;
+    /// per chunk of particles, with the chunk's breaks and closest pair in `bond_partials`.
+    fn bond_forces(&mut self) {
+        let ia = self.interaction;
+        let pos = &self.particles.pos;
+        self.bond_force_over_r
+            .par_chunks_mut(CHUNK * OWNED_BONDS)
+            .zip(
+                self.particles
+                    .bonds
+                    .par_chunks_mut(CHUNK * BONDS_PER_PARTICLE),
+            )
+            .zip(self.bond_partials.par_iter_mut())
+            .enumerate()
+            .for_each(|(c, ((fr, bonds), out))| {
+                *out = bond_chunk(&ia, pos, c * CHUNK, bonds, fr);
+            });
+    }
+
+    /// Per particle: the contact repulsion over the neighbour list, plus each bond slot's F/r
+    /// times the separation (the owner's value for both ends: the pair force is exactly
+    /// antisymmetric), then the second half-kick of velocity Verlet, fused here to save a pass
+    /// over memory. Each chunk's closest listed pair goes to `contact_min_r2`.
+    fn contact_forces_and_kick(&mut self, half_dt: f64) {
+        let ia = self.interaction;
+        let p = &mut self.particles;
+        let pos = &p.pos;
         let nl = &self.neighbours;
         let fr_bond = &self.bond_force_over_r;
         let bonds = &p.bonds;
@@ -352,61 +338,26 @@ impl Simulation {
                 let mut min_r2 = f64::INFINITY;
                 for (k, (f_out, v)) in force.iter_mut().zip(vel.iter_mut()).enumerate() {
                     let i = base + k;
-                    let pi = pos[i];
-                    let mut f = DVec3::ZERO;
-                    // Most listed pairs are out of contact in the cloud (the skin): a
-                    // branch-free pass finds the pairs in contact (a bit each), then only they
-                    // get the force. Leaving out the others' zero force leaves f as it is (f
-                    // starts at +0, and a sum is -0 only if both terms are).
-                    for list in nl.of(i).chunks(64) {
-                        let mut contact = 0u64;
-                        for (k, &j) in list.iter().enumerate() {
-                            let r2 = (pi - pos[j as usize]).length_squared();
-                            min_r2 = min_r2.min(r2);
-                            contact |= u64::from(r2 < r_eq2) << k;
-                        }
-                        while contact != 0 {
-                            let j = list[contact.trailing_zeros() as usize];
-                            contact &= contact - 1;
-                            let d = pi - pos[j as usize];
-                            f += d * ia.contact_force_over_r(d.length_squared());
-                        }
-                    }
+                    let f = contact_force(&ia, pos, i, nl.of(i), &mut min_r2);
                     let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
-                    for m in 0..OWNED_BONDS {
-                        let owned = slots[2 * m];
-                        if owned != NO_BOND {
-                            let d = pi - pos[(owned & INDEX_MASK) as usize];
-                            f += d * fr_bond[i * OWNED_BONDS + m];
-                        }
-                        let mirror = slots[2 * m + 1];
-                        if mirror != NO_BOND {
-                            let d = pi - pos[mirror as usize];
-                            f += d * fr_bond[mirror as usize * OWNED_BONDS + m];
-                        }
-                    }
+                    let f = add_bond_forces(f, pos, i, slots, fr_bond);
                     *f_out = f;
                     *v += f * (half_dt * inv_mass[i]);
                 }
                 *min_out = min_r2;
             });
+    }
+
+    /// Books the chunks' broken bonds and their energy, in chunk order, and returns the
+    /// squared distance of the closest pair (bonded or listed).
+    fn book_chunk_partials(&mut self) -> f64 {
         let mut min_r2 = f64::INFINITY;
         for (b, &c) in self.bond_partials.iter().zip(&self.contact_min_r2) {
             self.bonds_broken += b.broken;
             self.broken_energy += b.broken_energy;
             min_r2 = min_r2.min(b.min_r2).min(c);
         }
-        self.timing.contact += t1.elapsed();
-        self.last_min_r2 = min_r2;
-        if min_r2 < self.min_distance2 {
-            return Err(self.unstable(format!(
-                "two particles {:.3} sigma apart (limit run.min_distance_over_sigma = {:.3}); \
-                 the time step is too large for this impact",
-                min_r2.sqrt() / self.derived.sigma_m,
-                self.min_distance2.sqrt() / self.derived.sigma_m
-            )));
-        }
-        Ok(())
+        min_r2
     }
 
     fn unstable(&self, reason: String) -> EngineError {
@@ -447,20 +398,19 @@ impl Simulation {
     ///   within the listed pairs' bound. The look-ahead u' (m + 1) dt is held to
     ///   [`LOOKAHEAD_SKIN_FRACTION`] of the skin, so that most of the skin is left to the time
     ///   between builds;
-    /// - the stiffness bound: m dt <= [`AUTO_STEP_SAFETY`] x [`MAX_STEP_OVER_SQRT_M_K`] x
-    ///   sqrt(m_min / k), k the stiffest pair law at the closest pair now
-    ///   ([`Interaction::stiffness_at`]);
+    /// - the stiffness bound: m dt <= [`stiffness_step_s`] = [`crate::step::AUTO_STEP_SAFETY`]
+    ///   x [`crate::step::MAX_STEP_OVER_SQRT_M_K`] x sqrt(m_min / k), k the stiffest pair law
+    ///   at the closest pair now ([`Interaction::stiffness_at`]);
     /// - m is the largest whole number, at most `run.max_stride`, within the three bounds. It
     ///   drops at once when the bounds fall below it and rises by one only after they have
     ///   allowed more for [`STRIDE_RAISE_AFTER`] consecutive steps, so the step changes
     ///   rarely.
     ///
-    /// At first contact the leading layers close at v0; once the impact is hot, neighbours
-    /// close at up to 1.4 v0 and more, and at the default bounds and base step the stride is 1:
-    /// the hot impact is integrated as at the fixed step (the first contact may take two base
-    /// steps). In the expanding cloud neighbours close at a fraction of v0 and the stride
-    /// grows. Velocity Verlet is synchronised at the end of every step, so changing the step
-    /// between steps needs nothing else.
+    /// In the hot impact neighbours close at v0 and faster, so at the default bounds the
+    /// stride stays 1 there (the impact is integrated as at the fixed step); in the expanding
+    /// cloud they close at a fraction of v0 and the stride grows. Velocity Verlet is
+    /// synchronised at the end of every step, so changing the step between steps needs nothing
+    /// else.
     pub fn step_until(&mut self, limit: u64) -> Result<()> {
         if limit <= self.step {
             return Ok(());
@@ -473,10 +423,33 @@ impl Simulation {
         let m = self.stride.min(limit - self.step);
         let dt = self.dt * m as f64;
         let half = 0.5 * dt;
+        let since = self.since_build_s + dt;
+        let adaptive = self.max_stride > 1;
+        let [max_d2, max_e2, max_w2] = self.kick_and_drift(half, dt, since);
+        self.timing.integrate += t0.elapsed();
+        self.step += m;
+        self.steps_taken += 1;
+        self.largest_stride = self.largest_stride.max(m);
+        self.since_build_s = since;
+        if !max_d2.is_finite() {
+            return Err(self.unstable("non-finite or runaway particle position".into()));
+        }
+        self.rebuild_if_stale(max_d2, since, max_e2)?;
+        self.compute_forces(half)?;
+        if adaptive {
+            self.adapt_stride(max_e2.sqrt(), max_w2.sqrt());
+        }
+        Ok(())
+    }
+
+    /// The first half-kick (`half` = dt / 2) and the drift over `dt` of velocity Verlet.
+    /// Returns, each squared: the largest displacement of a particle relative to its frame
+    /// since the build (`since` ago; infinite if any is NaN), and with the adaptive step the
+    /// largest speed relative to a frame and relative to the velocity at the build.
+    fn kick_and_drift(&mut self, half: f64, dt: f64, since: f64) -> [f64; 3] {
         let p = &mut self.particles;
         let built = &self.neighbours.pos_at_build;
         let frame = &self.neighbours.frame_vel;
-        let since = self.since_build_s + dt;
         let adaptive = self.max_stride > 1;
         let vel_built = &self.vel_at_build;
         p.pos
@@ -518,17 +491,15 @@ impl Simulation {
             .speed_partials
             .iter()
             .fold([0.0f64; 2], |a, b| [a[0].max(b[0]), a[1].max(b[1])]);
-        self.timing.integrate += t0.elapsed();
-        self.step += m;
-        self.steps_taken += 1;
-        self.largest_stride = self.largest_stride.max(m);
-        self.since_build_s = since;
-        if !max_d2.is_finite() {
-            return Err(self.unstable("non-finite or runaway particle position".into()));
-        }
+        [max_d2, max_e2, max_w2]
+    }
+
+    /// Rebuilds the neighbour list when its rule says a contact could be missed (see
+    /// [`NeighbourList::stale`]); `max_d2` and `max_e2` as from [`Self::kick_and_drift`].
+    fn rebuild_if_stale(&mut self, max_d2: f64, since: f64, max_e2: f64) -> Result<()> {
         // The adaptive step looks one step ahead (the next stride is at most one more than
         // this one), so that pairs enter contact only once listed.
-        let ahead = if adaptive {
+        let ahead = if self.max_stride > 1 {
             (self.stride + 1).min(self.max_stride) as f64 * self.dt
         } else {
             0.0
@@ -548,10 +519,6 @@ impl Simulation {
                 )));
             }
         }
-        self.compute_forces(half)?;
-        if adaptive {
-            self.adapt_stride(max_e2.sqrt(), max_w2.sqrt());
-        }
         Ok(())
     }
 
@@ -566,8 +533,7 @@ impl Simulation {
         let u_new = 2.0 * max_e + self.neighbours.near_dv;
         let by_new = LOOKAHEAD_SKIN_FRACTION * self.skin_m / (u_new * self.dt) - 1.0;
         let k = self.interaction.stiffness_at(self.last_min_r2);
-        let by_stiffness =
-            AUTO_STEP_SAFETY * MAX_STEP_OVER_SQRT_M_K * (self.min_mass / k).sqrt() / self.dt;
+        let by_stiffness = stiffness_step_s(self.min_mass, k) / self.dt;
         let allowed = by_speed.min(by_new).min(by_stiffness);
         // NaN (nothing moves) and infinity allow the most.
         let capped = allowed >= self.max_stride as f64 || allowed.is_nan();
@@ -672,7 +638,7 @@ impl Simulation {
         Ok(drift)
     }
 
-    /// Whether the debris is in free flight (the ballistic cut-off of issue 6): no pair of
+    /// Whether the debris is in free flight (the ballistic cut-off): no pair of
     /// particles of *different* fragments is in contact (closer than r_eq), and no such pair
     /// within the neighbour-list radius is closing in, judged by the fragments' centre-of-mass
     /// velocities. `labels[i]` is the fragment of particle i (any id below the particle count,
@@ -699,15 +665,15 @@ impl Simulation {
         })
     }
 
-    /// Switches to free flight (the ballistic cut-off of issue 6): from now on every step
+    /// Switches to free flight (the ballistic cut-off): from now on every step
     /// moves each fragment rigidly with its centre-of-mass velocity instead of computing
     /// forces. Internal distances, hence contact and bond energy, the bonds and the fragments
     /// themselves, are unchanged, and so is every particle's velocity: the energy ledger and
     /// momentum stay exactly those at the cut-off. What is dropped is each fragment's rotation
     /// and internal vibration, which moves a particle by at most its fragment's size times the
     /// angle turned: far below the cloud's extent. Observables that are quantiles of particle
-    /// positions (front, La, Lr) and fragment counts are therefore unchanged to that order;
-    /// the benchmark shows it. `labels` as for [`Self::fragments_separating`].
+    /// positions (front, La, Lr) and fragment counts are therefore unchanged to that order.
+    /// `labels` as for [`Self::fragments_separating`].
     pub fn start_coasting(&mut self, labels: &[u32]) {
         let cm = fragment_velocities(&self.particles, labels);
         self.coast_velocity = labels.iter().map(|&l| cm[l as usize]).collect();
@@ -752,6 +718,128 @@ impl Simulation {
             .collect();
         partials.into_iter().fold(DVec3::ZERO, |a, b| a + b)
     }
+}
+
+/// The bond kernel over one chunk of particles starting at index `base`: F/r of each owned
+/// slot into `fr`, in blocks of `BLOCK_BONDS` bonds; breaks are booked in the result.
+fn bond_chunk(
+    ia: &Interaction,
+    pos: &[DVec3],
+    base: usize,
+    bonds: &mut [u32],
+    fr: &mut [f64],
+) -> BondPartial {
+    let r_eq2 = ia.r_eq2();
+    let rcut2 = ia.rcut2();
+    let break_energy = ia.break_energy_at_rcut();
+    let mut part = BondPartial {
+        min_r2: f64::INFINITY,
+        ..Default::default()
+    };
+    let nb_total = fr.len();
+    let mut b0 = 0;
+    while b0 < nb_total {
+        let nb = (nb_total - b0).min(BLOCK_BONDS);
+        // Stage 1 (scalar gathers): separation, squared distance and which law
+        // applies. Breaks are booked here (rare, so the branch predicts well).
+        let mut r2s = [r_eq2; BLOCK_BONDS];
+        let mut w_contact = [0.0f64; BLOCK_BONDS];
+        let mut w_spring = [0.0f64; BLOCK_BONDS];
+        for b in 0..nb {
+            let owned = b0 + b;
+            let (k, m) = (owned / OWNED_BONDS, owned % OWNED_BONDS);
+            let slot = &mut bonds[k * BONDS_PER_PARTICLE + 2 * m];
+            let s = *slot;
+            if s == NO_BOND {
+                continue;
+            }
+            let d = pos[base + k] - pos[(s & INDEX_MASK) as usize];
+            let r2 = d.length_squared();
+            let intact = s & BROKEN_FLAG == 0;
+            if intact && r2 > rcut2 {
+                *slot = s | BROKEN_FLAG;
+                part.broken += 1;
+                // Book the energy the bond holds at rcut (MODEL.md 3), not at the
+                // overshoot r2 > rcut2: velocity Verlet's trapezoidal work over the
+                // step in which the force drops to zero matches E(rcut) to O(dt^2),
+                // while E(r) over-books by about kappa (rcut - r_eq) dr / 2.
+                part.broken_energy += break_energy;
+                continue;
+            }
+            // Compressed (intact or just broken): contact repulsion; stretched and
+            // intact: spring; stretched and broken: nothing.
+            let compressed = f64::from(u8::from(r2 < r_eq2));
+            r2s[b] = r2;
+            w_contact[b] = compressed;
+            w_spring[b] = (1.0 - compressed) * f64::from(u8::from(intact));
+            part.min_r2 = part.min_r2.min(r2);
+        }
+        // Stage 2 (vectorised): both laws for every bond, blended by weight. A
+        // branch here would be mispredicted half the time in a hot lattice.
+        let fr = &mut fr[b0..b0 + nb];
+        for b in 0..nb {
+            let (fc, fs) = ia.contact_and_spring_force_over_r(r2s[b]);
+            fr[b] = w_contact[b] * fc + w_spring[b] * fs;
+        }
+        b0 += nb;
+    }
+    part
+}
+
+/// The contact repulsion on particle `i` from the pairs of its neighbour list `list`;
+/// lowers `min_r2` to the closest listed pair's squared distance.
+#[inline]
+fn contact_force(
+    ia: &Interaction,
+    pos: &[DVec3],
+    i: usize,
+    list: &[u32],
+    min_r2: &mut f64,
+) -> DVec3 {
+    let r_eq2 = ia.r_eq2();
+    let pi = pos[i];
+    let mut closest = *min_r2;
+    let mut f = DVec3::ZERO;
+    // Most listed pairs are out of contact in the cloud (the skin): a branch-free pass
+    // finds the pairs in contact (a bit each), then only they get the force. Leaving out
+    // the others' zero force leaves f as it is (f starts at +0, and a sum is -0 only if
+    // both terms are).
+    for list in list.chunks(64) {
+        let mut contact = 0u64;
+        for (k, &j) in list.iter().enumerate() {
+            let r2 = (pi - pos[j as usize]).length_squared();
+            closest = closest.min(r2);
+            contact |= u64::from(r2 < r_eq2) << k;
+        }
+        while contact != 0 {
+            let j = list[contact.trailing_zeros() as usize];
+            contact &= contact - 1;
+            let d = pi - pos[j as usize];
+            f += d * ia.contact_force_over_r(d.length_squared());
+        }
+    }
+    *min_r2 = closest;
+    f
+}
+
+/// Adds to `f` the bond forces on particle `i` from its bond `slots`: each slot's F/r (the
+/// owner's, from `fr_bond`) times the separation.
+#[inline]
+fn add_bond_forces(mut f: DVec3, pos: &[DVec3], i: usize, slots: &[u32], fr_bond: &[f64]) -> DVec3 {
+    let pi = pos[i];
+    for m in 0..OWNED_BONDS {
+        let owned = slots[2 * m];
+        if owned != NO_BOND {
+            let d = pi - pos[(owned & INDEX_MASK) as usize];
+            f += d * fr_bond[i * OWNED_BONDS + m];
+        }
+        let mirror = slots[2 * m + 1];
+        if mirror != NO_BOND {
+            let d = pi - pos[mirror as usize];
+            f += d * fr_bond[mirror as usize * OWNED_BONDS + m];
+        }
+    }
+    f
 }
 
 /// Centre-of-mass velocity of each fragment label (indexed by label), summed in index order.

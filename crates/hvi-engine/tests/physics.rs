@@ -1,14 +1,14 @@
-//! Physics tests of the engine: conservation, geometric sizing (Fig. 4), determinism across
-//! thread counts, bond breaking, blow-up detection. Small scenes, release-optimised.
+//! Physics tests of the engine: conservation, determinism across thread counts, bond
+//! breaking, blow-up detection, the adaptive step, free flight and the neighbour list's rebuild
+//! rule. Small scenes, release-optimised. (The geometric sizing test, Fig. 4, uses the
+//! reproduction's scene and lives at the workspace level in `tests/sizing.rs`.)
 
 use glam::DVec3;
-use hvi_analysis::decide::{curve_deviation, EnergySample};
 use hvi_engine::potential::{ContactForm, Interaction};
 use hvi_engine::scene::{Derived, RunSettings, SceneSpec};
 use hvi_engine::sim::{Energy, Simulation};
 use hvi_engine::state::{Body, Particles, BONDS_PER_PARTICLE, NO_BOND};
 use hvi_engine::EngineError;
-use hvi_study::reproduce::sizing;
 
 fn sphere_scene(particles: f64, end_time_s: f64) -> SceneSpec {
     SceneSpec::calibration(particles, end_time_s)
@@ -97,49 +97,6 @@ fn same_seed_is_bit_identical_at_one_and_two_threads() {
                 "particle {id}"
             );
         }
-    }
-}
-
-/// Kinetic and potential (contact + bond) energy against time since contact, stepping the
-/// engine directly on the scene `hvi-study reproduce` uses for Fig. 4.
-fn flyer_curves(particles: f64, sizing: bool) -> Vec<EnergySample> {
-    let spec = sizing::plates_scene(particles, sizing);
-    let mut sim = Simulation::new(spec.build().expect("valid")).expect("starts");
-    let mut out = Vec::new();
-    while sim.step < sim.derived.steps {
-        let e = sim.energy();
-        out.push(EnergySample {
-            tau_s: sim.tau_s(),
-            kinetic_j: e.kinetic_j,
-            potential_j: e.contact_j + e.bond_j,
-        });
-        let n = sizing::SAMPLE_EVERY.min(sim.derived.steps - sim.step);
-        sim.advance(n).expect("stable");
-    }
-    out
-}
-
-/// Fig. 4: with sizing, energy curves of colliding plates at 500, 5000 and 50000 particles
-/// agree within `SIZED_MAX_DEVIATION` of the initial kinetic energy (measured: 7-8 %); without
-/// sizing they differ by more than `UNSIZED_MIN_DEVIATION` (measured: about 45 %).
-#[test]
-fn sizing_makes_colliding_plates_independent_of_particle_count() {
-    let counts = [500.0, 5000.0, 50000.0];
-    let sized: Vec<_> = counts.iter().map(|&n| flyer_curves(n, true)).collect();
-    let unscaled: Vec<_> = counts.iter().map(|&n| flyer_curves(n, false)).collect();
-    for k in 0..2 {
-        let d = curve_deviation(&sized[k], &sized[2]);
-        assert!(
-            d < sizing::SIZED_MAX_DEVIATION,
-            "with sizing, N = {} differs from N = 5e4 by {d:.3}",
-            counts[k]
-        );
-        let u = curve_deviation(&unscaled[k], &unscaled[2]);
-        assert!(
-            u > sizing::UNSIZED_MIN_DEVIATION,
-            "without sizing, N = {} differs from N = 5e4 by only {u:.3}",
-            counts[k]
-        );
     }
 }
 

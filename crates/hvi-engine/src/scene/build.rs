@@ -1,0 +1,333 @@
+//! Building a scene: the spec validated, sized and laid out into a ready-to-run [`Setup`].
+//!
+//! [`SceneSpec::build`] runs the steps in order: check the geometry, derive the lattice
+//! spacing from the resolution and sigma from it, size the material (eq. 12), lay out the
+//! lattice (`layout`), give each body's particles their mass (eq. 20), check the run settings,
+//! choose the time step against the stability bound, and place the impactor at its standoff.
+
+use serde::Serialize;
+
+use super::layout::{lay_out, rim_ids, Layout};
+use super::spec::{Geometry, Material, Resolution, SceneSpec};
+use super::time_step::choose_time_step;
+use super::validate::Impact;
+use crate::error::{check_positive, check_range, EngineError, Result};
+use crate::paper;
+use crate::potential::Interaction;
+use crate::state::{Body, Particles};
+use crate::step::stability_bound_s;
+
+/// Numbers derived from a scene that every run prints (and the summary records).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Derived {
+    /// Particle diameter sigma at this resolution, m.
+    pub sigma_m: f64,
+    /// Reference diameter at which eps and kappa are given, m.
+    pub sigma_ref_m: f64,
+    /// Lattice spacing r_eq, m.
+    pub r_eq_m: f64,
+    /// gamma = eps / sigma^3, Pa.
+    pub gamma_pa: f64,
+    /// lambda = kappa / sigma, Pa.
+    pub lambda_pa: f64,
+    /// eps at this sigma, J.
+    pub eps_j: f64,
+    /// kappa at this sigma, N/m.
+    pub kappa_n_m: f64,
+    /// rcut, m.
+    pub rcut_m: f64,
+    /// Particle mass of the impactor (flyer), kg.
+    pub mass_impactor_kg: f64,
+    /// Particle mass of the target plate, kg.
+    pub mass_target_kg: f64,
+    /// Density of both bodies, kg/m^3 (a particle stands for the volume mass / density).
+    pub density_kg_m3: f64,
+    /// Time step, s.
+    pub dt_s: f64,
+    /// Largest step the validation accepts, s.
+    pub dt_max_s: f64,
+    /// Impact velocity, m/s.
+    pub v0_m_s: f64,
+    /// z of the target plate's rear face at t = 0, m (the debris cloud lies beyond it).
+    pub plate_rear_z_m: f64,
+    /// z of the target plate's front face at t = 0, m.
+    pub plate_front_z_m: f64,
+    /// Time of first contact, s (tau = t - this).
+    pub contact_time_s: f64,
+    /// Number of steps to reach the end time.
+    pub steps: u64,
+}
+
+impl Derived {
+    /// Derived numbers for a hand-made particle set (tests and tools): the interaction's
+    /// constants, the given step, the lattice's density mass / r_eq^3, and zeros for the
+    /// scene geometry.
+    pub fn for_interaction(ia: &Interaction, dt_s: f64, mass_kg: f64, steps: u64) -> Derived {
+        Derived {
+            sigma_m: ia.sigma_m,
+            sigma_ref_m: paper::reference_sigma_m(),
+            r_eq_m: ia.r_eq_m,
+            gamma_pa: ia.eps_j / ia.sigma_m.powi(3),
+            lambda_pa: ia.kappa_n_m / ia.sigma_m,
+            eps_j: ia.eps_j,
+            kappa_n_m: ia.kappa_n_m,
+            rcut_m: ia.rcut_m,
+            mass_impactor_kg: mass_kg,
+            mass_target_kg: mass_kg,
+            density_kg_m3: mass_kg / ia.r_eq_m.powi(3),
+            dt_s,
+            dt_max_s: f64::INFINITY,
+            v0_m_s: 0.0,
+            plate_rear_z_m: 0.0,
+            plate_front_z_m: 0.0,
+            contact_time_s: 0.0,
+            steps,
+        }
+    }
+}
+
+/// A validated scene, laid out and ready to run.
+#[derive(Debug, Clone)]
+pub struct Setup {
+    /// The spec it came from.
+    pub spec: SceneSpec,
+    /// Derived numbers.
+    pub derived: Derived,
+    /// Interaction constants at this sigma.
+    pub interaction: Interaction,
+    /// Particles and bonds at t = 0.
+    pub particles: Particles,
+    /// Particles of the target that lie on its lateral rim at t = 0 (by id): the residual
+    /// plate is the fragment that holds them (MODEL.md section 5).
+    pub rim_ids: Vec<u32>,
+}
+
+/// The material at this resolution: the size-invariant (gamma, lambda), eps and kappa at this
+/// sigma, and the interaction constants built from them.
+struct SizedMaterial {
+    gamma_pa: f64,
+    lambda_pa: f64,
+    eps_j: f64,
+    kappa_n_m: f64,
+    interaction: Interaction,
+}
+
+fn require(key: &str, value: Option<f64>) -> Result<f64> {
+    value.ok_or_else(|| EngineError::invalid(key, "missing", "a finite number > 0"))
+}
+
+impl SceneSpec {
+    /// Validates the spec and lays out the scene.
+    ///
+    /// ```
+    /// use hvi_engine::scene::SceneSpec;
+    ///
+    /// let setup = SceneSpec::calibration(500.0, 1e-7).build().expect("valid scene");
+    /// assert!(setup.derived.dt_s <= setup.derived.dt_max_s);
+    /// assert_eq!(setup.particles.len(), setup.particles.id.len());
+    ///
+    /// let mut bad = SceneSpec::calibration(500.0, 1e-7);
+    /// bad.run.thermal_ratio = 0.5;
+    /// let err = bad.build().expect_err("out of range");
+    /// assert!(err.to_string().contains("run.thermal_ratio"));
+    /// ```
+    pub fn build(&self) -> Result<Setup> {
+        let geometry = &self.scene;
+        let Impact {
+            v0_m_s: v0,
+            density_kg_m3: density,
+            standoff_m: standoff,
+        } = geometry.validate()?;
+        let r_eq = self.resolution.lattice_spacing_m(geometry)?;
+        let sigma = r_eq / paper::r_eq_over_sigma();
+        let sigma_ref = paper::reference_sigma_m();
+        let sized = self.material.sized(sigma, sigma_ref)?;
+        let interaction = sized.interaction;
+
+        let mut layout = lay_out(geometry, r_eq)?;
+        let [mass_imp, mass_tgt] = particle_masses_kg(geometry, &layout, density);
+
+        let run = &self.run;
+        run.validate()?;
+        self.analysis.validate(run.end_time_s)?;
+        let stiffness = sized.kappa_n_m.max(interaction.contact_stiffness_at_r_eq());
+        let dt_max = stability_bound_s(sigma, v0, mass_imp.min(mass_tgt), stiffness);
+        let dt = choose_time_step(run, dt_max, sigma, sigma_ref)?;
+        place_impactor(&mut layout, standoff, r_eq)?;
+
+        let steps = ((run.end_time_s + standoff / v0) / dt).ceil() as u64;
+        let derived = Derived {
+            sigma_m: sigma,
+            sigma_ref_m: sigma_ref,
+            r_eq_m: r_eq,
+            gamma_pa: sized.gamma_pa,
+            lambda_pa: sized.lambda_pa,
+            eps_j: sized.eps_j,
+            kappa_n_m: sized.kappa_n_m,
+            rcut_m: interaction.rcut_m,
+            mass_impactor_kg: mass_imp,
+            mass_target_kg: mass_tgt,
+            density_kg_m3: density,
+            dt_s: dt,
+            dt_max_s: dt_max,
+            v0_m_s: v0,
+            plate_rear_z_m: layout.plate_rear_z,
+            plate_front_z_m: 0.0,
+            contact_time_s: standoff / v0,
+            steps,
+        };
+        let particles = layout.into_particles(mass_imp, mass_tgt, v0, run.thermal_ratio, run.seed);
+        let rim_ids = rim_ids(&particles, r_eq);
+        Ok(Setup {
+            spec: self.clone(),
+            derived,
+            interaction,
+            particles,
+            rim_ids,
+        })
+    }
+}
+
+impl Resolution {
+    /// The lattice spacing r_eq, m: the cube root of the volume per particle, or the sphere
+    /// diameter over the particles across it.
+    fn lattice_spacing_m(&self, geometry: &Geometry) -> Result<f64> {
+        match (self.particles, self.particles_across_d) {
+            (Some(n), None) => {
+                check_range("resolution.particles", n, 8.0, false, 5e8, false)?;
+                Ok((geometry.volume_m3() / n).cbrt())
+            }
+            (None, Some(k)) => {
+                check_range(
+                    "resolution.particles_across_d",
+                    k,
+                    2.0,
+                    false,
+                    2000.0,
+                    false,
+                )?;
+                match *geometry {
+                    Geometry::SphereOnPlate { diameter_m, .. } => Ok(diameter_m / k),
+                    Geometry::FlyerPlate { .. } => Err(EngineError::invalid(
+                        "resolution.particles_across_d",
+                        k,
+                        "only for kind = \"sphere_on_plate\"; use resolution.particles",
+                    )),
+                }
+            }
+            (Some(_), Some(_)) => Err(EngineError::Conflict(
+                "give either resolution.particles or resolution.particles_across_d, \
+                 not both"
+                    .into(),
+            )),
+            (None, None) => Err(EngineError::Conflict(
+                "give resolution.particles or resolution.particles_across_d".into(),
+            )),
+        }
+    }
+}
+
+impl Material {
+    /// The material at particle diameter `sigma` with geometric sizing (eq. 12: eps = gamma
+    /// sigma^3, kappa = lambda sigma), or at the reference diameter `sigma_ref` without it.
+    fn sized(&self, sigma: f64, sigma_ref: f64) -> Result<SizedMaterial> {
+        let m = self;
+        let rcut_over_sigma = check_range(
+            "material.rcut_over_sigma",
+            m.rcut_over_sigma,
+            paper::r_eq_over_sigma(),
+            true,
+            10.0,
+            false,
+        )?;
+        let (gamma, lambda) = match (m.eps_j, m.kappa_n_m, m.gamma_pa, m.lambda_pa) {
+            (eps, kappa, None, None) => {
+                let eps = check_positive("material.eps_j", require("material.eps_j", eps)?)?;
+                let kappa =
+                    check_positive("material.kappa_n_m", require("material.kappa_n_m", kappa)?)?;
+                (eps / sigma_ref.powi(3), kappa / sigma_ref)
+            }
+            (None, None, gamma, lambda) => {
+                let gamma =
+                    check_positive("material.gamma_pa", require("material.gamma_pa", gamma)?)?;
+                let lambda =
+                    check_positive("material.lambda_pa", require("material.lambda_pa", lambda)?)?;
+                (gamma, lambda)
+            }
+            _ => {
+                return Err(EngineError::Conflict(
+                    "give material.eps_j and material.kappa_n_m, or material.gamma_pa and \
+                     material.lambda_pa, not a mix"
+                        .into(),
+                ))
+            }
+        };
+        let (eps, kappa) = if m.sizing {
+            (gamma * sigma.powi(3), lambda * sigma)
+        } else {
+            // Without sizing the reference values are used at any sigma (Fig. 4, top panel).
+            (gamma * sigma_ref.powi(3), lambda * sigma_ref)
+        };
+        let interaction = Interaction::new(sigma, eps, kappa, rcut_over_sigma * sigma, m.contact);
+        Ok(SizedMaterial {
+            gamma_pa: gamma,
+            lambda_pa: lambda,
+            eps_j: eps,
+            kappa_n_m: kappa,
+            interaction,
+        })
+    }
+}
+
+/// Particle mass of the impactor and of the target, kg: each body's mass over its particle
+/// count (eq. 20), so each body's mass is exact whatever the lattice rounding.
+fn particle_masses_kg(geometry: &Geometry, layout: &Layout, density: f64) -> [f64; 2] {
+    let n_imp = layout.count(Body::Impactor);
+    let n_tgt = layout.count(Body::Target);
+    let (vol_imp, vol_tgt) = match *geometry {
+        Geometry::SphereOnPlate {
+            diameter_m,
+            t_over_d,
+            width_over_d,
+            ..
+        } => (
+            std::f64::consts::PI / 6.0 * diameter_m.powi(3),
+            (width_over_d * diameter_m).powi(2) * t_over_d * diameter_m,
+        ),
+        Geometry::FlyerPlate {
+            flyer_thickness_m,
+            target_thickness_m,
+            width_m,
+            ..
+        } => (
+            width_m * width_m * flyer_thickness_m,
+            width_m * width_m * target_thickness_m,
+        ),
+    };
+    let mass_imp = density * vol_imp / n_imp as f64;
+    let mass_tgt = density * vol_tgt / n_tgt as f64;
+    [mass_imp, mass_tgt]
+}
+
+/// Shifts the impactor back by the standoff (first contact then happens at standoff / v0) and
+/// refuses bodies that overlap.
+fn place_impactor(layout: &mut Layout, standoff: f64, r_eq: f64) -> Result<()> {
+    if standoff < 0.0 {
+        // Check the actual closest distance: a negative standoff overlaps the bodies.
+        layout.shift_impactor(-standoff);
+        let d = layout.closest_impactor_target_distance();
+        return Err(EngineError::Overlap {
+            distance_m: d,
+            r_eq_m: r_eq,
+        });
+    }
+    layout.shift_impactor(-standoff);
+    let closest = layout.closest_impactor_target_distance();
+    if closest < r_eq * (1.0 - 1e-9) {
+        return Err(EngineError::Overlap {
+            distance_m: closest,
+            r_eq_m: r_eq,
+        });
+    }
+    Ok(())
+}
