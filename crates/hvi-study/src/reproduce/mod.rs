@@ -259,8 +259,8 @@ pub fn build_plans(config: &Config, tier_name: &str) -> Result<Plans> {
 }
 
 /// The cost of a tier: per stage, the sum over runs of particles x base steps (each scene
-/// built by the engine, so the base step is the one it would run with) over the throughput
-/// in the same unit (`[estimate]`, measured with the adaptive step).
+/// built by the engine, so the base step is the one it would run with) over `[estimate]`'s
+/// throughput in the same unit (whole runs with the adaptive step).
 pub fn estimate(plans: &Plans, tier: &str, cfg: &EstimateConfig) -> Result<Estimate> {
     let mut rows = Vec::new();
     for (stage, figures, plan) in plans.stages() {
