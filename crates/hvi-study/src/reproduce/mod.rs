@@ -324,48 +324,16 @@ fn check_out(out: &Path) -> Result<()> {
 /// Every figure, pending, in the paper's order.
 fn pending_figures() -> Vec<Figure> {
     vec![
-        Figure::pending(
-            "3",
-            "contact repulsion and bond spring",
-            stages::fig3_paper(),
-        ),
-        Figure::pending(
-            "4",
-            "geometric sizing: colliding plates",
-            stages::fig4_paper(),
-        ),
-        Figure::pending(
-            "5",
-            "convergence of the fragmentation with particle count",
-            stages::fig5_paper(),
-        ),
-        Figure::pending(
-            "7",
-            "snapshot matrix over (\u{3b5}, \u{3ba}) at the analysis time",
-            stages::fig7_paper(),
-        ),
-        Figure::pending(
-            "9",
-            "R = La/Lr over (\u{3b5}, \u{3ba})",
-            stages::fig9_paper(),
-        ),
-        Figure::pending("10", "va/v0 over (\u{3b5}, \u{3ba})", stages::fig10_paper()),
-        Figure::pending(
-            "11-12",
-            "the best fit at the final resolution: side view and 3-D series",
-            stages::fig11_paper(),
-        ),
-        Figure::pending("13", "va/v0 against t/D", stages::fig13_paper()),
-        Figure::pending(
-            "16",
-            "F over (v0, t/D) and the validity boundary",
-            stages::fig16_paper(),
-        ),
-        Figure::pending(
-            "17",
-            "snapshot matrix over (v0, t/D), valid red, invalid blue",
-            stages::fig17_paper(),
-        ),
+        stages::fig3_pending(),
+        stages::fig4_pending(),
+        stages::fig5_pending(),
+        stages::fig7_pending(),
+        stages::fig9_pending(),
+        stages::fig10_pending(),
+        stages::fig11_pending(),
+        stages::fig13_pending(),
+        stages::fig16_pending(),
+        stages::fig17_pending(),
     ]
 }
 
