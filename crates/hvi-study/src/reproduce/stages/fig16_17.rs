@@ -17,7 +17,7 @@ use super::{axis, completed_runs, plan_records, timing, Ctx};
 use crate::cli::ValidityArgs;
 use crate::reproduce::report::{fmt_num, Figure, StageTiming, Value, Verdict};
 use crate::study::figures::field_of;
-use crate::study::validity::validity_map;
+use crate::study::validity::{validity_map, ValidityMap};
 
 /// Paper text of Fig. 16.
 pub fn fig16_paper() -> String {
@@ -64,14 +64,15 @@ pub fn fig16_17(
     let dir = ctx.runs.join(&plan.study);
     let cached = completed_runs(plan, &dir).unwrap_or(0);
     let cutoff = paper::VALIDITY_FRAGMENTATION_CUTOFF;
-    validity_map(&ValidityArgs {
+    let map = validity_map(&ValidityArgs {
         study: ctx.study_args(study_path, sref, &dir),
         cutoff: Some(cutoff),
     })?;
+    // `validity_map` returns its map but not the runs' records: those are the store's.
     let records = plan_records(plan, &dir)?;
     let mut f16 = fig16_pending();
     let mut f17 = fig17_pending();
-    (f16.files, f17.files) = collect(ctx, &dir)?;
+    (f16.files, f17.files) = collect(ctx, &dir, &map)?;
     let ax = axis(plan, "scene.v0_m_s")?;
     let ay = axis(plan, "scene.t_over_d")?;
     let field = field_of(plan, &records, (ax, ay), 0, |r| {
@@ -84,9 +85,9 @@ pub fn fig16_17(
 }
 
 /// The files of Figs. 16 and 17, copied from the validity-map study's directory.
-fn collect(ctx: &Ctx, dir: &Path) -> Result<(Vec<String>, Vec<String>)> {
+fn collect(ctx: &Ctx, dir: &Path, map: &ValidityMap) -> Result<(Vec<String>, Vec<String>)> {
     let f16 = ctx.collect_all(&[
-        (dir.join("validity_map.png"), "fig16_fragmentation.png"),
+        (map.plot.with_extension("png"), "fig16_fragmentation.png"),
         (dir.join("validity_boundary.csv"), "fig16_boundary.csv"),
         (dir.join("results.csv"), "fig16_17_grid.csv"),
     ])?;

@@ -18,9 +18,8 @@ use super::Ctx;
 use super::{axis, completed_runs, index_of, join_or, mean, plan_records, summary_number, timing};
 use crate::cli::CalibrateArgs;
 use crate::reproduce::report::{fmt_num, short, Figure, StageTiming, Value, Verdict};
-use crate::study::calibrate::{calibrate, CalibrateConfig};
+use crate::study::calibrate::calibrate;
 use crate::study::figures::field_of;
-use hvi_run::spec::Study;
 
 /// Paper text of Fig. 7.
 pub fn fig7_paper() -> String {
@@ -86,17 +85,14 @@ pub fn fig7_9_10(
     let t0 = Instant::now();
     let dir = ctx.runs.join(&plan.study);
     let cached = completed_runs(plan, &dir).unwrap_or(0);
-    calibrate(&CalibrateArgs {
+    let calibration = calibrate(&CalibrateArgs {
         study: ctx.study_args(study_path, sref, &dir),
         no_refine: true,
         max_iters: None,
     })?;
+    // `calibrate` returns its result but not the grid's records: those are the store's.
     let records = plan_records(plan, &dir)?;
-    let study = Study::load(study_path)?;
-    let cfg = CalibrateConfig::of(&study)?;
-    let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-    let targets = hvi_run::output::load_targets(&base.join(&cfg.targets))?;
-    let bound = largest_fragment_bound(&targets.targets);
+    let bound = largest_fragment_bound(&calibration.targets);
     let files = collect(ctx, &dir)?;
     let grid = Grid::of(plan, &records, &dir)?;
     let figures = vec![

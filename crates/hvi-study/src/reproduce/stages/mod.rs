@@ -111,11 +111,10 @@ impl Executed {
 fn execute(ctx: &Ctx, plan: &Plan) -> Result<Executed> {
     let dir = ctx.runs.join(&plan.study);
     plan.write(&dir)?;
-    let cached = completed_runs(plan, &dir)?;
     let (_, report) = execute_plan(plan, &dir, &ctx.exec)?;
     Ok(Executed {
         dir,
-        cached,
+        cached: report.cached,
         records: report.records,
     })
 }
