@@ -316,3 +316,30 @@ fn fig17_decide(f17: &mut Figure, m: &Regions, cutoff: f64) {
     );
     f17.ours = format!("{valid} runs valid, {invalid} invalid");
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// F over v0 = (1, 2, 3) (columns) and t/D = (0.1, 0.2) (rows).
+    fn field(z: Vec<Vec<f64>>) -> Field {
+        Field::new(vec![1.0, 2.0, 3.0], vec![0.1, 0.2], z).expect("field")
+    }
+
+    #[test]
+    fn regions_count_runs_and_rows_that_split_once() {
+        let f = field(vec![vec![0.1, 0.2, 0.5], vec![0.4, 0.1, f64::NAN]]);
+        let r = Regions::of(&f, 0.3);
+        assert_eq!((r.valid, r.invalid, r.split_once, r.rows), (2, 3, 1, 2));
+    }
+
+    #[test]
+    fn crossings_say_where_f_reaches_the_cutoff() {
+        assert_eq!(crossing(&[1.0, 2.0], &[0.1, 0.5], 0.3), "2 m/s");
+        assert_eq!(crossing(&[1.0, 2.0], &[0.4, 0.5], 0.3), "valid everywhere");
+        assert_eq!(crossing(&[1.0, 2.0], &[0.1, 0.2], 0.3), "below everywhere");
+        let m = FragmentationMap::of(&field(vec![vec![0.1, 0.2, 0.5], vec![0.2, 0.1, 0.4]]), 0.3);
+        assert_eq!((m.monotone_rows, m.rows, m.cols), (1, 2, 3));
+        assert!((m.worst_drop - 0.1).abs() < 1e-12, "{}", m.worst_drop);
+    }
+}

@@ -219,3 +219,31 @@ fn verdict(n: &SizingNumbers, failed: &[usize]) -> (Verdict, String) {
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn numbers(decades: f64, unsized_dev: f64, sized_dev: f64) -> SizingNumbers {
+        SizingNumbers {
+            counts: vec![500, 5000],
+            decades,
+            unsized_dev,
+            sized_dev,
+        }
+    }
+
+    #[test]
+    fn verdict_needs_coincide_diverge_and_the_paper_s_decades() {
+        let wide = paper::SIZING_DECADES;
+        assert_eq!(
+            verdict(&numbers(wide, 0.5, 0.05), &[]).0,
+            Verdict::Reproduced
+        );
+        assert_eq!(verdict(&numbers(1.0, 0.5, 0.05), &[]).0, Verdict::Partly);
+        assert_eq!(verdict(&numbers(wide, 0.2, 0.15), &[]).0, Verdict::Partly);
+        assert_eq!(verdict(&numbers(wide, 0.1, 0.2), &[]).0, Verdict::Not);
+        let (v, why) = verdict(&numbers(wide, 0.5, 0.05), &[3]);
+        assert_eq!((v, why.as_str()), (Verdict::Not, "runs [3] failed"));
+    }
+}

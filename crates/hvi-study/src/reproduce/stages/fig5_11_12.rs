@@ -419,3 +419,22 @@ fn fig11_verdict(rec: &Record, n: f64, score: &Score) -> (Verdict, String) {
         (Verdict::Partly, format!("drawn, but {}", why.join("; ")))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fig5_verdict_from_the_convergence_count() {
+        let n = paper::CONVERGED_PARTICLES;
+        let fs = [0.5, 0.6, 0.61];
+        assert_eq!(fig5_verdict(&fs, &[], Some(n), n).0, Verdict::Reproduced);
+        assert_eq!(fig5_verdict(&fs, &[], Some(10.0 * n), n).0, Verdict::Partly);
+        // Not converged: shrinking steps are partly, growing ones are not.
+        assert_eq!(fig5_verdict(&fs, &[0.2, 0.1], None, n).0, Verdict::Partly);
+        assert_eq!(fig5_verdict(&fs, &[0.1, 0.2], None, n).0, Verdict::Not);
+        // A failed run decides before anything else.
+        let failed = [0.5, f64::NAN];
+        assert_eq!(fig5_verdict(&failed, &[], Some(n), n).0, Verdict::Not);
+    }
+}

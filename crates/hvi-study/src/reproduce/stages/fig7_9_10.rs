@@ -569,3 +569,30 @@ fn fig10_figure(va: &Field, files: Vec<String>) -> Figure {
     );
     f10
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ratio_map_finds_the_peak_and_the_fit_s_local_maximum() {
+        let (e, k) = (paper::BEST_EPS_J, paper::BEST_KAPPA_N_M);
+        let rr = Field::new(
+            vec![e / 2.0, e, 2.0 * e],
+            vec![k / 2.0, k, 2.0 * k],
+            vec![
+                vec![1.0, 1.1, 1.0],
+                vec![1.1, 1.3, 1.2],
+                vec![1.0, 1.1, f64::NAN],
+            ],
+        )
+        .expect("field");
+        let m = RatioMap::of(&rr);
+        assert_eq!(m.peak_at, Some((e, k)));
+        assert_eq!((m.peak, m.at_fit), (Some(1.3), Some(1.3)));
+        assert_eq!(m.plateau, Some(1.1));
+        assert_eq!(m.fit_is_local_max, Some(true));
+        assert!(m.checks()[3].0, "local maximum at the paper's fit");
+        assert_eq!(value_at(&rr, (2.0 * e, 2.0 * k)), None, "NaN is no value");
+    }
+}
