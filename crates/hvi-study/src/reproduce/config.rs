@@ -3,7 +3,7 @@
 //! ```toml
 //! [estimate]
 //! tier = "paper"                       # the tier whose wall time every report estimates
-//! particle_steps_per_second = 2.44e7   # particles x base steps per second, measured
+//! particle_steps_per_second = 2.4e7    # particles x base steps per second on `cores` cores
 //! cores = 2
 //!
 //! [tiers.quick]
@@ -113,7 +113,7 @@ pub struct EstimateConfig {
     /// (with the adaptive step a run takes fewer steps than base steps; the estimate counts
     /// each scene's base steps, which the engine knows before running).
     pub particle_steps_per_second: f64,
-    /// The cores that throughput was measured on.
+    /// The cores that throughput holds for.
     pub cores: usize,
     /// Where the throughput comes from.
     #[serde(default)]

@@ -2,10 +2,10 @@
 //! study runner and its store, and a report that puts the paper's result beside ours.
 //!
 //! ```text
-//! studies/reproduce.toml (tier) --(config)--> plans of five studies, every scene validated
+//! studies/reproduce.toml (tier) --(config, plans)--> plans of five studies, every scene validated
 //!   sizing (Fig. 4), convergence (Figs. 5, 11, 12), calibration (Figs. 7, 9, 10),
 //!   front-velocity (Fig. 13), validity-map (Figs. 16, 17); Fig. 3 needs no run
-//! plans --(study::exec + store, runs/reproduce/<tier>/<study>/runs/<fingerprint>)--> records
+//! plans --(hvi_run execute_plan + store, runs/reproduce/<tier>/<study>/runs/<fingerprint>)--> records
 //! records --(stages: decide, plots)--> figures, deciding numbers, verdicts
 //!   --(report)--> reports/<tier>/report.md, reproduce.json, fig*.png, fig*.csv
 //! ```
@@ -17,278 +17,110 @@
 //! Every paper number comes from `hvi_engine::paper`.
 
 pub mod config;
+mod plans;
 pub mod report;
 pub mod sizing;
 pub mod stages;
+
+pub use plans::{build_plans, estimate, Plans};
 
 use crate::cli::ReproduceArgs;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Context, Result};
+use hvi_analysis::score::Targets;
 use hvi_engine::paper;
-use rayon::prelude::*;
 
-use config::{Config, EstimateConfig};
+use config::{Config, TierConfig};
 use hvi_run::exec::ExecOptions;
-use hvi_run::plan::{build_plan, Plan, PlanRequest};
-use hvi_run::spec::{json_to_override, Axis, Study, Tier};
-use report::{fmt_duration, Estimate, EstimateRow, Figure, Machine, Reproduction, Verdict};
+use hvi_run::spec::Study;
+use report::{fmt_duration, Estimate, Figure, Machine, Reproduction, StageTiming, Verdict};
 use stages::Ctx;
 
-/// The plans of a tier: every run of every figure, validated.
-#[derive(Debug, Clone)]
-pub struct Plans {
-    /// The calibration study file.
-    pub calibration_study: PathBuf,
-    /// Figs. 7, 9, 10.
-    pub calibration: Plan,
-    /// The validity-map study file.
-    pub validity_study: PathBuf,
-    /// Figs. 16, 17.
-    pub validity: Plan,
-    /// Fig. 4.
-    pub sizing: Plan,
-    /// Fig. 5, Figs. 11-12.
-    pub convergence: Plan,
-    /// Fig. 13.
-    pub front_velocity: Plan,
+/// `hvi-study reproduce`.
+pub fn reproduce(args: &ReproduceArgs) -> Result<Reproduction> {
+    let t0 = Instant::now();
+    check_counts(args)?;
+    let config = Config::load(&args.config)?;
+    let tier = config.tier(&args.tier)?.clone();
+    let (out, runs) = report_and_runs_dirs(args);
+    // Read the previous report before anything is written (it may be --out itself).
+    let previous = load_previous(args)?;
+    if !args.dry_run {
+        check_out(&out)?;
+    }
+    say(
+        args,
+        format!("tier `{}`: planning every figure's runs", args.tier),
+    );
+    let plans = build_plans(&config, &args.tier)?;
+    let n_runs: usize = plans.stages().iter().map(|s| s.2.runs.len()).sum();
+    say(args, format!("{n_runs} runs planned, every scene valid"));
+    let estimates = estimates(args, &config, &plans)?;
+    if args.dry_run {
+        return Ok(dry_run(args, &tier, estimates, n_runs, t0));
+    }
+    std::fs::create_dir_all(&runs)
+        .with_context(|| format!("cannot create --runs {}", runs.display()))?;
+
+    let mut rep = Reproduction {
+        notes: model_notes(&plans, &runs),
+        ..new_report(args, &tier, estimates)
+    };
+    rep.write(&out)?;
+    let targets = calibration_targets(&plans)?;
+    let inputs = StageInputs {
+        ctx: stage_context(args, &out, &runs),
+        plans: &plans,
+        tier: &tier,
+        fig13_gap: fig13_gap(&targets),
+        targets,
+    };
+    let errors = run_stages(args, &inputs, &mut rep, &out, t0)?;
+    finish(args, rep, previous.as_ref(), &out, t0, errors)
 }
 
-impl Plans {
-    /// (stage, figures, plan) in the order the stages run.
-    pub fn stages(&self) -> [(&'static str, &'static str, &Plan); 5] {
-        [
-            ("sizing", "4", &self.sizing),
-            ("convergence", "5, 11, 12", &self.convergence),
-            ("calibration", "7, 9, 10", &self.calibration),
-            ("front-velocity", "13", &self.front_velocity),
-            ("validity-map", "16, 17", &self.validity),
-        ]
+/// A progress line on stderr (none with `--quiet`).
+fn say(args: &ReproduceArgs, line: String) {
+    if !args.quiet {
+        eprintln!("[reproduce] {line}");
     }
 }
 
-/// A study that lives only in memory: a base scene, axes and one tier without overrides (the
-/// overrides go through the plan request, which keeps them off the axes).
-fn memory_study(
-    name: &str,
-    description: &str,
-    config: &Config,
-    scene_path: PathBuf,
-    scene_text: String,
-    axes: Vec<Axis>,
-    tier: &str,
-) -> Study {
-    let mut tiers = std::collections::BTreeMap::new();
-    tiers.insert(
-        tier.to_string(),
-        Tier {
-            name: tier.to_string(),
-            description: format!("`hvi-study reproduce --tier {tier}`"),
-            set: Vec::new(),
-        },
-    );
-    Study {
-        name: name.into(),
-        description: description.into(),
-        path: config.path.clone(),
-        scene_path,
-        scene_text,
-        set: Vec::new(),
-        axes,
-        tiers,
-        default_tier: tier.to_string(),
-        calibrate: None,
-        validity: None,
+/// `--threads` and `--jobs` are counts: at least 1 when given.
+fn check_counts(args: &ReproduceArgs) -> Result<()> {
+    if args.threads == Some(0) {
+        bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
     }
+    if args.jobs == Some(0) {
+        bail!("invalid value for `--jobs`: 0 (allowed: an integer >= 1)");
+    }
+    Ok(())
 }
 
-fn numbers(values: impl IntoIterator<Item = f64>) -> Vec<serde_json::Value> {
-    values.into_iter().map(|v| serde_json::json!(v)).collect()
-}
-
-fn set_of(key: &str, v: f64) -> Result<String> {
-    Ok(format!(
-        "{key}={}",
-        json_to_override(&serde_json::json!(v))?
-    ))
-}
-
-/// The paper's best-fit material as overrides.
-fn best_fit() -> Result<Vec<String>> {
-    Ok(vec![
-        set_of("material.eps_j", paper::BEST_EPS_J)?,
-        set_of("material.kappa_n_m", paper::BEST_KAPPA_N_M)?,
-        set_of("material.rcut_over_sigma", paper::BEST_RCUT_OVER_SIGMA)?,
-    ])
-}
-
-/// Plans every study of a tier (nothing is written, nothing runs). Every run's scene is built
-/// by the engine, so a bad value fails here, naming the key.
-pub fn build_plans(config: &Config, tier_name: &str) -> Result<Plans> {
-    let t = config.tier(tier_name)?;
-    let plan_ref = |what: &str, r: &config::StudyRef| -> Result<(PathBuf, Plan)> {
-        let path = config.resolve(&r.study);
-        let study = Study::load(&path)?;
-        let plan = build_plan(
-            &study,
-            &PlanRequest {
-                tier: Some(r.tier.clone()),
-                particles: r.particles,
-                set: r.set.clone(),
-            },
-        )
-        .with_context(|| format!("{}: tiers.{tier_name}.{what}", config.path.display()))?;
-        Ok((path, plan))
-    };
-    let (calibration_study, calibration) = plan_ref("calibration", &t.calibration)?;
-    let (validity_study, validity) = plan_ref("validity", &t.validity)?;
-    let plan_mem = |what: &str, study: &Study, set: Vec<String>| -> Result<Plan> {
-        build_plan(
-            study,
-            &PlanRequest {
-                tier: Some(tier_name.to_string()),
-                particles: None,
-                set,
-            },
-        )
-        .with_context(|| format!("{}: tiers.{tier_name}.{what}", config.path.display()))
-    };
-    let read = |p: &Path| {
-        std::fs::read_to_string(p)
-            .with_context(|| format!("cannot read scene file {}", p.display()))
-    };
-
-    // Fig. 4: the plates at each count, without and with sizing.
-    let mut counts = t.sizing.particles.clone();
-    counts.sort_by(f64::total_cmp);
-    counts.dedup();
-    let study = memory_study(
-        "sizing",
-        "Fig. 4: colliding plates with and without geometric sizing",
-        config,
-        PathBuf::from("hvi_study::reproduce::sizing::plates_scene"),
-        sizing::plates_scene_toml(counts[0], true)?,
-        vec![
-            Axis {
-                key: "material.sizing".into(),
-                values: vec![serde_json::json!(false), serde_json::json!(true)],
-                label: "sizing".into(),
-            },
-            Axis {
-                key: "resolution.particles".into(),
-                values: numbers(counts),
-                label: "particles".into(),
-            },
-        ],
-        tier_name,
-    );
-    let sizing = plan_mem("sizing", &study, t.sizing.set.clone())?;
-
-    // Fig. 5 and Figs. 11-12: the best fit at fractions of the calibration's count, at it, and
-    // at the paper's final-over-calibration ratio of it.
-    let cal_n = calibration
+/// `--out` (default `reports/<tier>`) and `--runs` (default `runs/reproduce/<tier>`).
+fn report_and_runs_dirs(args: &ReproduceArgs) -> (PathBuf, PathBuf) {
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| Path::new("reports").join(&args.tier));
+    let runs = args
         .runs
-        .first()
-        .and_then(|r| r.scene.resolution.particles)
-        .ok_or_else(|| {
-            anyhow!(
-                "tiers.{tier_name}.calibration: its runs set resolution.particles_across_d; Fig. 5 \
-                 scales the calibration's particle count, so it needs resolution.particles"
-            )
-        })?;
-    let mut counts: Vec<f64> = t
-        .convergence
-        .fractions
-        .iter()
-        .map(|f| (cal_n * f).round())
-        .chain([
-            cal_n.round(),
-            (cal_n * paper::FINAL_PARTICLES / paper::CALIBRATION_PARTICLES).round(),
-        ])
-        .collect();
-    counts.sort_by(f64::total_cmp);
-    counts.dedup();
-    let scene_path = config.resolve(&t.convergence.scene);
-    let study = memory_study(
-        "convergence",
-        "Fig. 5 (F against particle count) and Figs. 11-12 (its finest run): the paper's best fit on the calibration scene",
-        config,
-        scene_path.clone(),
-        read(&scene_path)?,
-        vec![Axis {
-            key: "resolution.particles".into(),
-            values: numbers(counts),
-            label: "particles".into(),
-        }],
-        tier_name,
-    );
-    let mut set = best_fit()?;
-    set.extend(t.convergence.set.iter().cloned());
-    let convergence = plan_mem("convergence", &study, set)?;
-
-    // Fig. 13: va/v0 against t/D at the paper's velocity.
-    let scene_path = config.resolve(&t.front_velocity.scene);
-    let study = memory_study(
-        "front-velocity",
-        "Fig. 13: va/v0 against t/D at the paper's velocity, best fit",
-        config,
-        scene_path.clone(),
-        read(&scene_path)?,
-        vec![Axis {
-            key: "scene.t_over_d".into(),
-            values: numbers(t.front_velocity.t_over_d.iter().copied()),
-            label: "t/D".into(),
-        }],
-        tier_name,
-    );
-    let mut set = vec![set_of("scene.v0_m_s", paper::FIG13_V0_M_S)?];
-    set.extend(best_fit()?);
-    set.extend(t.front_velocity.set.iter().cloned());
-    let front_velocity = plan_mem("front_velocity", &study, set)?;
-
-    Ok(Plans {
-        calibration_study,
-        calibration,
-        validity_study,
-        validity,
-        sizing,
-        convergence,
-        front_velocity,
-    })
+        .clone()
+        .unwrap_or_else(|| Path::new("runs").join("reproduce").join(&args.tier));
+    (out, runs)
 }
 
-/// The cost of a tier: per stage, the sum over runs of particles x base steps (each scene
-/// built by the engine, so the base step is the one it would run with) over the throughput
-/// in the same unit (`[estimate]`, measured with the adaptive step).
-pub fn estimate(plans: &Plans, tier: &str, cfg: &EstimateConfig) -> Result<Estimate> {
-    let mut rows = Vec::new();
-    for (stage, figures, plan) in plans.stages() {
-        let costs: Vec<(usize, f64)> = plan
-            .runs
-            .par_iter()
-            .map(|r| hvi_run::exec::run_cost(&r.scene))
-            .collect::<Result<_>>()?;
-        let particle_steps: f64 = costs.iter().map(|c| c.1).sum();
-        rows.push(EstimateRow {
-            stage: stage.into(),
-            figures: figures.into(),
-            runs: costs.len(),
-            particles: (
-                costs.iter().map(|c| c.0).min().unwrap_or(0),
-                costs.iter().map(|c| c.0).max().unwrap_or(0),
-            ),
-            particle_steps,
-            seconds: particle_steps / cfg.particle_steps_per_second,
-        });
-    }
-    Ok(Estimate {
-        tier: tier.into(),
-        rows,
-        particle_steps_per_second: cfg.particle_steps_per_second,
-        cores: cfg.cores,
-        source: cfg.source.clone(),
-    })
+/// The report of `--previous DIR`, when given.
+fn load_previous(args: &ReproduceArgs) -> Result<Option<Reproduction>> {
+    args.previous
+        .as_ref()
+        .map(|d| {
+            Reproduction::load(&d.join("reproduce.json"))
+                .with_context(|| format!("--previous {}", d.display()))
+        })
+        .transpose()
 }
 
 /// Checks the report directory: a new or empty directory, or a previous report.
@@ -321,50 +153,92 @@ fn check_out(out: &Path) -> Result<()> {
     Ok(())
 }
 
+/// This tier's estimate and, when `[estimate]` names another tier, that tier's (planned only).
+fn estimates(args: &ReproduceArgs, config: &Config, plans: &Plans) -> Result<Vec<Estimate>> {
+    let mut estimates = Vec::new();
+    if let Some(e) = &config.estimate {
+        estimates.push(estimate(plans, &args.tier, e)?);
+        if let Some(other) = e.tier.as_ref().filter(|t| **t != args.tier) {
+            say(args, format!("estimating tier `{other}` (planning only)"));
+            let p = build_plans(config, other)?;
+            estimates.push(estimate(&p, other, e)?);
+        }
+    }
+    Ok(estimates)
+}
+
+/// `--dry-run`: prints the estimates and returns a report with every figure pending.
+fn dry_run(
+    args: &ReproduceArgs,
+    tier: &TierConfig,
+    estimates: Vec<Estimate>,
+    n_runs: usize,
+    t0: Instant,
+) -> Reproduction {
+    for e in &estimates {
+        print_estimate(e);
+    }
+    if estimates.is_empty() {
+        println!("{n_runs} runs planned (the config has no [estimate] to time them)");
+    }
+    Reproduction {
+        wall_seconds: t0.elapsed().as_secs_f64(),
+        ..new_report(args, tier, estimates)
+    }
+}
+
+/// A report of this tier with every figure pending, no stage run and no notes.
+fn new_report(args: &ReproduceArgs, tier: &TierConfig, estimates: Vec<Estimate>) -> Reproduction {
+    Reproduction {
+        tier: args.tier.clone(),
+        tier_description: tier.description.clone(),
+        config: args.config.display().to_string(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        machine: Machine::detect(),
+        complete: false,
+        figures: pending_figures(),
+        stages: Vec::new(),
+        wall_seconds: 0.0,
+        estimates,
+        notes: Vec::new(),
+        changes: None,
+    }
+}
+
 /// Every figure, pending, in the paper's order.
 fn pending_figures() -> Vec<Figure> {
     vec![
-        Figure::pending(
-            "3",
-            "contact repulsion and bond spring",
-            stages::fig3_paper(),
+        stages::fig3_pending(),
+        stages::fig4_pending(),
+        stages::fig5_pending(),
+        stages::fig7_pending(),
+        stages::fig9_pending(),
+        stages::fig10_pending(),
+        stages::fig11_pending(),
+        stages::fig13_pending(),
+        stages::fig16_pending(),
+        stages::fig17_pending(),
+    ]
+}
+
+/// The model decisions every figure depends on, and where the runs are kept.
+fn model_notes(plans: &Plans, runs: &Path) -> Vec<String> {
+    let contact = plans
+        .calibration
+        .runs
+        .first()
+        .map_or("?", |r| r.scene.material.contact.name());
+    vec![
+        format!(
+            "Contact form `{contact}` (eq. 3 with the prefactor as printed is the default; \
+             MODEL.md section 3); eps and kappa are the paper's values at \u{3c3}_ref = {:.4} mm \
+             and are sized to each run's \u{3c3} (eq. 12).",
+            paper::reference_sigma_m() * 1e3
         ),
-        Figure::pending(
-            "4",
-            "geometric sizing: colliding plates",
-            stages::fig4_paper(),
-        ),
-        Figure::pending(
-            "5",
-            "convergence of the fragmentation with particle count",
-            stages::fig5_paper(),
-        ),
-        Figure::pending(
-            "7",
-            "snapshot matrix over (\u{3b5}, \u{3ba}) at the analysis time",
-            stages::fig7_paper(),
-        ),
-        Figure::pending(
-            "9",
-            "R = La/Lr over (\u{3b5}, \u{3ba})",
-            stages::fig9_paper(),
-        ),
-        Figure::pending("10", "va/v0 over (\u{3b5}, \u{3ba})", stages::fig10_paper()),
-        Figure::pending(
-            "11-12",
-            "the best fit at the final resolution: side view and 3-D series",
-            stages::fig11_paper(),
-        ),
-        Figure::pending("13", "va/v0 against t/D", stages::fig13_paper()),
-        Figure::pending(
-            "16",
-            "F over (v0, t/D) and the validity boundary",
-            stages::fig16_paper(),
-        ),
-        Figure::pending(
-            "17",
-            "snapshot matrix over (v0, t/D), valid red, invalid blue",
-            stages::fig17_paper(),
+        format!(
+            "Runs are kept by fingerprint under `{}` (one study store per stage): running the \
+             command again simulates only what is missing.",
+            runs.display()
         ),
     ]
 }
@@ -395,119 +269,28 @@ fn print_estimate(e: &Estimate) {
     );
 }
 
-/// `hvi-study reproduce`.
-pub fn reproduce(args: &ReproduceArgs) -> Result<Reproduction> {
-    let t0 = Instant::now();
-    if args.threads == Some(0) {
-        bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
-    }
-    if args.jobs == Some(0) {
-        bail!("invalid value for `--jobs`: 0 (allowed: an integer >= 1)");
-    }
-    let config = Config::load(&args.config)?;
-    let tier = config.tier(&args.tier)?.clone();
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| Path::new("reports").join(&args.tier));
-    let runs = args
-        .runs
-        .clone()
-        .unwrap_or_else(|| Path::new("runs").join("reproduce").join(&args.tier));
-    // Read the previous report before anything is written (it may be --out itself).
-    let previous = match &args.previous {
-        Some(d) => Some(
-            Reproduction::load(&d.join("reproduce.json"))
-                .with_context(|| format!("--previous {}", d.display()))?,
-        ),
-        None => None,
-    };
-    if !args.dry_run {
-        check_out(&out)?;
-    }
-    let say = |line: String| {
-        if !args.quiet {
-            eprintln!("[reproduce] {line}");
-        }
-    };
+/// The calibration study's targets (experiments_data): Figs. 11-12 score the best fit
+/// against them, and their gaps say what Fig. 13 cannot compare.
+fn calibration_targets(plans: &Plans) -> Result<Targets> {
+    let study = Study::load(&plans.calibration_study)?;
+    let cfg = crate::study::calibrate::CalibrateConfig::of(&study)?;
+    let base = study.path.parent().unwrap_or_else(|| Path::new("."));
+    hvi_run::output::load_targets(&base.join(&cfg.targets))
+}
 
-    say(format!(
-        "tier `{}`: planning every figure's runs",
-        args.tier
-    ));
-    let plans = build_plans(&config, &args.tier)?;
-    let n_runs: usize = plans.stages().iter().map(|s| s.2.runs.len()).sum();
-    say(format!("{n_runs} runs planned, every scene valid"));
-    let mut estimates = Vec::new();
-    if let Some(e) = &config.estimate {
-        estimates.push(estimate(&plans, &args.tier, e)?);
-        if let Some(other) = e.tier.as_ref().filter(|t| **t != args.tier) {
-            say(format!("estimating tier `{other}` (planning only)"));
-            let p = build_plans(&config, other)?;
-            estimates.push(estimate(&p, other, e)?);
-        }
-    }
-    if args.dry_run {
-        for e in &estimates {
-            print_estimate(e);
-        }
-        if estimates.is_empty() {
-            println!("{n_runs} runs planned (the config has no [estimate] to time them)");
-        }
-        return Ok(Reproduction {
-            tier: args.tier.clone(),
-            tier_description: tier.description.clone(),
-            config: args.config.display().to_string(),
-            version: env!("CARGO_PKG_VERSION").into(),
-            machine: Machine::detect(),
-            complete: false,
-            figures: pending_figures(),
-            stages: Vec::new(),
-            wall_seconds: t0.elapsed().as_secs_f64(),
-            estimates,
-            notes: Vec::new(),
-            changes: None,
-        });
-    }
-    std::fs::create_dir_all(&runs)
-        .with_context(|| format!("cannot create --runs {}", runs.display()))?;
+/// experiments_data's note on Fig. 13's experimental points, if it records one.
+fn fig13_gap(targets: &Targets) -> Option<String> {
+    targets
+        .gaps
+        .iter()
+        .find(|g| g.name.contains("fig13"))
+        .map(|g| format!("{}: {}", g.source, g.note))
+}
 
-    let contact = plans
-        .calibration
-        .runs
-        .first()
-        .map_or("?", |r| r.scene.material.contact.name());
-    let mut rep = Reproduction {
-        tier: args.tier.clone(),
-        tier_description: tier.description.clone(),
-        config: args.config.display().to_string(),
-        version: env!("CARGO_PKG_VERSION").into(),
-        machine: Machine::detect(),
-        complete: false,
-        figures: pending_figures(),
-        stages: Vec::new(),
-        wall_seconds: 0.0,
-        estimates,
-        notes: vec![
-            format!(
-                "Contact form `{contact}` (eq. 3 with the prefactor as printed is the default; \
-                 MODEL.md section 3); eps and kappa are the paper's values at \u{3c3}_ref = {:.4} mm \
-                 and are sized to each run's \u{3c3} (eq. 12).",
-                paper::reference_sigma_m() * 1e3
-            ),
-            format!(
-                "Runs are kept by fingerprint under `{}` (one study store per stage): running the \
-                 command again simulates only what is missing.",
-                runs.display()
-            ),
-        ],
-        changes: None,
-    };
-    rep.write(&out)?;
-
-    let ctx = Ctx {
-        out: out.clone(),
-        runs: runs.clone(),
+fn stage_context(args: &ReproduceArgs, out: &Path, runs: &Path) -> Ctx {
+    Ctx {
+        out: out.to_path_buf(),
+        runs: runs.to_path_buf(),
         exec: ExecOptions {
             threads: args.threads.unwrap_or(0),
             jobs: args.jobs,
@@ -516,141 +299,184 @@ pub fn reproduce(args: &ReproduceArgs) -> Result<Reproduction> {
         threads: args.threads,
         jobs: args.jobs,
         quiet: args.quiet,
-    };
-    let targets = {
-        let study = Study::load(&plans.calibration_study)?;
-        let cfg = crate::study::calibrate::CalibrateConfig::of(&study)?;
-        let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-        hvi_run::output::load_targets(&base.join(&cfg.targets))?
-    };
-    let fig13_gap = targets
-        .gaps
-        .iter()
-        .find(|g| g.name.contains("fig13"))
-        .map(|g| format!("{}: {}", g.source, g.note));
+    }
+}
 
-    type StageFn<'a> = Box<dyn Fn() -> Result<(Vec<Figure>, Option<report::StageTiming>)> + 'a>;
-    let with_timing = |r: Result<(Vec<Figure>, report::StageTiming)>| r.map(|(f, t)| (f, Some(t)));
-    let stage_list: Vec<(&str, &[&str], StageFn)> = vec![
-        (
-            "Fig. 3: the pair laws (no runs)",
-            &["3"],
-            Box::new(|| {
-                let t = Instant::now();
-                let figures = stages::fig3(&ctx)?;
-                let timing = report::StageTiming {
-                    stage: "potentials".into(),
-                    figures: "3".into(),
-                    runs: 0,
-                    ran: 0,
-                    cached: 0,
-                    failed: 0,
-                    wall_seconds: t.elapsed().as_secs_f64(),
-                };
-                Ok((figures, Some(timing)))
-            }),
-        ),
-        (
-            "Fig. 4: sizing",
-            &["4"],
-            Box::new(|| with_timing(stages::fig4(&ctx, &plans.sizing))),
-        ),
-        (
-            "Fig. 5 and Figs. 11-12: convergence and the best fit",
-            &["5", "11-12"],
-            Box::new(|| with_timing(stages::fig5_11_12(&ctx, &plans.convergence, &targets))),
-        ),
-        (
-            "Figs. 7, 9, 10: the calibration grid",
-            &["7", "9", "10"],
-            Box::new(|| {
-                with_timing(stages::fig7_9_10(
-                    &ctx,
-                    &plans.calibration_study,
-                    &tier.calibration,
-                    &plans.calibration,
-                ))
-            }),
-        ),
-        (
-            "Fig. 13: va/v0 against t/D",
-            &["13"],
-            Box::new(|| {
-                with_timing(stages::fig13(
-                    &ctx,
-                    &plans.front_velocity,
-                    fig13_gap.clone(),
-                ))
-            }),
-        ),
-        (
-            "Figs. 16, 17: the validity map",
-            &["16", "17"],
-            Box::new(|| {
-                with_timing(stages::fig16_17(
-                    &ctx,
-                    &plans.validity_study,
-                    &tier.validity,
-                    &plans.validity,
-                ))
-            }),
-        ),
+/// The stages in the order they run.
+#[derive(Debug, Clone, Copy)]
+enum Stage {
+    Potentials,
+    Sizing,
+    Convergence,
+    Calibration,
+    FrontVelocity,
+    ValidityMap,
+}
+
+impl Stage {
+    const ALL: [Stage; 6] = [
+        Stage::Potentials,
+        Stage::Sizing,
+        Stage::Convergence,
+        Stage::Calibration,
+        Stage::FrontVelocity,
+        Stage::ValidityMap,
     ];
-    let n_stages = stage_list.len();
+
+    /// As the progress lines name it.
+    fn name(self) -> &'static str {
+        match self {
+            Stage::Potentials => "Fig. 3: the pair laws (no runs)",
+            Stage::Sizing => "Fig. 4: sizing",
+            Stage::Convergence => "Fig. 5 and Figs. 11-12: convergence and the best fit",
+            Stage::Calibration => "Figs. 7, 9, 10: the calibration grid",
+            Stage::FrontVelocity => "Fig. 13: va/v0 against t/D",
+            Stage::ValidityMap => "Figs. 16, 17: the validity map",
+        }
+    }
+
+    /// The figures it makes (they fail with it).
+    fn figures(self) -> &'static [&'static str] {
+        match self {
+            Stage::Potentials => &["3"],
+            Stage::Sizing => &["4"],
+            Stage::Convergence => &["5", "11-12"],
+            Stage::Calibration => &["7", "9", "10"],
+            Stage::FrontVelocity => &["13"],
+            Stage::ValidityMap => &["16", "17"],
+        }
+    }
+}
+
+/// What the stages take besides the report.
+struct StageInputs<'a> {
+    ctx: Ctx,
+    plans: &'a Plans,
+    tier: &'a TierConfig,
+    targets: Targets,
+    fig13_gap: Option<String>,
+}
+
+fn run_stage(stage: Stage, s: &StageInputs) -> Result<(Vec<Figure>, StageTiming)> {
+    let (ctx, plans) = (&s.ctx, s.plans);
+    match stage {
+        Stage::Potentials => {
+            let t = Instant::now();
+            let figures = stages::fig3(ctx)?;
+            let timing = StageTiming {
+                stage: "potentials".into(),
+                figures: "3".into(),
+                runs: 0,
+                ran: 0,
+                cached: 0,
+                failed: 0,
+                wall_seconds: t.elapsed().as_secs_f64(),
+            };
+            Ok((figures, timing))
+        }
+        Stage::Sizing => stages::fig4(ctx, &plans.sizing),
+        Stage::Convergence => stages::fig5_11_12(ctx, &plans.convergence, &s.targets),
+        Stage::Calibration => stages::fig7_9_10(
+            ctx,
+            &plans.calibration_study,
+            &s.tier.calibration,
+            &plans.calibration,
+        ),
+        Stage::FrontVelocity => stages::fig13(ctx, &plans.front_velocity, s.fig13_gap.clone()),
+        Stage::ValidityMap => stages::fig16_17(
+            ctx,
+            &plans.validity_study,
+            &s.tier.validity,
+            &plans.validity,
+        ),
+    }
+}
+
+/// Runs every stage in order, rewriting the report after each; a failed stage fails its
+/// figures and the others go on. Returns the failures.
+fn run_stages(
+    args: &ReproduceArgs,
+    inputs: &StageInputs,
+    rep: &mut Reproduction,
+    out: &Path,
+    t0: Instant,
+) -> Result<Vec<String>> {
+    let n_stages = Stage::ALL.len();
     let mut errors = Vec::new();
-    for (k, (name, ids, run)) in stage_list.into_iter().enumerate() {
+    for (k, stage) in Stage::ALL.into_iter().enumerate() {
         let ts = Instant::now();
-        say(format!("stage {}/{n_stages}: {name}", k + 1));
-        match run() {
+        let name = stage.name();
+        say(args, format!("stage {}/{n_stages}: {name}", k + 1));
+        match run_stage(stage, inputs) {
             Ok((figures, timing)) => {
                 for f in figures {
-                    say(format!(
-                        "Fig. {}: {} ({})",
-                        f.id,
-                        f.verdict.word(),
-                        f.reason
-                    ));
+                    say(
+                        args,
+                        format!("Fig. {}: {} ({})", f.id, f.verdict.word(), f.reason),
+                    );
                     if let Some(slot) = rep.figures.iter_mut().find(|g| g.id == f.id) {
                         *slot = f;
                     }
                 }
-                if let Some(t) = timing {
-                    rep.stages.push(t);
-                }
+                rep.stages.push(timing);
             }
             Err(e) => {
-                say(format!("stage {name} failed: {e:#}"));
-                for id in ids {
-                    if let Some(slot) = rep.figures.iter_mut().find(|g| g.id == *id) {
-                        slot.verdict = Verdict::Not;
-                        slot.ours = "the stage failed".into();
-                        slot.reason = format!("the stage failed: {e:#}");
-                    }
-                }
+                say(args, format!("stage {name} failed: {e:#}"));
+                fail_figures(rep, stage.figures(), &e);
                 errors.push(format!("stage {name} failed: {e:#}"));
             }
         }
-        say(format!(
-            "stage {}/{n_stages} done in {}",
-            k + 1,
-            fmt_duration(ts.elapsed().as_secs_f64())
-        ));
+        say(
+            args,
+            format!(
+                "stage {}/{n_stages} done in {}",
+                k + 1,
+                fmt_duration(ts.elapsed().as_secs_f64())
+            ),
+        );
         rep.wall_seconds = t0.elapsed().as_secs_f64();
-        rep.write(&out)?;
+        rep.write(out)?;
     }
+    Ok(errors)
+}
+
+/// Marks a failed stage's figures `not reproduced`, with the error as the reason.
+fn fail_figures(rep: &mut Reproduction, ids: &[&str], e: &anyhow::Error) {
+    for id in ids {
+        if let Some(slot) = rep.figures.iter_mut().find(|g| g.id == *id) {
+            slot.verdict = Verdict::Not;
+            slot.ours = "the stage failed".into();
+            slot.reason = format!("the stage failed: {e:#}");
+        }
+    }
+}
+
+/// Completes the report (the changes since `--previous`), writes it, and fails when a stage
+/// failed or, with `--fail-on-change`, when a verdict or deciding number changed.
+fn finish(
+    args: &ReproduceArgs,
+    mut rep: Reproduction,
+    previous: Option<&Reproduction>,
+    out: &Path,
+    t0: Instant,
+    mut errors: Vec<String>,
+) -> Result<Reproduction> {
     rep.complete = errors.is_empty();
     rep.wall_seconds = t0.elapsed().as_secs_f64();
-    rep.changes = previous.as_ref().map(|p| report::diff(p, &rep));
-    rep.write(&out)?;
-    say(format!(
-        "done in {}: {}",
-        fmt_duration(rep.wall_seconds),
-        rep.figures
-            .iter()
-            .map(|f| format!("Fig. {} {}", f.id, f.verdict.word()))
-            .collect::<Vec<_>>()
-            .join(", ")
-    ));
+    rep.changes = previous.map(|p| report::diff(p, &rep));
+    rep.write(out)?;
+    say(
+        args,
+        format!(
+            "done in {}: {}",
+            fmt_duration(rep.wall_seconds),
+            rep.figures
+                .iter()
+                .map(|f| format!("Fig. {} {}", f.id, f.verdict.word()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    );
     println!("{}", out.join("report.md").display());
     if let (true, Some(changes)) = (args.fail_on_change, &rep.changes) {
         if !changes.is_empty() {

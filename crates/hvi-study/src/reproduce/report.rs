@@ -295,9 +295,26 @@ fn cell(s: &str) -> String {
 }
 
 impl Reproduction {
-    /// The report as Markdown.
+    /// The report as Markdown: the header and notes, the summary table, the changes since the
+    /// previous report, the machine and run times, the estimates, then one section per figure.
     pub fn markdown(&self) -> String {
         let mut s = String::new();
+        self.header(&mut s);
+        self.summary(&mut s);
+        if let Some(changes) = &self.changes {
+            changes_section(&mut s, changes);
+        }
+        self.run_times(&mut s);
+        for e in &self.estimates {
+            estimate_section(&mut s, e);
+        }
+        for f in &self.figures {
+            figure_section(&mut s, f);
+        }
+        s
+    }
+
+    fn header(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "# Reproduction of Watson & Steinhauser (2017), tier `{}`\n",
@@ -327,7 +344,10 @@ impl Reproduction {
         if !self.notes.is_empty() {
             s.push('\n');
         }
+    }
 
+    /// One row per figure: the paper, ours, the verdict and why.
+    fn summary(&self, s: &mut String) {
         let _ = writeln!(s, "## Summary\n");
         let _ = writeln!(s, "| Fig. | paper | ours | verdict |\n|---|---|---|---|");
         for f in &self.figures {
@@ -343,22 +363,10 @@ impl Reproduction {
             );
         }
         s.push('\n');
+    }
 
-        if let Some(changes) = &self.changes {
-            let _ = writeln!(s, "## What changed since the previous report\n");
-            if changes.is_empty() {
-                let _ = writeln!(
-                    s,
-                    "Nothing: every verdict and deciding number is as in the previous report.\n"
-                );
-            } else {
-                for c in changes {
-                    let _ = writeln!(s, "- {c}");
-                }
-                s.push('\n');
-            }
-        }
-
+    /// The machine and what each stage ran, took from the store and took in wall time.
+    fn run_times(&self, s: &mut String) {
         let _ = writeln!(s, "## Machine and run times\n");
         let _ = writeln!(
             s,
@@ -389,92 +397,7 @@ impl Reproduction {
             "\nTotal wall time: {}.\n",
             fmt_duration(self.wall_seconds)
         );
-
-        for e in &self.estimates {
-            let _ = writeln!(
-                s,
-                "## Expected wall time of the `{}` tier on {} cores\n",
-                e.tier, e.cores
-            );
-            let _ = writeln!(
-                s,
-                "From every planned run's particle count and number of base steps (the scene's own \
-                 base step, as the engine chooses it; the adaptive step takes fewer, longer steps) \
-                 at {} particles x base steps per second ({}).\n",
-                fmt_num(e.particle_steps_per_second),
-                e.source
-            );
-            let _ = writeln!(
-                s,
-                "| stage | figures | runs | particles | particles x base steps | expected |\n|---|---|---|---|---|---|"
-            );
-            for r in &e.rows {
-                let particles = if r.particles.0 == r.particles.1 {
-                    r.particles.0.to_string()
-                } else {
-                    format!("{}-{}", r.particles.0, r.particles.1)
-                };
-                let _ = writeln!(
-                    s,
-                    "| {} | {} | {} | {particles} | {} | {} |",
-                    r.stage,
-                    r.figures,
-                    r.runs,
-                    fmt_num(r.particle_steps),
-                    fmt_duration(r.seconds)
-                );
-            }
-            let _ = writeln!(
-                s,
-                "| total | | {} | | {} | **{}** |\n",
-                e.rows.iter().map(|r| r.runs).sum::<usize>(),
-                fmt_num(e.particle_steps()),
-                fmt_duration(e.seconds())
-            );
-        }
-
-        for f in &self.figures {
-            let _ = writeln!(s, "<a id=\"fig-{}\"></a>\n", f.id);
-            let figs = if f.id.contains('-') { "Figs." } else { "Fig." };
-            let _ = writeln!(s, "## {figs} {}: {}\n", f.id, f.title);
-            for file in f.files.iter().filter(|p| p.ends_with(".png")) {
-                let _ = writeln!(s, "![Fig. {}: {file}]({file})\n", f.id);
-            }
-            let others: Vec<&String> = f.files.iter().filter(|p| !p.ends_with(".png")).collect();
-            if !others.is_empty() {
-                let _ = writeln!(
-                    s,
-                    "Data: {}\n",
-                    others
-                        .iter()
-                        .map(|p| format!("[`{p}`]({p})"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                );
-            }
-            let _ = writeln!(s, "- **Paper:** {}", f.paper);
-            let _ = writeln!(s, "- **Ours:** {}", f.ours);
-            let _ = writeln!(s, "- **Verdict: {}.** {}\n", f.verdict.word(), f.reason);
-            if !f.numbers.is_empty() {
-                let _ = writeln!(
-                    s,
-                    "| deciding number | value | how / paper |\n|---|---|---|"
-                );
-                for n in &f.numbers {
-                    let _ = writeln!(
-                        s,
-                        "| {} | {} | {} |",
-                        cell(&n.name),
-                        cell(&n.value.show()),
-                        cell(&n.note)
-                    );
-                }
-                s.push('\n');
-            }
-        }
-        s
     }
-
     /// Writes `report.md` and `reproduce.json` into `dir`.
     pub fn write(&self, dir: &Path) -> Result<()> {
         write_atomic_bytes(&dir.join("report.md"), self.markdown().as_bytes())?;
@@ -490,6 +413,108 @@ impl Reproduction {
             .with_context(|| format!("cannot read {}", path.display()))?;
         serde_json::from_str(&text)
             .with_context(|| format!("{} is not a reproduce.json", path.display()))
+    }
+}
+
+/// What changed since the previous report, one line each, or that nothing did.
+fn changes_section(s: &mut String, changes: &[String]) {
+    let _ = writeln!(s, "## What changed since the previous report\n");
+    if changes.is_empty() {
+        let _ = writeln!(
+            s,
+            "Nothing: every verdict and deciding number is as in the previous report.\n"
+        );
+    } else {
+        for c in changes {
+            let _ = writeln!(s, "- {c}");
+        }
+        s.push('\n');
+    }
+}
+
+/// A tier's expected wall time per stage, from its runs' particles x base steps.
+fn estimate_section(s: &mut String, e: &Estimate) {
+    let _ = writeln!(
+        s,
+        "## Expected wall time of the `{}` tier on {} cores\n",
+        e.tier, e.cores
+    );
+    let _ = writeln!(
+        s,
+        "From every planned run's particle count and number of base steps (the scene's own \
+         base step, as the engine chooses it; the adaptive step takes fewer, longer steps) \
+         at {} particles x base steps per second ({}).\n",
+        fmt_num(e.particle_steps_per_second),
+        e.source
+    );
+    let _ = writeln!(
+        s,
+        "| stage | figures | runs | particles | particles x base steps | expected |\n|---|---|---|---|---|---|"
+    );
+    for r in &e.rows {
+        let particles = if r.particles.0 == r.particles.1 {
+            r.particles.0.to_string()
+        } else {
+            format!("{}-{}", r.particles.0, r.particles.1)
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {particles} | {} | {} |",
+            r.stage,
+            r.figures,
+            r.runs,
+            fmt_num(r.particle_steps),
+            fmt_duration(r.seconds)
+        );
+    }
+    let _ = writeln!(
+        s,
+        "| total | | {} | | {} | **{}** |\n",
+        e.rows.iter().map(|r| r.runs).sum::<usize>(),
+        fmt_num(e.particle_steps()),
+        fmt_duration(e.seconds())
+    );
+}
+
+/// A figure's section: its pictures, its data files, the paper, ours, the verdict and the
+/// deciding numbers.
+fn figure_section(s: &mut String, f: &Figure) {
+    let _ = writeln!(s, "<a id=\"fig-{}\"></a>\n", f.id);
+    let figs = if f.id.contains('-') { "Figs." } else { "Fig." };
+    let _ = writeln!(s, "## {figs} {}: {}\n", f.id, f.title);
+    for file in f.files.iter().filter(|p| p.ends_with(".png")) {
+        let _ = writeln!(s, "![Fig. {}: {file}]({file})\n", f.id);
+    }
+    let others: Vec<&String> = f.files.iter().filter(|p| !p.ends_with(".png")).collect();
+    if !others.is_empty() {
+        let _ = writeln!(
+            s,
+            "Data: {}\n",
+            others
+                .iter()
+                .map(|p| format!("[`{p}`]({p})"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let _ = writeln!(s, "- **Paper:** {}", f.paper);
+    let _ = writeln!(s, "- **Ours:** {}", f.ours);
+    let _ = writeln!(s, "- **Verdict: {}.** {}\n", f.verdict.word(), f.reason);
+    if !f.numbers.is_empty() {
+        let _ = writeln!(
+            s,
+            "| deciding number | value | how / paper |\n|---|---|---|"
+        );
+        for n in &f.numbers {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} |",
+                cell(&n.name),
+                cell(&n.value.show()),
+                cell(&n.note)
+            );
+        }
+        s.push('\n');
     }
 }
 

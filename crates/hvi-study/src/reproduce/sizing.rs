@@ -19,12 +19,12 @@ pub const END_TIME_S: f64 = 0.8e-6;
 /// Steps between energy samples.
 pub const SAMPLE_EVERY: u64 = 10;
 
-/// With sizing, every count's curves stay within this fraction of the initial kinetic energy
-/// of the finest count's (measured 7-8 % at 500, 5000, 50000 particles).
+/// "Coincide": with sizing, every count's energy curves stay this close to the finest count's,
+/// as a fraction of the finest count's initial kinetic energy.
 pub const SIZED_MAX_DEVIATION: f64 = 0.10;
 
-/// Without sizing, some count's curves differ from the finest count's by more than this
-/// (measured about 45 % at 500, 5000, 50000 particles).
+/// "Diverge": without sizing, some count's energy curves differ from the finest count's by more
+/// than this, in the same unit.
 pub const UNSIZED_MIN_DEVIATION: f64 = 0.30;
 
 /// The colliding plates at `particles` particles, with or without sizing: a 1 mm flyer at
@@ -69,7 +69,7 @@ pub fn plates_scene_toml(particles: f64, sizing: bool) -> Result<String> {
     toml::to_string(&plates_scene(particles, sizing)).context("sizing scene as TOML")
 }
 
-/// The energy curve of a run from its `energy.csv` (`hvi_study::run`): kinetic, and contact +
+/// The energy curve of a run from its `energy.csv` (`hvi_run::run`): kinetic, and contact +
 /// bond as the potential energy, against time since first contact.
 pub fn curve_from_energy_csv(path: &Path) -> Result<Vec<EnergySample>> {
     let mut reader =

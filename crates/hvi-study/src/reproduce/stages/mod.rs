@@ -1,0 +1,210 @@
+//! The stages of the reproduction. Each runs its study through the study runner and its
+//! store (finished runs are reused), draws or collects its figures into the report directory,
+//! and turns the runs' numbers into [`Figure`]s: the paper's result (from `hvi_engine::paper`),
+//! ours, the deciding numbers ([`hvi_analysis::decide`]) and a verdict.
+//!
+//! Every stage reads the same way: run (or collect) the study, gather the fields it needs,
+//! compute the deciding numbers (pure functions of plain values), draw, and build each
+//! figure with its verdict.
+
+mod fig13;
+mod fig16_17;
+mod fig3;
+mod fig4;
+mod fig5_11_12;
+mod fig7_9_10;
+
+pub use fig13::{fig13, fig13_paper, fig13_pending};
+pub use fig16_17::{fig16_17, fig16_paper, fig16_pending, fig17_paper, fig17_pending};
+pub use fig3::{fig3, fig3_paper, fig3_pending};
+pub use fig4::{fig4, fig4_paper, fig4_pending};
+pub use fig5_11_12::{fig11_paper, fig11_pending, fig5_11_12, fig5_paper, fig5_pending};
+pub use fig7_9_10::{
+    fig10_paper, fig10_pending, fig7_9_10, fig7_paper, fig7_pending, fig9_paper, fig9_pending,
+};
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{anyhow, Context, Result};
+use serde_json::Value as Json;
+
+use super::report::StageTiming;
+use crate::cli::StudyArgs;
+use hvi_run::exec::ExecOptions;
+use hvi_run::output::write_atomic_bytes;
+use hvi_run::plan::Plan;
+use hvi_run::store::{Record, RunStatus, Store};
+use hvi_run::study::execute_plan;
+
+/// What the stages share: where things go and how to execute.
+#[derive(Debug, Clone)]
+pub struct Ctx {
+    /// The report directory.
+    pub out: PathBuf,
+    /// The runs' root (one study directory per stage below it).
+    pub runs: PathBuf,
+    /// How to execute runs.
+    pub exec: ExecOptions,
+    /// `--threads`.
+    pub threads: Option<usize>,
+    /// `--jobs`.
+    pub jobs: Option<usize>,
+    /// No progress output.
+    pub quiet: bool,
+}
+
+impl Ctx {
+    /// Copies a file into the report directory under `name`; returns the name, or None when
+    /// the source does not exist (a failed run has no pictures).
+    fn collect(&self, from: &Path, name: &str) -> Result<Option<String>> {
+        if !from.exists() {
+            return Ok(None);
+        }
+        let bytes =
+            std::fs::read(from).with_context(|| format!("cannot read {}", from.display()))?;
+        write_atomic_bytes(&self.out.join(name), &bytes)?;
+        Ok(Some(name.to_string()))
+    }
+
+    /// Copies each `(from, name)` that exists into the report directory; the names copied.
+    fn collect_all(&self, files: &[(PathBuf, &str)]) -> Result<Vec<String>> {
+        let mut names = Vec::new();
+        for (from, name) in files {
+            if let Some(n) = self.collect(from, name)? {
+                names.push(n);
+            }
+        }
+        Ok(names)
+    }
+
+    fn study_args(&self, study: &Path, r: &super::config::StudyRef, dir: &Path) -> StudyArgs {
+        StudyArgs {
+            study: study.to_path_buf(),
+            tier: Some(r.tier.clone()),
+            particles: r.particles,
+            sets: r.set.clone(),
+            out: Some(dir.to_path_buf()),
+            threads: self.threads,
+            jobs: self.jobs,
+            quiet: self.quiet,
+        }
+    }
+}
+
+/// A stage's plan after it ran: its study directory, the runs the store held finished before,
+/// and one record per run in plan order.
+struct Executed {
+    dir: PathBuf,
+    cached: usize,
+    records: Vec<Record>,
+}
+
+impl Executed {
+    /// The stage's timing row, from `t0` (the stage's start) to now.
+    fn timing(&self, stage: &str, figures: &str, plan: &Plan, t0: Instant) -> StageTiming {
+        timing(stage, figures, plan, self.cached, &self.records, t0)
+    }
+}
+
+/// Runs a plan through its study store below `ctx.runs` (finished runs are reused).
+fn execute(ctx: &Ctx, plan: &Plan) -> Result<Executed> {
+    let dir = ctx.runs.join(&plan.study);
+    plan.write(&dir)?;
+    let (_, report) = execute_plan(plan, &dir, &ctx.exec)?;
+    Ok(Executed {
+        dir,
+        cached: report.cached,
+        records: report.records,
+    })
+}
+
+/// The records of every run of a plan executed in `dir`.
+pub fn plan_records(plan: &Plan, dir: &Path) -> Result<Vec<Record>> {
+    let store = Store::open(dir)?;
+    plan.runs
+        .iter()
+        .map(|r| {
+            store.lookup(&r.fingerprint)?.ok_or_else(|| {
+                anyhow!(
+                    "run {} of `{}` has no record in {}",
+                    r.index,
+                    plan.study,
+                    dir.display()
+                )
+            })
+        })
+        .collect()
+}
+
+/// How many of a plan's runs the store in `dir` holds completed.
+pub fn completed_runs(plan: &Plan, dir: &Path) -> Result<usize> {
+    let store = Store::open(dir)?;
+    let mut n = 0;
+    for r in &plan.runs {
+        if matches!(store.lookup(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
+        {
+            n += 1;
+        }
+    }
+    Ok(n)
+}
+
+fn timing(
+    stage: &str,
+    figures: &str,
+    plan: &Plan,
+    cached: usize,
+    records: &[Record],
+    t0: Instant,
+) -> StageTiming {
+    StageTiming {
+        stage: stage.into(),
+        figures: figures.into(),
+        runs: plan.runs.len(),
+        ran: plan.runs.len() - cached,
+        cached,
+        failed: records
+            .iter()
+            .filter(|r| r.status == RunStatus::Failed)
+            .count(),
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    }
+}
+
+/// A number of a run's `summary.json` (read with [`hvi_run::store::read_summary`]) by JSON
+/// pointer, e.g. `/dt_s`.
+fn summary_number(summary: Option<&Json>, pointer: &str) -> Option<f64> {
+    summary?.pointer(pointer).and_then(Json::as_f64)
+}
+
+/// The index of `v` in sorted axis values (relative tolerance 1e-9).
+fn index_of(axis: &[f64], v: f64) -> Option<usize> {
+    axis.iter()
+        .position(|&a| (a - v).abs() <= 1e-9 * v.abs().max(a.abs()))
+}
+
+/// The axis of a plan with that key.
+fn axis(plan: &Plan, key: &str) -> Result<usize> {
+    plan.axes.iter().position(|a| a.key == key).ok_or_else(|| {
+        anyhow!(
+            "study `{}` has no axis `{key}` (the figure is drawn over it)",
+            plan.study
+        )
+    })
+}
+
+/// The mean of the finite values, None when there is none.
+fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
+    let v: Vec<f64> = v.filter(|x| x.is_finite()).collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+/// `items` joined by `sep`, or `none` when there are none.
+fn join_or(items: &[&str], sep: &str, none: &str) -> String {
+    if items.is_empty() {
+        none.into()
+    } else {
+        items.join(sep)
+    }
+}
