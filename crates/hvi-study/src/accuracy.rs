@@ -36,11 +36,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
-use plotters::prelude::*;
 use serde::Serialize;
 
 use hvi_analysis::observable::{Observable, Observables};
-use hvi_plot::render::{fonts, write_png, FAMILY};
+use hvi_plot::pareto::{pareto_plot, ParetoPlot, ParetoPoint};
 use hvi_run::output::{write_atomic_bytes, write_csv_atomic};
 use hvi_run::plan::fingerprint;
 use hvi_run::scene_file::parse_scene;
@@ -271,6 +270,18 @@ pub struct AccuracyRow {
     pub cached: bool,
 }
 
+impl AccuracyRow {
+    /// Its relative errors of the compared observables, in [`TOLERANCES`] order.
+    pub fn errors(&self) -> [Option<f64>; TOLERANCES.len()] {
+        [
+            self.err_length_ratio,
+            self.err_front_velocity_ratio,
+            self.err_fragmentation,
+            self.err_largest_fragment_mass_fraction,
+        ]
+    }
+}
+
 /// One row of `accuracy-runs.csv`: one run (a variant at one seed).
 #[derive(Debug, Clone, Serialize)]
 pub struct RunRow {
@@ -323,7 +334,7 @@ fn measured(store: &Store, fp: &str, cached: bool) -> Result<Measured> {
     Ok(Measured {
         status: rec.status,
         error: rec.error.clone(),
-        obs: rec.observables.clone(),
+        obs: rec.observables,
         dt_s: num("/dt_s"),
         steps: num("/steps").map(|s| s as u64),
         wall_s: num("/wall_seconds"),
@@ -659,7 +670,7 @@ pub fn accuracy(
             err_front_velocity_ratio: errs[1],
             err_fragmentation: errs[2],
             err_largest_fragment_mass_fraction: errs[3],
-            max_err_rvf: errs[..3]
+            max_err_rvf: errs[..HEADLINE]
                 .iter()
                 .try_fold(0.0f64, |a, e| e.map(|e| a.max(e))),
             within_tolerance: within,
@@ -705,7 +716,7 @@ pub fn accuracy(
         &report_dir.join("accuracy.md"),
         markdown(&report).as_bytes(),
     )?;
-    pareto_plot(&report_dir.join("pareto.png"), &report)?;
+    draw_pareto(&report_dir.join("pareto.png"), &report)?;
     Ok(report)
 }
 
@@ -820,193 +831,49 @@ pub fn markdown(r: &AccuracyReport) -> String {
     s
 }
 
-/// Wall time against error: left, the largest error in R, va/v0 and F per variant (the
-/// Pareto front joined); right, each observable's error. Tolerance and noise floor drawn.
-pub fn pareto_plot(path: &Path, r: &AccuracyReport) -> Result<()> {
-    fonts()?;
-    let (w, h) = (1600u32, 760u32);
-    let mut rgb = vec![255u8; (w * h * 3) as usize];
-    let rows: Vec<&AccuracyRow> = r.rows.iter().filter(|x| x.wall_s.is_some()).collect();
-    let walls: Vec<f64> = rows.iter().filter_map(|x| x.wall_s).collect();
-    let (w_lo, w_hi) = walls
-        .iter()
-        .fold((f64::INFINITY, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
-    if !w_lo.is_finite() {
-        bail!("no completed run to plot");
-    }
-    let x_range = (w_lo * 0.7).max(1e-3).log10()..(w_hi * 1.4).log10();
-    // Errors of 0 (the reference) are drawn at the floor of the axis.
-    let e_floor = 1e-5f64;
-    let tol = TOLERANCES[0].1;
-    let y_range = e_floor.log10()..1.0f64.log10();
-    let ly = |e: f64| e.max(e_floor).log10();
-    {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        let (left, right) = root.split_horizontally(w / 2);
-        let floor_rvf = r.noise_floor[..3].iter().map(|x| x.1).fold(0.0, f64::max);
-        for (panel, area) in [(0, &left), (1, &right)] {
-            let mut chart = ChartBuilder::on(area)
-                .caption(
-                    if panel == 0 {
-                        "largest error in R, va/v0, F against wall time".to_string()
-                    } else {
-                        "error per observable".to_string()
-                    },
-                    (FAMILY, 22),
-                )
-                .margin(18)
-                .x_label_area_size(55)
-                .y_label_area_size(75)
-                .build_cartesian_2d(x_range.clone(), y_range.clone())?;
-            chart
-                .configure_mesh()
-                .light_line_style(RGBColor(235, 235, 235))
-                .x_desc("wall time of the run (s)")
-                .y_desc("relative error vs reference")
-                .label_style((FAMILY, 16))
-                .axis_desc_style((FAMILY, 18))
-                .x_labels(8)
-                .y_labels(6)
-                .x_label_formatter(&|v| sig2(10f64.powf(*v)))
-                .y_label_formatter(&|v| format!("{} %", sig2(100.0 * 10f64.powf(*v))))
-                .draw()?;
-            chart
-                .draw_series(LineSeries::new(
-                    vec![(x_range.start, tol.log10()), (x_range.end, tol.log10())],
-                    RED.stroke_width(2),
-                ))?
-                .label(format!("tolerance {:.0} %", 100.0 * tol))
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
-            if panel == 0 && floor_rvf > 0.0 {
-                chart
-                    .draw_series(std::iter::once(Rectangle::new(
-                        [(x_range.start, y_range.start), (x_range.end, ly(floor_rvf))],
-                        RGBColor(200, 200, 200).mix(0.4).filled(),
-                    )))?
-                    .label(format!(
-                        "noise floor (2 SE, {} seed(s)): {:.2} %",
-                        r.seeds,
-                        100.0 * floor_rvf
-                    ))
-                    .legend(|(x, y)| {
-                        Rectangle::new(
-                            [(x, y - 6), (x + 20, y + 6)],
-                            RGBColor(200, 200, 200).filled(),
-                        )
-                    });
-            }
-            if panel == 0 {
-                let pts: Vec<(f64, f64, &AccuracyRow)> = rows
-                    .iter()
-                    .filter(|x| x.role == Role::Candidate)
-                    .filter_map(|x| Some((x.wall_s?.log10(), ly(x.max_err_rvf?), *x)))
-                    .collect();
-                // Pareto front: by increasing wall time, each point with a smaller error than
-                // every cheaper one.
-                let mut sorted = pts.clone();
-                sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
-                let mut front: Vec<(f64, f64)> = Vec::new();
-                let mut best = f64::INFINITY;
-                for p in &sorted {
-                    if p.1 < best {
-                        best = p.1;
-                        front.push((p.0, p.1));
-                    }
-                }
-                chart
-                    .draw_series(LineSeries::new(front, BLUE.stroke_width(1)))?
-                    .label("Pareto front")
-                    .legend(|(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(1))
-                    });
-                for (x, y, row) in &pts {
-                    let color = if row.within_tolerance {
-                        RGBColor(0, 140, 0)
-                    } else {
-                        RGBColor(200, 0, 0)
-                    };
-                    chart.draw_series(std::iter::once(Circle::new((*x, *y), 6, color.filled())))?;
-                    chart.draw_series(std::iter::once(Text::new(
-                        row.variant.clone(),
-                        (*x, *y),
-                        (FAMILY, 13).into_font().color(&BLACK),
-                    )))?;
-                }
-                for row in rows.iter().filter(|x| x.role != Role::Candidate) {
-                    let (Some(wv), e) = (row.wall_s, row.max_err_rvf.unwrap_or(0.0)) else {
-                        continue;
-                    };
-                    chart.draw_series(std::iter::once(TriangleMarker::new(
-                        (wv.log10(), ly(e)),
-                        7,
-                        BLACK.filled(),
-                    )))?;
-                    chart.draw_series(std::iter::once(Text::new(
-                        row.variant.clone(),
-                        (wv.log10(), ly(e)),
-                        (FAMILY, 15).into_font().color(&RGBColor(80, 80, 80)),
-                    )))?;
-                }
-            } else {
-                let colors = [
-                    RGBColor(31, 119, 180),
-                    RGBColor(255, 127, 14),
-                    RGBColor(44, 160, 44),
-                    RGBColor(148, 103, 189),
-                ];
-                for (k, &(key, _)) in TOLERANCES.iter().enumerate() {
-                    let label = key.symbol();
-                    let c = colors[k % colors.len()];
-                    let pts: Vec<(f64, f64)> = rows
-                        .iter()
-                        .filter(|x| x.role == Role::Candidate)
-                        .filter_map(|x| {
-                            let e = match key {
-                                Observable::LengthRatio => x.err_length_ratio,
-                                Observable::FrontVelocityRatio => x.err_front_velocity_ratio,
-                                Observable::Fragmentation => x.err_fragmentation,
-                                _ => x.err_largest_fragment_mass_fraction,
-                            }?;
-                            Some((x.wall_s?.log10(), ly(e)))
-                        })
-                        .collect();
-                    chart
-                        .draw_series(pts.iter().map(|p| Circle::new(*p, 5, c.filled())))?
-                        .label(format!(
-                            "{label} (noise floor {:.2} %)",
-                            100.0 * r.noise_floor[k].1
-                        ))
-                        .legend(move |(x, y)| Circle::new((x + 10, y), 5, c.filled()));
-                }
-            }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::LowerLeft)
-                .background_style(WHITE.mix(0.9))
-                .border_style(BLACK)
-                .label_font((FAMILY, 15))
-                .draw()?;
-        }
-        root.present()?;
-    }
-    write_png(path, &rgb, w, h)
-}
+/// The observables of the headline error (`max_err_rvf`, the Pareto front): R, va/v0 and F,
+/// the first of [`TOLERANCES`]; the largest fragment scatters too much between seeds to lead.
+const HEADLINE: usize = 3;
 
-/// Two significant digits, without trailing zeros (axis labels).
-fn sig2(v: f64) -> String {
-    if v <= 0.0 || !v.is_finite() {
-        return format!("{v}");
-    }
-    let e = v.log10().floor() as i32;
-    let scale = 10f64.powi(1 - e);
-    let rounded = (v * scale).round() / scale;
-    let digits = (1 - e).max(0) as usize;
-    let s = format!("{rounded:.digits$}");
-    if s.contains('.') {
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        s
-    }
+/// `pareto.png` of a report: every row with a wall time, as plain numbers for the picture.
+fn draw_pareto(path: &Path, r: &AccuracyReport) -> Result<()> {
+    let points: Vec<ParetoPoint> = r
+        .rows
+        .iter()
+        .filter_map(|row| {
+            Some(ParetoPoint {
+                label: row.variant.clone(),
+                wall_s: row.wall_s?,
+                candidate: row.role == Role::Candidate,
+                within: row.within_tolerance,
+                max_error: row.max_err_rvf,
+                errors: row.errors().to_vec(),
+            })
+        })
+        .collect();
+    let headline: Vec<&str> = TOLERANCES[..HEADLINE]
+        .iter()
+        .map(|(o, _)| o.symbol())
+        .collect();
+    let observables: Vec<(&str, f64)> = r
+        .noise_floor
+        .iter()
+        .map(|&(o, floor)| (o.symbol(), floor))
+        .collect();
+    pareto_plot(
+        path,
+        &ParetoPlot {
+            points: &points,
+            headline: &headline.join(", "),
+            headline_floor: r.noise_floor[..HEADLINE]
+                .iter()
+                .map(|x| x.1)
+                .fold(0.0, f64::max),
+            observables: &observables,
+            tolerance: TOLERANCES[0].1,
+            seeds: r.seeds,
+        },
+    )
 }
 
 /// Default report directory for a scene: `reports/accuracy/<scene file stem>`.
@@ -1061,15 +928,6 @@ mod tests {
         assert!(e.to_string().contains("--seeds"), "{e}");
         assert_eq!(seed_set(1), None);
         assert_eq!(seed_set(3).as_deref(), Some("run.seed=3"));
-    }
-
-    #[test]
-    fn axis_labels_have_two_significant_digits() {
-        assert_eq!(sig2(39.811), "40");
-        assert_eq!(sig2(0.031623), "0.032");
-        assert_eq!(sig2(1000.0), "1000");
-        assert_eq!(sig2(1.0), "1");
-        assert_eq!(sig2(0.1), "0.1");
     }
 
     #[test]

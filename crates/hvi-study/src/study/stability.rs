@@ -13,11 +13,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use plotters::prelude::*;
 use serde::Serialize;
 
 use crate::cli::{StabilityArgs, StudyArgs};
-use hvi_plot::render::{fonts, write_png, FAMILY};
+use hvi_plot::stability_map::{stability_map, MapCell, StabilityMap};
 use hvi_run::output::{write_atomic_bytes, write_csv_atomic};
 use hvi_run::store::{read_summary, RunStatus, Store};
 use hvi_run::study::execute_plan;
@@ -159,13 +158,25 @@ pub fn stability(args: &StabilityArgs) -> Result<Vec<Cell>> {
         let y_labels: Vec<String> = plan.axes[1].values.iter().map(value_text).collect();
         let x_name = plan.axes[0].label.clone();
         let y_name = plan.axes[1].label.clone();
-        map_plot(
+        let map_cells: Vec<MapCell> = slice_cells
+            .iter()
+            .map(|c| MapCell {
+                at: c.at,
+                stopped: c.status != "stable",
+                max_drift: c.max_drift,
+                dt_over_bound: c.dt_over_bound,
+            })
+            .collect();
+        stability_map(
             &args.out.join(format!("{stem}.png")),
-            &format!("{} \u{2014} {}", plan.study, study.description),
-            &plan.tier_description,
-            (&x_name, &x_labels),
-            (&y_name, &y_labels),
-            &slice_cells,
+            &StabilityMap {
+                title: &format!("{} \u{2014} {}", plan.study, study.description),
+                subtitle: &plan.tier_description,
+                x: (&x_name, &x_labels),
+                y: (&y_name, &y_labels),
+                cells: &map_cells,
+                drift_bound: hvi_engine::sim::LEDGER_DRIFT_BOUND,
+            },
         )?;
         let stopped: Vec<&Cell> = slice_cells
             .iter()
@@ -228,114 +239,4 @@ pub fn stability(args: &StabilityArgs) -> Result<Vec<Cell>> {
     write_csv_atomic(&args.out.join("stability.csv"), &cells)?;
     write_atomic_bytes(&args.out.join("stability.md"), md.as_bytes())?;
     Ok(cells)
-}
-
-/// Colour of a stable cell by its drift: green (1e-7 or less) to orange (the ledger bound).
-fn drift_color(d: f64) -> RGBColor {
-    let lo = -7.0;
-    let hi = hvi_engine::sim::LEDGER_DRIFT_BOUND.log10();
-    let t = ((d.max(1e-300).log10() - lo) / (hi - lo)).clamp(0.0, 1.0);
-    let (a, b) = ([120.0, 200.0, 120.0], [245.0, 160.0, 40.0]);
-    let c = |k: usize| (a[k] + (b[k] - a[k]) * t) as u8;
-    RGBColor(c(0), c(1), c(2))
-}
-
-fn map_plot(
-    path: &Path,
-    title: &str,
-    subtitle: &str,
-    x: (&str, &[String]),
-    y: (&str, &[String]),
-    cells: &[Cell],
-) -> Result<()> {
-    fonts()?;
-    let (w, h) = (1300u32, 900u32);
-    let mut rgb = vec![255u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        let (nx, ny) = (x.1.len(), y.1.len());
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, (FAMILY, 22))
-            .margin(20)
-            .x_label_area_size(60)
-            .y_label_area_size(90)
-            .build_cartesian_2d(0.0..nx as f64, 0.0..ny as f64)?;
-        let xl = x.1.to_vec();
-        let yl = y.1.to_vec();
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_labels(nx * 2 + 1)
-            .y_labels(ny * 2 + 1)
-            .x_desc(x.0)
-            .y_desc(y.0)
-            .label_style((FAMILY, 16))
-            .axis_desc_style((FAMILY, 18))
-            .x_label_formatter(&|v| {
-                let k = (v - 0.5).round();
-                if (v - 0.5 - k).abs() < 1e-6 && k >= 0.0 {
-                    xl.get(k as usize).cloned().unwrap_or_default()
-                } else {
-                    String::new()
-                }
-            })
-            .y_label_formatter(&|v| {
-                let k = (v - 0.5).round();
-                if (v - 0.5 - k).abs() < 1e-6 && k >= 0.0 {
-                    yl.get(k as usize).cloned().unwrap_or_default()
-                } else {
-                    String::new()
-                }
-            })
-            .draw()?;
-        for c in cells {
-            let (x0, y0) = (c.at.0 as f64, c.at.1 as f64);
-            let fill = if c.status == "stable" {
-                c.max_drift.map_or(RGBColor(200, 200, 200), drift_color)
-            } else {
-                RGBColor(210, 40, 40)
-            };
-            chart.draw_series(std::iter::once(Rectangle::new(
-                [(x0 + 0.03, y0 + 0.03), (x0 + 0.97, y0 + 0.97)],
-                fill.filled(),
-            )))?;
-            let line1 = if c.status == "stable" {
-                c.max_drift.map_or("-".into(), |d| format!("{d:.0e}"))
-            } else {
-                "stopped".into()
-            };
-            let line2 = c
-                .dt_over_bound
-                .map_or(String::new(), |f| format!("dt {f:.2}"));
-            for (k, text) in [line1, line2].into_iter().enumerate() {
-                chart.draw_series(std::iter::once(Text::new(
-                    text,
-                    (x0 + 0.12, y0 + 0.68 - 0.3 * k as f64),
-                    (FAMILY, 14).into_font().color(&BLACK),
-                )))?;
-            }
-        }
-        root.draw(&Text::new(
-            format!(
-                "{subtitle}. Cell: largest ledger drift, step / stability bound; red = stopped."
-            ),
-            (20, h as i32 - 22),
-            (FAMILY, 14).into_font().color(&RGBColor(60, 60, 60)),
-        ))?;
-        root.present()?;
-    }
-    write_png(path, &rgb, w, h)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn drift_colours_run_green_to_orange() {
-        assert_eq!(drift_color(1e-9), RGBColor(120, 200, 120));
-        assert_eq!(drift_color(1.0), RGBColor(245, 160, 40));
-        let mid = drift_color(1e-5);
-        assert!(mid.0 > 120 && mid.0 < 245);
-    }
 }
