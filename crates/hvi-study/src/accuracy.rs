@@ -981,8 +981,8 @@ fn verdict(r: &AccuracyReport) -> String {
     s
 }
 
-/// The observables of the headline error (`max_err_rvf`, the Pareto front): R, va/v0 and F,
-/// the first of [`TOLERANCES`]; the largest fragment scatters too much between seeds to lead.
+/// How many of [`TOLERANCES`] the headline error covers (`max_err_rvf`, the left panel of
+/// `pareto.png`): the first three, R, va/v0 and F.
 const HEADLINE: usize = 3;
 
 /// `pareto.png` of a report: every row with a wall time, as plain numbers for the picture.

@@ -763,7 +763,7 @@ pub fn report_text(r: &CalibrationResult) -> String {
     s
 }
 
-/// calibration.json, refinement.csv (every evaluation: grid, refinement, paper).
+/// calibration.json and evaluations.csv (every evaluation: grid, refinement, paper).
 fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluation]) -> Result<()> {
     write_atomic_bytes(
         &out.join("calibration.json"),

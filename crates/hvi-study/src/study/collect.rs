@@ -1,6 +1,6 @@
 //! `hvi-study status` and `hvi-study collect`: a study directory's progress and tables read
 //! from its run store, running nothing. They serve a study run anywhere (locally, on a Slurm
-//! cluster through [`super::slurm`], or both): the store is the one place results live.
+//! cluster through [`hvi_run::slurm`], or both): the store is the one place results live.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

@@ -15,8 +15,8 @@ use hvi_plot::snapshots::Tile;
 use hvi_run::plan::Plan;
 use hvi_run::store::{Record, RunStatus};
 
-/// The two axes a map is drawn over: the first two with more than one value. Other axes are
-/// held at the value of run `slice_run` (the best run for the calibration).
+/// The two axes a map is drawn over: the first two with more than one value (the others are
+/// held at one run's values: [`field_of`]).
 pub fn map_axes(plan: &Plan) -> Result<(usize, usize)> {
     let multi: Vec<usize> = (0..plan.axes.len())
         .filter(|&k| plan.axes[k].values.len() > 1)
@@ -181,7 +181,8 @@ impl<'a> MapFrame<'a> {
     }
 }
 
-/// `tier `<tier>`, <N> particles[; at <other axes at the slice>]`.
+/// The start of the maps' subtitles: the tier, its particles and the other axes' values at
+/// the slice.
 fn tier_note(
     plan: &Plan,
     result: &CalibrationResult,
