@@ -7,6 +7,8 @@
 
 pub mod contour;
 pub mod paper;
+pub mod pareto;
 pub mod render;
 mod save;
 pub mod snapshots;
+pub mod stability_map;

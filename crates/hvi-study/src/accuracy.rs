@@ -36,11 +36,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
-use plotters::prelude::*;
 use serde::Serialize;
 
 use hvi_analysis::observable::{Observable, Observables};
-use hvi_plot::render::{fonts, write_png, FAMILY};
+use hvi_plot::pareto::{pareto_plot, ParetoPlot, ParetoPoint};
 use hvi_run::output::{write_atomic_bytes, write_csv_atomic};
 use hvi_run::plan::fingerprint;
 use hvi_run::scene_file::parse_scene;
@@ -271,6 +270,36 @@ pub struct AccuracyRow {
     pub cached: bool,
 }
 
+/// Values of the compared observables, in [`TOLERANCES`] order.
+pub type Compared = [Option<f64>; TOLERANCES.len()];
+
+/// The compared observables of one source (a run, a mean over runs), in [`TOLERANCES`] order.
+fn compared(value: impl Fn(Observable) -> Option<f64>) -> Compared {
+    TOLERANCES.map(|(o, _)| value(o))
+}
+
+impl AccuracyRow {
+    /// Its means of the compared observables, in [`TOLERANCES`] order.
+    pub fn values(&self) -> Compared {
+        [
+            self.length_ratio,
+            self.front_velocity_ratio,
+            self.fragmentation,
+            self.largest_fragment_mass_fraction,
+        ]
+    }
+
+    /// Its relative errors of the compared observables, in [`TOLERANCES`] order.
+    pub fn errors(&self) -> Compared {
+        [
+            self.err_length_ratio,
+            self.err_front_velocity_ratio,
+            self.err_fragmentation,
+            self.err_largest_fragment_mass_fraction,
+        ]
+    }
+}
+
 /// One row of `accuracy-runs.csv`: one run (a variant at one seed).
 #[derive(Debug, Clone, Serialize)]
 pub struct RunRow {
@@ -323,7 +352,7 @@ fn measured(store: &Store, fp: &str, cached: bool) -> Result<Measured> {
     Ok(Measured {
         status: rec.status,
         error: rec.error.clone(),
-        obs: rec.observables.clone(),
+        obs: rec.observables,
         dt_s: num("/dt_s"),
         steps: num("/steps").map(|s| s as u64),
         wall_s: num("/wall_seconds"),
@@ -407,8 +436,8 @@ fn mean(vals: impl IntoIterator<Item = f64>) -> Option<f64> {
     (n > 0).then(|| sum / n as f64)
 }
 
-/// Runs (or reuses) every variant of `scene_text`, candidates at `seeds` seeds each, and
-/// compares it with the reference.
+/// Runs (or reuses) every variant of the scene, candidates at `seeds` seeds each, compares it
+/// with the reference and writes the report into `report_dir`.
 pub fn accuracy(
     scene_path: &Path,
     common_sets: &[String],
@@ -421,6 +450,34 @@ pub fn accuracy(
     let text = std::fs::read_to_string(scene_path)
         .with_context(|| format!("cannot read scene file {}", scene_path.display()))?;
     check_seeds(seeds)?;
+    check_variants(&text, common_sets, variants, seeds)?;
+    let planned = plan_runs(&text, common_sets, variants, seeds)?;
+    let store = Store::open(store_dir)?;
+    let results = execute_runs(&store, variants, &planned, seeds, threads)?;
+    let runs = runs_by_variant(variants, &planned, &results);
+    let mut report = score(variants, &runs, seeds)?;
+    report.scene = scene_path.display().to_string();
+    report.sets = common_sets.to_vec();
+    report.threads = threads;
+    write_report(report_dir, &report)?;
+    Ok(report)
+}
+
+/// One run of the benchmark: a variant (its index) at one seed, and its job.
+struct PlannedRun {
+    variant: usize,
+    seed: u32,
+    job: Job,
+}
+
+/// Checks the variants before anything runs: exactly one reference, and a scene seed apart
+/// from the benchmark's extra seeds (numbered 2, 3, ...).
+fn check_variants(
+    text: &str,
+    common_sets: &[String],
+    variants: &[Variant],
+    seeds: u32,
+) -> Result<()> {
     if variants
         .iter()
         .filter(|v| v.role == Role::Reference)
@@ -429,8 +486,7 @@ pub fn accuracy(
     {
         bail!("the variants must hold exactly one reference");
     }
-    // The extra seeds are numbered 2, 3, ...: the scene's own must not be one of them.
-    let base = parse_scene(&text, common_sets)?;
+    let base = parse_scene(text, common_sets)?;
     let extra_seeds = variants
         .iter()
         .filter(|v| v.role == Role::NoiseFloor)
@@ -444,269 +500,358 @@ pub fn accuracy(
             extra_seeds + 1
         );
     }
-    // Validate every run before running anything: (variant, seed, job).
-    let mut jobs: Vec<(usize, u32, Job)> = Vec::new();
+    Ok(())
+}
+
+/// Every run of the benchmark, validated before any runs: the candidates at seeds 1 to
+/// `seeds`, the reference and the noise-floor variants once.
+fn plan_runs(
+    text: &str,
+    common_sets: &[String],
+    variants: &[Variant],
+    seeds: u32,
+) -> Result<Vec<PlannedRun>> {
+    let mut planned = Vec::new();
     for (i, v) in variants.iter().enumerate() {
         let runs = if v.role == Role::Candidate { seeds } else { 1 };
         for seed in 1..=runs {
-            let mut sets = common_sets.to_vec();
-            sets.extend(v.sets.iter().cloned());
-            sets.extend(seed_set(seed));
             let what = if runs > 1 {
                 format!("variant `{}` at seed {seed}", v.name)
             } else {
                 format!("variant `{}`", v.name)
             };
-            let spec = parse_scene(&text, &sets).with_context(|| what.clone())?;
-            spec.build().with_context(|| what.clone())?;
-            if !spec.analysis.cloud {
-                bail!(
-                    "{what}: analysis.cloud = false, but the benchmark compares cloud observables"
-                );
-            }
-            let fp = fingerprint(&spec, "accuracy")?;
-            let params = serde_json::Map::from_iter([(
-                "variant".to_string(),
-                serde_json::Value::String(v.name.clone()),
-            )]);
-            jobs.push((
-                i,
+            let job = job_of(text, common_sets, v, seed, &what)?;
+            planned.push(PlannedRun {
+                variant: i,
                 seed,
-                Job {
-                    fingerprint: fp,
-                    scene: spec,
-                    study: "accuracy".into(),
-                    tier: "accuracy".into(),
-                    params,
-                },
-            ));
+                job,
+            });
         }
     }
-    let store = Store::open(store_dir)?;
-    let mut results: Vec<Measured> = Vec::with_capacity(jobs.len());
-    for (k, (i, seed, job)) in jobs.iter().enumerate() {
-        let v = &variants[*i];
+    Ok(planned)
+}
+
+/// The job of variant `v` at seed `seed` (`what` in messages): the scene with the common
+/// overrides, the variant's and the seed's, checked to build and to measure the cloud.
+fn job_of(text: &str, common_sets: &[String], v: &Variant, seed: u32, what: &str) -> Result<Job> {
+    let mut sets = common_sets.to_vec();
+    sets.extend(v.sets.iter().cloned());
+    sets.extend(seed_set(seed));
+    let spec = parse_scene(text, &sets).with_context(|| what.to_string())?;
+    spec.build().with_context(|| what.to_string())?;
+    if !spec.analysis.cloud {
+        bail!("{what}: analysis.cloud = false, but the benchmark compares cloud observables");
+    }
+    let fingerprint = fingerprint(&spec, "accuracy")?;
+    let params = serde_json::Map::from_iter([(
+        "variant".to_string(),
+        serde_json::Value::String(v.name.clone()),
+    )]);
+    Ok(Job {
+        fingerprint,
+        scene: spec,
+        study: "accuracy".into(),
+        tier: "accuracy".into(),
+        params,
+    })
+}
+
+/// Runs each planned run one after another on all threads (a stored, completed run is
+/// reused), with a progress line before and after each.
+fn execute_runs(
+    store: &Store,
+    variants: &[Variant],
+    planned: &[PlannedRun],
+    seeds: u32,
+    threads: usize,
+) -> Result<Vec<Measured>> {
+    let mut results = Vec::with_capacity(planned.len());
+    for (k, run) in planned.iter().enumerate() {
+        let v = &variants[run.variant];
         let label = if v.role == Role::Candidate && seeds > 1 {
-            format!("{} seed {seed}", v.name)
+            format!("{} seed {}", v.name, run.seed)
         } else {
             v.name.clone()
         };
-        let prior = store.lookup(&job.fingerprint)?;
+        let progress = format!("accuracy [{}/{}] {label}", k + 1, planned.len());
+        let prior = store.lookup(&run.job.fingerprint)?;
         let cached = matches!(&prior, Some(r) if r.status == RunStatus::Completed);
         if !cached {
-            eprintln!(
-                "accuracy [{}/{}] {label} ({}) ...",
-                k + 1,
-                jobs.len(),
-                v.sets.join(" ")
-            );
-            store.execute(job, threads)?;
+            eprintln!("{progress} ({}) ...", v.sets.join(" "));
+            store.execute(&run.job, threads)?;
         }
-        let m = measured(&store, &job.fingerprint, cached)?;
+        let m = measured(store, &run.job.fingerprint, cached)?;
+        let outcome = match (m.status, m.wall_s) {
+            (RunStatus::Completed, Some(w)) => format!("{w:.1} s"),
+            (RunStatus::Completed, None) => "done".into(),
+            (RunStatus::Failed, _) => format!("failed: {}", m.error.clone().unwrap_or_default()),
+        };
         eprintln!(
-            "accuracy [{}/{}] {label}: {}{}",
-            k + 1,
-            jobs.len(),
-            match (m.status, m.wall_s) {
-                (RunStatus::Completed, Some(w)) => format!("{w:.1} s"),
-                (RunStatus::Completed, None) => "done".into(),
-                (RunStatus::Failed, _) =>
-                    format!("failed: {}", m.error.clone().unwrap_or_default()),
-            },
+            "{progress}: {outcome}{}",
             if cached { " (stored)" } else { "" }
         );
         results.push(m);
     }
-    let completed = |m: &&Measured| m.status == RunStatus::Completed;
-    // The runs of each variant, in seed order.
-    let runs_of = |i: usize| -> Vec<(u32, &Measured)> {
-        jobs.iter()
-            .zip(&results)
-            .filter(|((j, _, _), _)| *j == i)
-            .map(|((_, seed, _), m)| (*seed, m))
-            .collect()
-    };
+    Ok(results)
+}
+
+/// The runs of one variant, in seed order: (seed, what the run gave).
+type VariantRuns<'a> = Vec<(u32, &'a Measured)>;
+
+/// The runs of each variant, in the variants' order.
+fn runs_by_variant<'a>(
+    variants: &[Variant],
+    planned: &[PlannedRun],
+    results: &'a [Measured],
+) -> Vec<VariantRuns<'a>> {
+    (0..variants.len())
+        .map(|i| {
+            planned
+                .iter()
+                .zip(results)
+                .filter(|(p, _)| p.variant == i)
+                .map(|(p, m)| (p.seed, m))
+                .collect()
+        })
+        .collect()
+}
+
+fn completed(m: &&Measured) -> bool {
+    m.status == RunStatus::Completed
+}
+
+/// The completed runs of a variant.
+fn completed_runs<'a>(all: &VariantRuns<'a>) -> Vec<&'a Measured> {
+    all.iter().map(|&(_, m)| m).filter(completed).collect()
+}
+
+/// The report of the runs of each variant (pure): the reference values, the seed scatter and
+/// noise floor, a row per variant and per run, the recommendation. The scene, its overrides
+/// and the threads are left for the caller.
+fn score(variants: &[Variant], runs: &[VariantRuns], seeds: u32) -> Result<AccuracyReport> {
     let reference_index = variants
         .iter()
         .position(|v| v.role == Role::Reference)
         .unwrap_or(0);
-    let reference = runs_of(reference_index)[0].1.clone();
+    let reference = runs[reference_index][0].1;
     if reference.status != RunStatus::Completed {
         bail!(
             "the reference run failed: {}",
-            reference.error.unwrap_or_default()
+            reference.error.clone().unwrap_or_default()
         );
     }
-    // The reference values: means over the runs at the reference step (reference + seeds).
-    let at_reference_step: Vec<&Measured> = jobs
+    let baseline = Baseline::of(variants, runs);
+    let rows: Vec<AccuracyRow> = variants
         .iter()
-        .zip(&results)
-        .filter(|((i, _, _), m)| variants[*i].role != Role::Candidate && completed(m))
-        .map(|(_, m)| m)
+        .zip(runs)
+        .map(|(v, all)| variant_row(v, all, &baseline, reference.wall_s))
         .collect();
-    let reference_runs = at_reference_step.len();
-    let reference_values: Vec<(Observable, Option<f64>)> = TOLERANCES
+    let run_rows = variants
         .iter()
-        .map(|&(key, _)| {
-            let value = mean(at_reference_step.iter().filter_map(|m| m.obs.get(key)));
-            (key, value)
-        })
+        .zip(runs)
+        .flat_map(|(v, all)| all.iter().map(|&(seed, m)| run_row(v, seed, m)))
         .collect();
-    // The seed scatter, pooled over the reference step and every candidate's seeds.
-    let mut candidate_groups: Vec<Vec<&Measured>> = Vec::new();
-    for (i, v) in variants.iter().enumerate() {
-        if v.role == Role::Candidate {
-            candidate_groups.push(
-                runs_of(i)
-                    .into_iter()
-                    .map(|(_, m)| m)
-                    .filter(completed)
-                    .collect(),
-            );
-        }
-    }
-    let mut scatter_dof = 0;
-    let seed_scatter: Vec<(Observable, f64)> = reference_values
+    let noise_floor = baseline
+        .seed_scatter
         .iter()
-        .map(|&(key, value)| {
-            let groups: Vec<Vec<f64>> = std::iter::once(&at_reference_step)
-                .chain(&candidate_groups)
-                .map(|g| g.iter().filter_map(|m| m.obs.get(key)).collect())
-                .collect();
-            let (s, dof) = pooled_scatter(&groups);
-            scatter_dof = scatter_dof.max(dof);
-            let rel = match value {
-                Some(r) if r != 0.0 => s / r.abs(),
-                _ => 0.0,
-            };
-            (key, rel)
-        })
-        .collect();
-    let floor_for = |k: usize| -> Vec<f64> {
-        seed_scatter
-            .iter()
-            .map(|(_, s)| noise_floor_of(*s, k, reference_runs))
-            .collect()
-    };
-    let mut rows: Vec<AccuracyRow> = Vec::new();
-    let mut run_rows: Vec<RunRow> = Vec::new();
-    for (i, v) in variants.iter().enumerate() {
-        let all = runs_of(i);
-        for &(seed, m) in &all {
-            run_rows.push(RunRow {
-                variant: v.name.clone(),
-                role: v.role,
-                seed,
-                status: if m.status == RunStatus::Completed {
-                    "completed"
-                } else {
-                    "failed"
-                }
-                .into(),
-                steps: m.steps,
-                wall_s: m.wall_s,
-                length_ratio: m.obs.get(Observable::LengthRatio),
-                front_velocity_ratio: m.obs.get(Observable::FrontVelocityRatio),
-                fragmentation: m.obs.get(Observable::Fragmentation),
-                largest_fragment_mass_fraction: m.obs.get(Observable::LargestFragmentMassFraction),
-                energy_max_drift: m.max_drift,
-                cached: m.cached,
-            });
-        }
-        let done: Vec<&Measured> = all.iter().map(|&(_, m)| m).filter(completed).collect();
-        let all_completed = !done.is_empty() && done.len() == all.len();
-        let obs = |key: Observable| mean(done.iter().filter_map(|m| m.obs.get(key)));
-        let errs: Vec<Option<f64>> = reference_values
-            .iter()
-            .map(|&(k, value)| rel_err(obs(k), value))
-            .collect();
-        let max_drift = if all_completed {
-            done.iter()
-                .map(|m| m.max_drift)
-                .try_fold(0.0f64, |a, d| d.map(|d| a.max(d)))
-        } else {
-            None
-        };
-        let wall_s = mean(done.iter().filter_map(|m| m.wall_s));
-        let within = all_completed
-            && TOLERANCES
-                .iter()
-                .zip(&errs)
-                .zip(floor_for(done.len()))
-                .all(|(((_, tol), e), floor)| e.is_some_and(|e| e <= tol.max(floor)))
-            && max_drift.is_some_and(|d| d <= ENERGY_DRIFT_BOUND);
-        rows.push(AccuracyRow {
-            variant: v.name.clone(),
-            role: v.role,
-            sets: v.sets.join(";"),
-            status: if all_completed { "completed" } else { "failed" }.into(),
-            seeds: done.len() as u32,
-            dt_s: done.first().and_then(|m| m.dt_s),
-            steps: mean(done.iter().filter_map(|m| m.steps.map(|s| s as f64)))
-                .map(|s| s.round() as u64),
-            wall_s,
-            particle_steps_per_s: mean(done.iter().filter_map(|m| m.rate)),
-            speedup: match (reference.wall_s, wall_s) {
-                (Some(r), Some(w)) if w > 0.0 => Some(r / w),
-                _ => None,
-            },
-            length_ratio: obs(Observable::LengthRatio),
-            front_velocity_ratio: obs(Observable::FrontVelocityRatio),
-            fragmentation: obs(Observable::Fragmentation),
-            largest_fragment_mass_fraction: obs(Observable::LargestFragmentMassFraction),
-            energy_max_drift: max_drift,
-            err_length_ratio: errs[0],
-            err_front_velocity_ratio: errs[1],
-            err_fragmentation: errs[2],
-            err_largest_fragment_mass_fraction: errs[3],
-            max_err_rvf: errs[..3]
-                .iter()
-                .try_fold(0.0f64, |a, e| e.map(|e| a.max(e))),
-            within_tolerance: within,
-            cached: all.iter().all(|(_, m)| m.cached),
-        });
-    }
-    let recommended = rows
-        .iter()
-        .filter(|r| r.role == Role::Candidate && r.within_tolerance)
-        .filter_map(|r| r.wall_s.map(|w| (w, r)))
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|(_, r)| r.variant.clone());
-    let noise_floor = seed_scatter
-        .iter()
-        .zip(floor_for(seeds as usize))
+        .zip(baseline.floors(seeds as usize))
         .map(|(&(k, _), f)| (k, f))
         .collect();
-    let report = AccuracyReport {
-        scene: scene_path.display().to_string(),
-        sets: common_sets.to_vec(),
-        threads,
+    Ok(AccuracyReport {
+        scene: String::new(),
+        sets: Vec::new(),
+        threads: 0,
         seeds,
-        reference_runs,
-        reference_values,
-        seed_scatter,
-        scatter_dof,
+        reference_runs: baseline.reference_runs,
+        recommended: recommended(&rows),
+        reference_values: baseline.reference_values,
+        seed_scatter: baseline.seed_scatter,
+        scatter_dof: baseline.scatter_dof,
         noise_floor,
         tolerances: TOLERANCES.to_vec(),
         energy_drift_bound: ENERGY_DRIFT_BOUND,
         rows,
         runs: run_rows,
-        recommended,
+    })
+}
+
+/// What the runs say about each compared observable before any candidate is judged.
+struct Baseline {
+    /// Completed runs at the reference step (`K_r`).
+    reference_runs: usize,
+    /// The mean over the runs at the reference step.
+    reference_values: Vec<(Observable, Option<f64>)>,
+    /// The pooled seed scatter of one run, relative to the reference value.
+    seed_scatter: Vec<(Observable, f64)>,
+    /// Degrees of freedom of the scatter.
+    scatter_dof: usize,
+}
+
+impl Baseline {
+    /// The reference values from the runs at the reference step (the reference and the
+    /// noise-floor seeds), the scatter pooled over them and every candidate's seeds.
+    fn of(variants: &[Variant], runs: &[VariantRuns]) -> Baseline {
+        let (mut at_reference_step, mut candidate_groups) = (Vec::new(), Vec::new());
+        for (v, all) in variants.iter().zip(runs) {
+            if v.role == Role::Candidate {
+                candidate_groups.push(completed_runs(all));
+            } else {
+                at_reference_step.extend(completed_runs(all));
+            }
+        }
+        let reference_values: Vec<(Observable, Option<f64>)> = TOLERANCES
+            .iter()
+            .map(|&(key, _)| {
+                let value = mean(at_reference_step.iter().filter_map(|m| m.obs.get(key)));
+                (key, value)
+            })
+            .collect();
+        let mut scatter_dof = 0;
+        let seed_scatter = reference_values
+            .iter()
+            .map(|&(key, value)| {
+                let groups: Vec<Vec<f64>> = std::iter::once(&at_reference_step)
+                    .chain(&candidate_groups)
+                    .map(|g| g.iter().filter_map(|m| m.obs.get(key)).collect())
+                    .collect();
+                let (s, dof) = pooled_scatter(&groups);
+                scatter_dof = scatter_dof.max(dof);
+                let rel = match value {
+                    Some(r) if r != 0.0 => s / r.abs(),
+                    _ => 0.0,
+                };
+                (key, rel)
+            })
+            .collect();
+        Baseline {
+            reference_runs: at_reference_step.len(),
+            reference_values,
+            seed_scatter,
+            scatter_dof,
+        }
+    }
+
+    /// The noise floor per observable of a mean over `k` runs.
+    fn floors(&self, k: usize) -> Vec<f64> {
+        self.seed_scatter
+            .iter()
+            .map(|(_, s)| noise_floor_of(*s, k, self.reference_runs))
+            .collect()
+    }
+}
+
+/// A variant's row: the means over its completed runs, their errors against the reference
+/// values, and whether it is within tolerance.
+fn variant_row(
+    v: &Variant,
+    all: &VariantRuns,
+    baseline: &Baseline,
+    reference_wall_s: Option<f64>,
+) -> AccuracyRow {
+    let done = completed_runs(all);
+    let all_completed = !done.is_empty() && done.len() == all.len();
+    let obs = |key: Observable| mean(done.iter().filter_map(|m| m.obs.get(key)));
+    let errors: Compared = compared(|key| {
+        let (_, reference) = baseline.reference_values.iter().find(|(k, _)| *k == key)?;
+        rel_err(obs(key), *reference)
+    });
+    let max_drift = if all_completed {
+        done.iter()
+            .map(|m| m.max_drift)
+            .try_fold(0.0f64, |a, d| d.map(|d| a.max(d)))
+    } else {
+        None
     };
+    let wall_s = mean(done.iter().filter_map(|m| m.wall_s));
+    let within = all_completed
+        && TOLERANCES
+            .iter()
+            .zip(&errors)
+            .zip(baseline.floors(done.len()))
+            .all(|(((_, tol), e), floor)| e.is_some_and(|e| e <= tol.max(floor)))
+        && max_drift.is_some_and(|d| d <= ENERGY_DRIFT_BOUND);
+    let [length_ratio, front_velocity_ratio, fragmentation, largest_fragment_mass_fraction] =
+        compared(obs);
+    let [err_length_ratio, err_front_velocity_ratio, err_fragmentation, err_largest_fragment_mass_fraction] =
+        errors;
+    AccuracyRow {
+        variant: v.name.clone(),
+        role: v.role,
+        sets: v.sets.join(";"),
+        status: if all_completed { "completed" } else { "failed" }.into(),
+        seeds: done.len() as u32,
+        dt_s: done.first().and_then(|m| m.dt_s),
+        steps: mean(done.iter().filter_map(|m| m.steps.map(|s| s as f64)))
+            .map(|s| s.round() as u64),
+        wall_s,
+        particle_steps_per_s: mean(done.iter().filter_map(|m| m.rate)),
+        speedup: match (reference_wall_s, wall_s) {
+            (Some(r), Some(w)) if w > 0.0 => Some(r / w),
+            _ => None,
+        },
+        length_ratio,
+        front_velocity_ratio,
+        fragmentation,
+        largest_fragment_mass_fraction,
+        energy_max_drift: max_drift,
+        err_length_ratio,
+        err_front_velocity_ratio,
+        err_fragmentation,
+        err_largest_fragment_mass_fraction,
+        max_err_rvf: errors[..HEADLINE]
+            .iter()
+            .try_fold(0.0f64, |a, e| e.map(|e| a.max(e))),
+        within_tolerance: within,
+        cached: all.iter().all(|(_, m)| m.cached),
+    }
+}
+
+/// One run's row.
+fn run_row(v: &Variant, seed: u32, m: &Measured) -> RunRow {
+    let [length_ratio, front_velocity_ratio, fragmentation, largest_fragment_mass_fraction] =
+        compared(|key| m.obs.get(key));
+    RunRow {
+        variant: v.name.clone(),
+        role: v.role,
+        seed,
+        status: if m.status == RunStatus::Completed {
+            "completed"
+        } else {
+            "failed"
+        }
+        .into(),
+        steps: m.steps,
+        wall_s: m.wall_s,
+        length_ratio,
+        front_velocity_ratio,
+        fragmentation,
+        largest_fragment_mass_fraction,
+        energy_max_drift: m.max_drift,
+        cached: m.cached,
+    }
+}
+
+/// The cheapest candidate within tolerance (by mean wall time).
+fn recommended(rows: &[AccuracyRow]) -> Option<String> {
+    rows.iter()
+        .filter(|r| r.role == Role::Candidate && r.within_tolerance)
+        .filter_map(|r| r.wall_s.map(|w| (w, r)))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, r)| r.variant.clone())
+}
+
+/// `accuracy.csv`, `accuracy-runs.csv`, `accuracy.json`, `accuracy.md` and `pareto.png`.
+fn write_report(report_dir: &Path, report: &AccuracyReport) -> Result<()> {
     std::fs::create_dir_all(report_dir)
         .with_context(|| format!("cannot create {}", report_dir.display()))?;
     write_csv_atomic(&report_dir.join("accuracy.csv"), &report.rows)?;
     write_csv_atomic(&report_dir.join("accuracy-runs.csv"), &report.runs)?;
     write_atomic_bytes(
         &report_dir.join("accuracy.json"),
-        serde_json::to_string_pretty(&report)?.as_bytes(),
+        serde_json::to_string_pretty(report)?.as_bytes(),
     )?;
-    write_atomic_bytes(
-        &report_dir.join("accuracy.md"),
-        markdown(&report).as_bytes(),
-    )?;
-    pareto_plot(&report_dir.join("pareto.png"), &report)?;
-    Ok(report)
+    write_atomic_bytes(&report_dir.join("accuracy.md"), markdown(report).as_bytes())?;
+    draw_pareto(&report_dir.join("pareto.png"), report)
 }
 
 fn pct(v: Option<f64>) -> String {
@@ -717,7 +862,8 @@ fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or("-".into(), |v| format!("{v:.digits$}"))
 }
 
-/// The report as Markdown: the table, the noise floor, the rule and the recommendation.
+/// The report as Markdown: how it was measured, the table, the noise floor, the rule and
+/// the recommendation.
 pub fn markdown(r: &AccuracyReport) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Run time against error: {}\n", r.scene);
@@ -731,45 +877,54 @@ pub fn markdown(r: &AccuracyReport) -> String {
         r.seeds,
         r.threads
     );
+    s.push_str(&variant_table(&r.rows));
+    s.push_str(&tolerance_table(r));
+    s.push_str(&verdict(r));
+    s
+}
+
+/// The table of variants, a row each.
+fn variant_table(rows: &[AccuracyRow]) -> String {
+    let mut s = String::new();
     let _ = writeln!(
         s,
         "| variant | role | seeds | dt (s) | steps | wall (s) | speed-up | particle-steps/s | R | va/v0 | F | largest frag. | max drift | err R % | err va % | err F % | err largest % | within |"
     );
     let _ = writeln!(s, "|{}", "---|".repeat(18));
-    for row in &r.rows {
-        let _ = writeln!(
-            s,
-            "| {} | {:?} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
-            row.variant,
-            row.role,
-            row.seeds,
+    for row in rows {
+        let mut cells = vec![
+            row.variant.clone(),
+            format!("{:?}", row.role),
+            row.seeds.to_string(),
             row.dt_s.map_or("-".into(), |v| format!("{v:.2e}")),
             row.steps.map_or("-".into(), |v| v.to_string()),
             opt(row.wall_s, 1),
             opt(row.speedup, 2),
             row.particle_steps_per_s
                 .map_or("-".into(), |v| format!("{v:.3e}")),
-            opt(row.length_ratio, 4),
-            opt(row.front_velocity_ratio, 4),
-            opt(row.fragmentation, 4),
-            opt(row.largest_fragment_mass_fraction, 4),
+        ];
+        cells.extend(row.values().map(|v| opt(v, 4)));
+        cells.push(
             row.energy_max_drift
                 .map_or("-".into(), |v| format!("{v:.1e}")),
-            pct(row.err_length_ratio),
-            pct(row.err_front_velocity_ratio),
-            pct(row.err_fragmentation),
-            pct(row.err_largest_fragment_mass_fraction),
-            if row.role == Role::Candidate {
-                if row.within_tolerance {
-                    "yes"
-                } else {
-                    "no"
-                }
-            } else {
-                ""
-            }
         );
+        cells.extend(row.errors().map(pct));
+        cells.push(
+            match (row.role, row.within_tolerance) {
+                (Role::Candidate, true) => "yes",
+                (Role::Candidate, false) => "no",
+                _ => "",
+            }
+            .into(),
+        );
+        let _ = writeln!(s, "| {} |", cells.join(" | "));
     }
+    s
+}
+
+/// The table of the tolerance, seed scatter and noise floor per observable.
+fn tolerance_table(r: &AccuracyReport) -> String {
+    let mut s = String::new();
     let _ = writeln!(s, "\n## Tolerances and noise floor\n");
     let _ = writeln!(
         s,
@@ -795,6 +950,12 @@ pub fn markdown(r: &AccuracyReport) -> String {
             100.0 * t.max(*f)
         );
     }
+    s
+}
+
+/// The rule a candidate is judged by, and the recommendation.
+fn verdict(r: &AccuracyReport) -> String {
+    let mut s = String::new();
     let _ = writeln!(
         s,
         "\nA candidate is within tolerance when the error of its mean is, for every observable, at most max(tolerance, noise floor), and its largest energy-ledger drift is at most {:.0e} at every seed. Fragmentation is chaotic: runs that differ only in the thermal seed differ by the seed scatter (the standard deviation of one run about its setting's mean, pooled over every setting that ran more than once), and the noise floor is two standard errors of the difference of a candidate's mean and the reference value, 2 s sqrt(1/K + 1/K_r): an error below it cannot be told from zero. More seeds (`--seeds`, `--noise-seeds`) lower it.\n",
@@ -820,193 +981,49 @@ pub fn markdown(r: &AccuracyReport) -> String {
     s
 }
 
-/// Wall time against error: left, the largest error in R, va/v0 and F per variant (the
-/// Pareto front joined); right, each observable's error. Tolerance and noise floor drawn.
-pub fn pareto_plot(path: &Path, r: &AccuracyReport) -> Result<()> {
-    fonts()?;
-    let (w, h) = (1600u32, 760u32);
-    let mut rgb = vec![255u8; (w * h * 3) as usize];
-    let rows: Vec<&AccuracyRow> = r.rows.iter().filter(|x| x.wall_s.is_some()).collect();
-    let walls: Vec<f64> = rows.iter().filter_map(|x| x.wall_s).collect();
-    let (w_lo, w_hi) = walls
-        .iter()
-        .fold((f64::INFINITY, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
-    if !w_lo.is_finite() {
-        bail!("no completed run to plot");
-    }
-    let x_range = (w_lo * 0.7).max(1e-3).log10()..(w_hi * 1.4).log10();
-    // Errors of 0 (the reference) are drawn at the floor of the axis.
-    let e_floor = 1e-5f64;
-    let tol = TOLERANCES[0].1;
-    let y_range = e_floor.log10()..1.0f64.log10();
-    let ly = |e: f64| e.max(e_floor).log10();
-    {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        let (left, right) = root.split_horizontally(w / 2);
-        let floor_rvf = r.noise_floor[..3].iter().map(|x| x.1).fold(0.0, f64::max);
-        for (panel, area) in [(0, &left), (1, &right)] {
-            let mut chart = ChartBuilder::on(area)
-                .caption(
-                    if panel == 0 {
-                        "largest error in R, va/v0, F against wall time".to_string()
-                    } else {
-                        "error per observable".to_string()
-                    },
-                    (FAMILY, 22),
-                )
-                .margin(18)
-                .x_label_area_size(55)
-                .y_label_area_size(75)
-                .build_cartesian_2d(x_range.clone(), y_range.clone())?;
-            chart
-                .configure_mesh()
-                .light_line_style(RGBColor(235, 235, 235))
-                .x_desc("wall time of the run (s)")
-                .y_desc("relative error vs reference")
-                .label_style((FAMILY, 16))
-                .axis_desc_style((FAMILY, 18))
-                .x_labels(8)
-                .y_labels(6)
-                .x_label_formatter(&|v| sig2(10f64.powf(*v)))
-                .y_label_formatter(&|v| format!("{} %", sig2(100.0 * 10f64.powf(*v))))
-                .draw()?;
-            chart
-                .draw_series(LineSeries::new(
-                    vec![(x_range.start, tol.log10()), (x_range.end, tol.log10())],
-                    RED.stroke_width(2),
-                ))?
-                .label(format!("tolerance {:.0} %", 100.0 * tol))
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
-            if panel == 0 && floor_rvf > 0.0 {
-                chart
-                    .draw_series(std::iter::once(Rectangle::new(
-                        [(x_range.start, y_range.start), (x_range.end, ly(floor_rvf))],
-                        RGBColor(200, 200, 200).mix(0.4).filled(),
-                    )))?
-                    .label(format!(
-                        "noise floor (2 SE, {} seed(s)): {:.2} %",
-                        r.seeds,
-                        100.0 * floor_rvf
-                    ))
-                    .legend(|(x, y)| {
-                        Rectangle::new(
-                            [(x, y - 6), (x + 20, y + 6)],
-                            RGBColor(200, 200, 200).filled(),
-                        )
-                    });
-            }
-            if panel == 0 {
-                let pts: Vec<(f64, f64, &AccuracyRow)> = rows
-                    .iter()
-                    .filter(|x| x.role == Role::Candidate)
-                    .filter_map(|x| Some((x.wall_s?.log10(), ly(x.max_err_rvf?), *x)))
-                    .collect();
-                // Pareto front: by increasing wall time, each point with a smaller error than
-                // every cheaper one.
-                let mut sorted = pts.clone();
-                sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
-                let mut front: Vec<(f64, f64)> = Vec::new();
-                let mut best = f64::INFINITY;
-                for p in &sorted {
-                    if p.1 < best {
-                        best = p.1;
-                        front.push((p.0, p.1));
-                    }
-                }
-                chart
-                    .draw_series(LineSeries::new(front, BLUE.stroke_width(1)))?
-                    .label("Pareto front")
-                    .legend(|(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(1))
-                    });
-                for (x, y, row) in &pts {
-                    let color = if row.within_tolerance {
-                        RGBColor(0, 140, 0)
-                    } else {
-                        RGBColor(200, 0, 0)
-                    };
-                    chart.draw_series(std::iter::once(Circle::new((*x, *y), 6, color.filled())))?;
-                    chart.draw_series(std::iter::once(Text::new(
-                        row.variant.clone(),
-                        (*x, *y),
-                        (FAMILY, 13).into_font().color(&BLACK),
-                    )))?;
-                }
-                for row in rows.iter().filter(|x| x.role != Role::Candidate) {
-                    let (Some(wv), e) = (row.wall_s, row.max_err_rvf.unwrap_or(0.0)) else {
-                        continue;
-                    };
-                    chart.draw_series(std::iter::once(TriangleMarker::new(
-                        (wv.log10(), ly(e)),
-                        7,
-                        BLACK.filled(),
-                    )))?;
-                    chart.draw_series(std::iter::once(Text::new(
-                        row.variant.clone(),
-                        (wv.log10(), ly(e)),
-                        (FAMILY, 15).into_font().color(&RGBColor(80, 80, 80)),
-                    )))?;
-                }
-            } else {
-                let colors = [
-                    RGBColor(31, 119, 180),
-                    RGBColor(255, 127, 14),
-                    RGBColor(44, 160, 44),
-                    RGBColor(148, 103, 189),
-                ];
-                for (k, &(key, _)) in TOLERANCES.iter().enumerate() {
-                    let label = key.symbol();
-                    let c = colors[k % colors.len()];
-                    let pts: Vec<(f64, f64)> = rows
-                        .iter()
-                        .filter(|x| x.role == Role::Candidate)
-                        .filter_map(|x| {
-                            let e = match key {
-                                Observable::LengthRatio => x.err_length_ratio,
-                                Observable::FrontVelocityRatio => x.err_front_velocity_ratio,
-                                Observable::Fragmentation => x.err_fragmentation,
-                                _ => x.err_largest_fragment_mass_fraction,
-                            }?;
-                            Some((x.wall_s?.log10(), ly(e)))
-                        })
-                        .collect();
-                    chart
-                        .draw_series(pts.iter().map(|p| Circle::new(*p, 5, c.filled())))?
-                        .label(format!(
-                            "{label} (noise floor {:.2} %)",
-                            100.0 * r.noise_floor[k].1
-                        ))
-                        .legend(move |(x, y)| Circle::new((x + 10, y), 5, c.filled()));
-                }
-            }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::LowerLeft)
-                .background_style(WHITE.mix(0.9))
-                .border_style(BLACK)
-                .label_font((FAMILY, 15))
-                .draw()?;
-        }
-        root.present()?;
-    }
-    write_png(path, &rgb, w, h)
-}
+/// How many of [`TOLERANCES`] the headline error covers (`max_err_rvf`, the left panel of
+/// `pareto.png`): the first three, R, va/v0 and F.
+const HEADLINE: usize = 3;
 
-/// Two significant digits, without trailing zeros (axis labels).
-fn sig2(v: f64) -> String {
-    if v <= 0.0 || !v.is_finite() {
-        return format!("{v}");
-    }
-    let e = v.log10().floor() as i32;
-    let scale = 10f64.powi(1 - e);
-    let rounded = (v * scale).round() / scale;
-    let digits = (1 - e).max(0) as usize;
-    let s = format!("{rounded:.digits$}");
-    if s.contains('.') {
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        s
-    }
+/// `pareto.png` of a report: every row with a wall time, as plain numbers for the picture.
+fn draw_pareto(path: &Path, r: &AccuracyReport) -> Result<()> {
+    let points: Vec<ParetoPoint> = r
+        .rows
+        .iter()
+        .filter_map(|row| {
+            Some(ParetoPoint {
+                label: row.variant.clone(),
+                wall_s: row.wall_s?,
+                candidate: row.role == Role::Candidate,
+                within: row.within_tolerance,
+                max_error: row.max_err_rvf,
+                errors: row.errors().to_vec(),
+            })
+        })
+        .collect();
+    let headline: Vec<&str> = TOLERANCES[..HEADLINE]
+        .iter()
+        .map(|(o, _)| o.symbol())
+        .collect();
+    let observables: Vec<(&str, f64)> = r
+        .noise_floor
+        .iter()
+        .map(|&(o, floor)| (o.symbol(), floor))
+        .collect();
+    pareto_plot(
+        path,
+        &ParetoPlot {
+            points: &points,
+            headline: &headline.join(", "),
+            headline_floor: r.noise_floor[..HEADLINE]
+                .iter()
+                .map(|x| x.1)
+                .fold(0.0, f64::max),
+            observables: &observables,
+            tolerance: TOLERANCES[0].1,
+            seeds: r.seeds,
+        },
+    )
 }
 
 /// Default report directory for a scene: `reports/accuracy/<scene file stem>`.
@@ -1063,13 +1080,94 @@ mod tests {
         assert_eq!(seed_set(3).as_deref(), Some("run.seed=3"));
     }
 
+    fn run(values: [f64; 4], wall_s: f64) -> Measured {
+        let mut obs = Observables::default();
+        for ((key, _), v) in TOLERANCES.iter().zip(values) {
+            obs.set(*key, Some(v));
+        }
+        Measured {
+            status: RunStatus::Completed,
+            error: None,
+            obs,
+            dt_s: Some(1e-10),
+            steps: Some(100),
+            wall_s: Some(wall_s),
+            rate: Some(1e6),
+            max_drift: Some(1e-6),
+            cached: false,
+        }
+    }
+
+    /// The header of a CSV of one row.
+    fn csv_header(row: &impl Serialize) -> Vec<String> {
+        let mut w = csv::Writer::from_writer(Vec::new());
+        w.serialize(row).expect("serialises");
+        let bytes = w.into_inner().expect("flushes");
+        let text = String::from_utf8(bytes).expect("UTF-8");
+        let first = text.lines().next().expect("a header").to_string();
+        first.split(',').map(String::from).collect()
+    }
+
     #[test]
-    fn axis_labels_have_two_significant_digits() {
-        assert_eq!(sig2(39.811), "40");
-        assert_eq!(sig2(0.031623), "0.032");
-        assert_eq!(sig2(1000.0), "1000");
-        assert_eq!(sig2(1.0), "1");
-        assert_eq!(sig2(0.1), "0.1");
+    fn scores_means_against_the_reference_step() {
+        let mut variants = reference_variants(1).expect("1 is allowed");
+        variants.push(Variant::parse("dt4:run.dt_factor=4").expect("parses"));
+        let (reference, seed2) = (
+            run([1.0, 2.0, 4.0, 8.0], 10.0),
+            run([1.5, 2.0, 4.0, 8.0], 8.0),
+        );
+        let candidate = run([1.25, 2.5, 4.0, 8.0], 2.0);
+        let runs = vec![
+            vec![(1, &reference)],
+            vec![(2, &seed2)],
+            vec![(1, &candidate)],
+        ];
+        let report = score(&variants, &runs, 1).expect("the reference completed");
+        assert_eq!(report.reference_runs, 2);
+        assert_eq!(
+            report.reference_values[0],
+            (Observable::LengthRatio, Some(1.25))
+        );
+        assert_eq!(report.scatter_dof, 1);
+        let row = &report.rows[2];
+        assert_eq!(row.values(), [Some(1.25), Some(2.5), Some(4.0), Some(8.0)]);
+        assert_eq!(row.errors(), [Some(0.0), Some(0.25), Some(0.0), Some(0.0)]);
+        assert_eq!(row.max_err_rvf, Some(0.25));
+        assert_eq!(row.speedup, Some(5.0));
+        assert!(!row.within_tolerance, "va/v0 is 25 % off with no scatter");
+        assert_eq!(report.recommended, None);
+        assert_eq!(report.runs.len(), 3);
+        assert_eq!(report.runs[1].seed, 2);
+    }
+
+    #[test]
+    fn fixed_row_fields_follow_the_tolerances() {
+        // accuracy.csv needs fixed serde fields; they must name TOLERANCES in order, as
+        // values() and errors() read them.
+        let mut variants = reference_variants(0).expect("0 is allowed");
+        variants.push(Variant::parse("dt4:run.dt_factor=4").expect("parses"));
+        let (reference, candidate) = (run([1.0, 2.0, 4.0, 8.0], 10.0), run([1.0; 4], 1.0));
+        let runs = vec![vec![(1, &reference)], vec![(1, &candidate)]];
+        let report = score(&variants, &runs, 1).expect("the reference completed");
+        let names: Vec<String> = TOLERANCES.iter().map(|(o, _)| o.name().into()).collect();
+        let errors: Vec<String> = names.iter().map(|n| format!("err_{n}")).collect();
+        let columns = |header: &[String], wanted: &[String]| -> Vec<usize> {
+            wanted
+                .iter()
+                .map(|n| header.iter().position(|h| h == n).expect("a column"))
+                .collect()
+        };
+        let consecutive = |at: Vec<usize>| at.windows(2).all(|w| w[0] + 1 == w[1]);
+        let header = csv_header(&report.rows[1]);
+        assert!(consecutive(columns(&header, &names)), "{header:?}");
+        assert!(consecutive(columns(&header, &errors)), "{header:?}");
+        assert!(consecutive(columns(&csv_header(&report.runs[0]), &names)));
+        assert_eq!(
+            report.rows[0].values(),
+            [Some(1.0), Some(2.0), Some(4.0), Some(8.0)]
+        );
+        assert_eq!(report.runs[1].length_ratio, Some(1.0));
+        assert_eq!(report.rows[1].errors()[3], Some(0.875));
     }
 
     #[test]

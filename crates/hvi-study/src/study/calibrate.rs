@@ -207,7 +207,7 @@ struct Refinement<'a> {
     /// Fixed overrides: the plan's common ones plus the non-refined axes at the best point.
     fixed: Vec<String>,
     /// Refined keys, whether each is in log10, and the box in transformed coordinates.
-    dims: Vec<(String, bool, f64, f64)>,
+    dims: Vec<Dim>,
     threads: usize,
     progress: bool,
     log: RefCell<Vec<Evaluation>>,
@@ -376,7 +376,8 @@ fn describe_eval(e: &Evaluation) -> String {
     s
 }
 
-/// `hvi-study calibrate`.
+/// `hvi-study calibrate`: the grid scored, the refinement from its best point, the paper's
+/// fit at this tier, then calibration.json, evaluations.csv, the maps and the snapshots.
 pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
     let (study, plan, out) = args.study.plan()?;
     let cfg = CalibrateConfig::of(&study)?;
@@ -384,8 +385,65 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
     let targets =
         hvi_run::output::load_targets(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
     let progress = !args.study.quiet;
+    let (refine_keys, dims) = refined_axes(&plan, &cfg)?;
 
-    // Which axes the refinement moves, and in which coordinates.
+    let grid = grid_stage(&plan, &out, args, &targets, progress)?;
+    let best_grid = grid.evaluations[grid.best].clone();
+    let best_run = plan.run(grid.best)?;
+    let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
+    let fixed = fixed_overrides(&plan, &best_run.values, |k| refine_keys.contains(k))?;
+    let store = Store::open(&out)?;
+    let stage = Stage {
+        study: &study,
+        plan: &plan,
+        store: &store,
+        targets: &targets,
+        threads,
+        progress,
+    };
+    let problem = stage.problem(fixed, dims);
+    let termination = refine_stage(&problem, &cfg, args, &best_grid, &refine_keys)?;
+    let refinement = problem.log.take();
+    let refinement_runs = *problem.ran.borrow();
+    let (paper_params, paper) = paper_point(&stage, &best_run.values)?;
+
+    let best = best_of(&best_grid, &refinement);
+    let ratio_to_paper = best
+        .params
+        .iter()
+        .filter_map(|(k, v)| paper_params.get(k).map(|p| (k.clone(), v / p)))
+        .collect();
+    let result = CalibrationResult {
+        study: plan.study.clone(),
+        tier: plan.tier.clone(),
+        particles: particles_of(&out, &best),
+        targets_file: targets.path.clone(),
+        targets: targets.targets.clone(),
+        gaps: targets.gaps.clone(),
+        best,
+        best_grid,
+        paper,
+        ratio_to_paper,
+        termination,
+        refinement_runs,
+        refinement,
+    };
+    write_outputs(&out, &result, &grid.evaluations)?;
+    draw_figures(&out, &plan, &grid.records, &result, &cfg.log_axes, progress);
+    if progress {
+        eprint!("{}", report_text(&result));
+    }
+    println!("{}", out.join("calibration.json").display());
+    Ok(result)
+}
+
+/// A refined axis: its key, whether it is refined in log10, and the grid's box on it in
+/// those coordinates (lowest, highest).
+type Dim = (String, bool, f64, f64);
+
+/// The axes the refinement moves (`calibrate.refine`, default every axis with more than one
+/// value) and their coordinates.
+fn refined_axes(plan: &Plan, cfg: &CalibrateConfig) -> Result<(Vec<String>, Vec<Dim>)> {
     let refine_keys: Vec<String> = match &cfg.refine {
         Some(k) => k.clone(),
         None => plan
@@ -416,20 +474,63 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
         }
         dims.push((k.clone(), log, lo, hi));
     }
+    Ok((refine_keys, dims))
+}
 
-    // Stage 1: the grid.
-    let (mut table, report) = execute_plan(&plan, &out, &args.study.exec_options())?;
+/// The grid stage's outcome.
+struct Grid {
+    /// Every grid run as an evaluation, in plan order.
+    evaluations: Vec<Evaluation>,
+    /// The runs' records, in plan order.
+    records: Vec<Record>,
+    /// The run with the lowest objective.
+    best: usize,
+}
+
+/// Stage 1: the grid, run (or reused) through the store and scored; results.csv/json gain the
+/// objective and the terms.
+fn grid_stage(
+    plan: &Plan,
+    out: &Path,
+    args: &CalibrateArgs,
+    targets: &Targets,
+    progress: bool,
+) -> Result<Grid> {
+    let (mut table, report) = execute_plan(plan, out, &args.study.exec_options())?;
     if progress {
         eprintln!("grid: {}", report.line());
     }
     print_failures(&report.records);
-    let scores = score_table(&mut table, &report.records, &targets);
-    table.write(&out, "results")?;
-    let grid: Vec<Evaluation> = plan
-        .runs
+    let scores = score_table(&mut table, &report.records, targets);
+    table.write(out, "results")?;
+    let evaluations = grid_evaluations(plan, &report.records, &scores);
+    let best = (0..evaluations.len())
+        .filter(|&i| evaluations[i].objective.is_finite())
+        .min_by(|&a, &b| {
+            evaluations[a]
+                .objective
+                .total_cmp(&evaluations[b].objective)
+        })
+        .ok_or_else(|| anyhow!("no grid run has a score"))?;
+    if progress {
+        eprintln!(
+            "best grid point (run {best}): {}",
+            describe_eval(&evaluations[best])
+        );
+    }
+    Ok(Grid {
+        evaluations,
+        records: report.records,
+        best,
+    })
+}
+
+/// The grid runs as evaluations: their numeric axis values, scores and status.
+fn grid_evaluations(plan: &Plan, records: &[Record], scores: &[Score]) -> Vec<Evaluation> {
+    plan.runs
         .iter()
-        .zip(&report.records)
-        .zip(&scores)
+        .zip(records)
+        .zip(scores)
         .map(|((run, rec), score)| {
             let params = plan
                 .axes
@@ -451,169 +552,179 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
                 dir: Some(run.dir.clone()),
             }
         })
-        .collect();
-    let best_index = (0..grid.len())
-        .filter(|&i| grid[i].objective.is_finite())
-        .min_by(|&a, &b| grid[a].objective.total_cmp(&grid[b].objective))
-        .ok_or_else(|| anyhow!("no grid run has a score"))?;
-    let best_grid = grid[best_index].clone();
-    if progress {
-        eprintln!(
-            "best grid point (run {best_index}): {}",
-            describe_eval(&best_grid)
-        );
-    }
+        .collect()
+}
 
-    // Stage 2: Nelder-Mead from the best grid point.
-    let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
-    let best_run = plan.run(best_index)?;
+/// What the stages after the grid share: where runs go and how they are scored.
+struct Stage<'a> {
+    study: &'a Study,
+    plan: &'a Plan,
+    store: &'a Store,
+    targets: &'a Targets,
+    threads: usize,
+    progress: bool,
+}
+
+impl<'a> Stage<'a> {
+    /// A problem over `dims` with the other scene keys at `fixed`.
+    fn problem(&self, fixed: Vec<String>, dims: Vec<Dim>) -> Refinement<'a> {
+        Refinement {
+            study: self.study,
+            plan: self.plan,
+            store: self.store,
+            targets: self.targets,
+            fixed,
+            dims,
+            threads: self.threads,
+            progress: self.progress,
+            log: RefCell::new(Vec::new()),
+            ran: RefCell::new(0),
+        }
+    }
+}
+
+/// The plan's common overrides plus every axis at the best run's value, except the axes
+/// `moved` names (those the stage sets itself).
+fn fixed_overrides(
+    plan: &Plan,
+    best_values: &[Value],
+    moved: impl Fn(&String) -> bool,
+) -> Result<Vec<String>> {
     let mut fixed = plan.set.clone();
-    for (a, v) in plan.axes.iter().zip(&best_run.values) {
-        if !refine_keys.contains(&a.key) {
+    for (a, v) in plan.axes.iter().zip(best_values) {
+        if !moved(&a.key) {
             fixed.push(format!("{}={}", a.key, json_to_override(v)?));
         }
     }
-    let store = Store::open(&out)?;
-    let problem = Refinement {
-        study: &study,
-        plan: &plan,
-        store: &store,
-        targets: &targets,
-        fixed,
-        dims: dims.clone(),
-        threads,
-        progress,
-        log: RefCell::new(Vec::new()),
-        ran: RefCell::new(0),
-    };
+    Ok(fixed)
+}
+
+/// Stage 2: Nelder-Mead from the best grid point (unless skipped). Returns why it stopped;
+/// the evaluations stay in the problem's log.
+fn refine_stage(
+    problem: &Refinement,
+    cfg: &CalibrateConfig,
+    args: &CalibrateArgs,
+    best_grid: &Evaluation,
+    refine_keys: &[String],
+) -> Result<String> {
+    let dims = &problem.dims;
     let max_iters = args.max_iters.unwrap_or(cfg.max_iters);
-    let termination = if args.no_refine || dims.is_empty() || max_iters == 0 {
-        if dims.is_empty() {
+    if args.no_refine || dims.is_empty() || max_iters == 0 {
+        return Ok(if dims.is_empty() {
             "skipped: no axis to refine".to_string()
         } else {
             "skipped (--no-refine or max_iters = 0)".to_string()
-        }
-    } else {
-        // Start simplex: the best grid point and one step along each refined axis (half the
-        // grid's spacing on that axis, towards the inside of the box).
-        let x0: Vec<f64> = dims
-            .iter()
-            .map(|(k, log, _, _)| {
-                let x = best_grid.params.get(k).copied().unwrap_or(f64::NAN);
-                if *log {
-                    x.log10()
-                } else {
-                    x
-                }
-            })
-            .collect();
-        let mut simplex = vec![x0.clone()];
-        for (d, (k, _, lo, hi)) in dims.iter().enumerate() {
-            let n = plan
-                .axes
-                .iter()
-                .find(|a| &a.key == k)
-                .map_or(2, |a| a.values.len());
-            let step = 0.5 * (hi - lo) / (n.max(2) - 1) as f64;
-            let mut v = x0.clone();
-            v[d] = if x0[d] + step <= *hi + 1e-12 {
-                x0[d] + step
+        });
+    }
+    let simplex = start_simplex(problem.plan, dims, best_grid);
+    if problem.progress {
+        eprintln!(
+            "refinement: Nelder-Mead over {} (log10 for {:?}), at most {max_iters} iterations, sd tolerance {}",
+            refine_keys.join(", "),
+            dims.iter().filter(|d| d.1).map(|d| d.0.as_str()).collect::<Vec<_>>(),
+            cfg.sd_tolerance
+        );
+    }
+    let solver = NelderMead::new(simplex)
+        .with_sd_tolerance(cfg.sd_tolerance)
+        .map_err(|e| anyhow!("{e}"))?;
+    let res = Executor::new(Lend(problem), solver)
+        .configure(|s| s.max_iters(max_iters))
+        .run()
+        .map_err(|e| anyhow!("refinement: {e:#}"))?;
+    let st = res.state();
+    Ok(format!(
+        "{} after {} iterations",
+        st.get_termination_status(),
+        st.get_iter()
+    ))
+}
+
+/// The start simplex: the best grid point and one step along each refined axis (half the
+/// grid's spacing on that axis, towards the inside of the box).
+fn start_simplex(plan: &Plan, dims: &[Dim], best_grid: &Evaluation) -> Vec<Vec<f64>> {
+    let x0: Vec<f64> = dims
+        .iter()
+        .map(|(k, log, _, _)| {
+            let x = best_grid.params.get(k).copied().unwrap_or(f64::NAN);
+            if *log {
+                x.log10()
             } else {
-                x0[d] - step
-            };
-            simplex.push(v);
-        }
-        if progress {
-            eprintln!(
-                "refinement: Nelder-Mead over {} (log10 for {:?}), at most {max_iters} iterations, sd tolerance {}",
-                refine_keys.join(", "),
-                dims.iter().filter(|d| d.1).map(|d| d.0.as_str()).collect::<Vec<_>>(),
-                cfg.sd_tolerance
-            );
-        }
-        let solver = NelderMead::new(simplex)
-            .with_sd_tolerance(cfg.sd_tolerance)
-            .map_err(|e| anyhow!("{e}"))?;
-        let res = Executor::new(Lend(&problem), solver)
-            .configure(|s| s.max_iters(max_iters))
-            .run()
-            .map_err(|e| anyhow!("refinement: {e:#}"))?;
-        let st = res.state();
-        format!(
-            "{} after {} iterations",
-            st.get_termination_status(),
-            st.get_iter()
-        )
-    };
+                x
+            }
+        })
+        .collect();
+    let mut simplex = vec![x0.clone()];
+    for (d, (k, _, lo, hi)) in dims.iter().enumerate() {
+        let n = plan
+            .axes
+            .iter()
+            .find(|a| &a.key == k)
+            .map_or(2, |a| a.values.len());
+        let step = 0.5 * (hi - lo) / (n.max(2) - 1) as f64;
+        let mut v = x0.clone();
+        v[d] = if x0[d] + step <= *hi + 1e-12 {
+            x0[d] + step
+        } else {
+            x0[d] - step
+        };
+        simplex.push(v);
+    }
+    simplex
+}
 
-    let refinement = problem.log.take();
-    let refinement_runs = *problem.ran.borrow();
-
-    // The paper's best fit at this tier, through the same store (a cache hit when the grid
-    // holds it).
+/// The paper's best fit at this tier, through the same store (a cache hit when the grid holds
+/// it): its parameters on the plan's axes and its evaluation.
+fn paper_point(
+    stage: &Stage,
+    best_values: &[Value],
+) -> Result<(BTreeMap<String, f64>, Evaluation)> {
     let mut paper_params = BTreeMap::new();
     for (k, v) in PAPER_BEST {
-        if plan.axes.iter().any(|a| a.key == k) {
+        if stage.plan.axes.iter().any(|a| a.key == k) {
             paper_params.insert(k.to_string(), v);
         }
     }
-    let mut paper_fixed = plan.set.clone();
-    for (a, v) in plan.axes.iter().zip(&best_run.values) {
-        if !paper_params.contains_key(&a.key) {
-            paper_fixed.push(format!("{}={}", a.key, json_to_override(v)?));
-        }
-    }
-    let paper_problem = Refinement {
-        study: &study,
-        plan: &plan,
-        store: &store,
-        targets: &targets,
-        fixed: paper_fixed,
-        dims: Vec::new(),
-        threads,
-        progress,
-        log: RefCell::new(Vec::new()),
-        ran: RefCell::new(0),
-    };
-    let paper = paper_problem.evaluate("paper", &paper_params)?;
+    let fixed = fixed_overrides(stage.plan, best_values, |k| paper_params.contains_key(k))?;
+    let paper = stage
+        .problem(fixed, Vec::new())
+        .evaluate("paper", &paper_params)?;
+    Ok((paper_params, paper))
+}
 
-    let best = std::iter::once(&best_grid)
-        .chain(refinement.iter())
+/// The best scored point over the best grid point and the refinement.
+fn best_of(best_grid: &Evaluation, refinement: &[Evaluation]) -> Evaluation {
+    std::iter::once(best_grid)
+        .chain(refinement)
         .filter(|e| e.score.is_some() && e.objective.is_finite())
         .min_by(|a, b| a.objective.total_cmp(&b.objective))
         .cloned()
-        .unwrap_or_else(|| best_grid.clone());
-    let ratio_to_paper = best
-        .params
-        .iter()
-        .filter_map(|(k, v)| paper_params.get(k).map(|p| (k.clone(), v / p)))
-        .collect();
-    let particles = best
-        .dir
+        .unwrap_or_else(|| best_grid.clone())
+}
+
+/// Particles of a run, read from its record in the study directory.
+fn particles_of(out: &Path, e: &Evaluation) -> Option<f64> {
+    e.dir
         .as_ref()
         .and_then(|d| {
             std::fs::read_to_string(out.join(d).join("record.json"))
                 .ok()
                 .and_then(|t| serde_json::from_str::<Record>(&t).ok())
         })
-        .and_then(|r| r.observables.get(Observable::Particles));
-    let result = CalibrationResult {
-        study: plan.study.clone(),
-        tier: plan.tier.clone(),
-        particles,
-        targets_file: targets.path.clone(),
-        targets: targets.targets.clone(),
-        gaps: targets.gaps.clone(),
-        best,
-        best_grid,
-        paper,
-        ratio_to_paper,
-        termination,
-        refinement_runs,
-        refinement,
-    };
-    write_outputs(&out, &result, &grid)?;
-    match super::figures::calibration_maps(&out, &plan, &report.records, &result, &cfg.log_axes) {
+        .and_then(|r| r.observables.get(Observable::Particles))
+}
+
+/// The maps and the snapshot matrix; a figure that cannot be drawn is reported, not fatal.
+fn draw_figures(
+    out: &Path,
+    plan: &Plan,
+    records: &[Record],
+    result: &CalibrationResult,
+    log_axes: &[String],
+    progress: bool,
+) {
+    match super::figures::calibration_maps(out, plan, records, result, log_axes) {
         Ok(stems) if progress => {
             for s in stems {
                 eprintln!("plot: {} (and .svg)", s.with_extension("png").display());
@@ -622,16 +733,11 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
         Ok(_) => {}
         Err(e) => eprintln!("no maps drawn: {e:#}"),
     }
-    match calibration_snapshots(&out, &plan, &report.records, &result) {
+    match calibration_snapshots(out, plan, records, result) {
         Ok(path) if progress => eprintln!("snapshots: {}", path.display()),
         Ok(_) => {}
         Err(e) => eprintln!("no snapshot matrix: {e:#}"),
     }
-    if progress {
-        eprint!("{}", report_text(&result));
-    }
-    println!("{}", out.join("calibration.json").display());
-    Ok(result)
 }
 
 /// The human-readable report: best point, every term, the paper's point, the gaps.
@@ -657,7 +763,7 @@ pub fn report_text(r: &CalibrationResult) -> String {
     s
 }
 
-/// calibration.json, refinement.csv (every evaluation: grid, refinement, paper).
+/// calibration.json and evaluations.csv (every evaluation: grid, refinement, paper).
 fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluation]) -> Result<()> {
     write_atomic_bytes(
         &out.join("calibration.json"),

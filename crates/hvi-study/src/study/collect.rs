@@ -1,6 +1,6 @@
 //! `hvi-study status` and `hvi-study collect`: a study directory's progress and tables read
 //! from its run store, running nothing. They serve a study run anywhere (locally, on a Slurm
-//! cluster through [`super::slurm`], or both): the store is the one place results live.
+//! cluster through [`hvi_run::slurm`], or both): the store is the one place results live.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -17,7 +17,7 @@ use hvi_run::plan::{describe_values, Plan, DIR_DIGITS};
 use hvi_run::slurm::{QueueView, TaskState};
 use hvi_run::spec::Study;
 use hvi_run::store::{Record, RunStatus, Store};
-use hvi_run::table::results_table;
+use hvi_run::table::{results_table, Table};
 
 /// Reads a plan and its study directory: a study directory or its `plan.json` as is, or a
 /// study file planned like every other command (which writes plan.json).
@@ -273,10 +273,9 @@ pub fn collect(args: &CollectArgs) -> Result<()> {
         .iter()
         .map(|r| store.lookup(&r.fingerprint))
         .collect::<Result<_>>()?;
-    let study = || Study::load(&plan.study_file);
     let kind = match args.kind {
         Some(k) => k,
-        None => match study() {
+        None => match Study::load(&plan.study_file) {
             Ok(s) if s.calibrate.is_some() => CollectAs::Calibrate,
             Ok(s) if s.validity.is_some() => CollectAs::ValidityMap,
             _ => CollectAs::Sweep,
@@ -293,7 +292,7 @@ pub fn collect(args: &CollectArgs) -> Result<()> {
         .enumerate()
         .map(|(i, r)| r.clone().unwrap_or_else(|| missing_record(&plan, i)))
         .collect();
-    let mut table = results_table(&plan, &records);
+    let table = results_table(&plan, &records);
     let quiet = args.study.quiet;
     let done = records.iter().flatten().cloned().collect::<Vec<_>>();
     print_failures(&done);
@@ -302,40 +301,55 @@ pub fn collect(args: &CollectArgs) -> Result<()> {
             table.write(&dir, "results")?;
             println!("{}", dir.join("results.csv").display());
         }
-        CollectAs::Calibrate => {
-            let study = study()?;
-            let cfg = CalibrateConfig::of(&study)?;
-            let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-            let targets = hvi_run::output::load_targets(&base.join(&cfg.targets))?
-                .with_weights(&cfg.weights)?;
-            score_table(&mut table, &filled, &targets);
-            // A run without a result has no score (a failed run scores as it does locally).
-            let scored: Vec<usize> = (0..table.columns.len())
-                .filter(|&c| {
-                    table.columns[c] == "objective" || table.columns[c].starts_with("score_")
-                })
-                .collect();
-            for &i in &missing {
-                for &c in &scored {
-                    table.rows[i][c] = Value::Null;
-                }
-            }
-            table.write(&dir, "results")?;
-            if !quiet {
-                eprintln!(
-                    "the grid scored; the refinement runs new simulations one after another: \
-                     `hvi-study calibrate` does it (locally, or inside one Slurm job), reusing \
-                     these runs"
-                );
-            }
-            println!("{}", dir.join("results.csv").display());
-        }
+        CollectAs::Calibrate => collect_calibration(&plan, &dir, table, &filled, &missing, quiet)?,
         CollectAs::ValidityMap => {
-            let cfg = ValidityConfig::of(&study()?)?;
+            let cfg = ValidityConfig::of(&Study::load(&plan.study_file)?)?;
             let cutoff = cfg.cutoff(args.cutoff)?;
             validity_outputs(&plan, &dir, cfg.observable, cutoff, table, &filled, quiet)?;
         }
     }
+    report_missing(&plan, &missing, quiet);
+    Ok(())
+}
+
+/// A calibration's grid scored from the store: results.csv/json with the objective and the
+/// terms (none for a run without a result; a failed run scores as it does locally).
+fn collect_calibration(
+    plan: &Plan,
+    dir: &Path,
+    mut table: Table,
+    filled: &[Record],
+    missing: &[usize],
+    quiet: bool,
+) -> Result<()> {
+    let study = Study::load(&plan.study_file)?;
+    let cfg = CalibrateConfig::of(&study)?;
+    let base = study.path.parent().unwrap_or_else(|| Path::new("."));
+    let targets =
+        hvi_run::output::load_targets(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
+    score_table(&mut table, filled, &targets);
+    let scored: Vec<usize> = (0..table.columns.len())
+        .filter(|&c| table.columns[c] == "objective" || table.columns[c].starts_with("score_"))
+        .collect();
+    for &i in missing {
+        for &c in &scored {
+            table.rows[i][c] = Value::Null;
+        }
+    }
+    table.write(dir, "results")?;
+    if !quiet {
+        eprintln!(
+            "the grid scored; the refinement runs new simulations one after another: \
+             `hvi-study calibrate` does it (locally, or inside one Slurm job), reusing \
+             these runs"
+        );
+    }
+    println!("{}", dir.join("results.csv").display());
+    Ok(())
+}
+
+/// Names the runs without a result (the first ten), or says every run was collected.
+fn report_missing(plan: &Plan, missing: &[usize], quiet: bool) {
     if !missing.is_empty() {
         let shown: Vec<String> = missing
             .iter()
@@ -357,5 +371,4 @@ pub fn collect(args: &CollectArgs) -> Result<()> {
     } else if !quiet {
         eprintln!("all {} runs collected; nothing was run", plan.runs.len());
     }
-    Ok(())
 }

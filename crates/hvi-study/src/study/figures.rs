@@ -7,16 +7,16 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, Result};
 use plotters::style::RGBColor;
 
-use super::calibrate::CalibrationResult;
-use hvi_analysis::contour::Field;
-use hvi_analysis::score::objective;
+use super::calibrate::{CalibrationResult, Evaluation};
+use hvi_analysis::contour::{Field, Point};
+use hvi_analysis::score::{objective, Target};
 use hvi_plot::contour::{contour_plot, ContourPlot, Marker};
 use hvi_plot::snapshots::Tile;
 use hvi_run::plan::Plan;
 use hvi_run::store::{Record, RunStatus};
 
-/// The two axes a map is drawn over: the first two with more than one value. Other axes are
-/// held at the value of run `slice_run` (the best run for the calibration).
+/// The two axes a map is drawn over: the first two with more than one value (the others are
+/// held at one run's values: [`field_of`]).
 pub fn map_axes(plan: &Plan) -> Result<(usize, usize)> {
     let multi: Vec<usize> = (0..plan.axes.len())
         .filter(|&k| plan.axes[k].values.len() > 1)
@@ -99,10 +99,96 @@ pub fn calibration_maps(
     result: &CalibrationResult,
     log_axes: &[String],
 ) -> Result<Vec<PathBuf>> {
-    let (ax, ay) = map_axes(plan)?;
-    let (kx, ky) = (plan.axes[ax].key.clone(), plan.axes[ay].key.clone());
-    let (lx, ly) = (log_axes.contains(&kx), log_axes.contains(&ky));
-    let slice = result.best_grid.step;
+    let frame = MapFrame::new(plan, records, result, log_axes)?;
+    let mut stems = Vec::new();
+    let mut draw = |name: &str, plot: ContourPlot| -> Result<()> {
+        let stem = dir.join(name);
+        contour_plot(&stem, &plot)?;
+        stems.push(stem);
+        Ok(())
+    };
+    draw("map_R", length_ratio_map(&frame)?)?;
+    draw("map_va", front_velocity_map(&frame)?)?;
+    draw("map_objective", objective_map(&frame)?)?;
+    Ok(stems)
+}
+
+/// What the calibration's maps share: the runs, the two axes drawn and the slice through the
+/// others (at the best grid point), the tier note and the marked points.
+struct MapFrame<'a> {
+    plan: &'a Plan,
+    records: &'a [Record],
+    result: &'a CalibrationResult,
+    axes: (usize, usize),
+    logs: (bool, bool),
+    slice: usize,
+    /// The tier, the particles and the slice, for the subtitles.
+    tier: String,
+    markers: Vec<Marker>,
+}
+
+impl<'a> MapFrame<'a> {
+    fn new(
+        plan: &'a Plan,
+        records: &'a [Record],
+        result: &'a CalibrationResult,
+        log_axes: &[String],
+    ) -> Result<MapFrame<'a>> {
+        let (ax, ay) = map_axes(plan)?;
+        let (kx, ky) = (&plan.axes[ax].key, &plan.axes[ay].key);
+        let slice = result.best_grid.step;
+        Ok(MapFrame {
+            plan,
+            records,
+            result,
+            axes: (ax, ay),
+            logs: (log_axes.contains(kx), log_axes.contains(ky)),
+            slice,
+            tier: tier_note(plan, result, (ax, ay), slice),
+            markers: markers(result, |e| point_of(plan, (ax, ay), e)),
+        })
+    }
+
+    /// The field of `value(record)` over the map's axes.
+    fn field(&self, value: impl Fn(&Record) -> Option<f64>) -> Result<Field> {
+        field_of(self.plan, self.records, self.axes, self.slice, value)
+    }
+
+    /// A map of `field` in this frame (axes, six iso-lines, the markers), untitled.
+    fn plot(&self, field: Field, value_label: &str) -> ContourPlot {
+        ContourPlot {
+            title: String::new(),
+            subtitle: String::new(),
+            x_label: label(self.plan, self.axes.0, self.logs.0),
+            y_label: label(self.plan, self.axes.1, self.logs.1),
+            x_log: self.logs.0,
+            y_log: self.logs.1,
+            field,
+            value_label: value_label.into(),
+            levels: 6,
+            highlight: None,
+            extra_points: Vec::new(),
+            markers: self.markers.clone(),
+        }
+    }
+
+    /// The weighted target of an observable, if the calibration scores one.
+    fn target_of(&self, observable: Observable) -> Option<&'a Target> {
+        self.result
+            .targets
+            .iter()
+            .find(|t| t.observable == observable && t.weight > 0.0)
+    }
+}
+
+/// The start of the maps' subtitles: the tier, its particles and the other axes' values at
+/// the slice.
+fn tier_note(
+    plan: &Plan,
+    result: &CalibrationResult,
+    (ax, ay): (usize, usize),
+    slice: usize,
+) -> String {
     let sliced = plan
         .axes
         .iter()
@@ -110,7 +196,7 @@ pub fn calibration_maps(
         .filter(|&(k, a)| k != ax && k != ay && a.values.len() > 1)
         .map(|(k, a)| format!("{} = {}", a.key, plan.runs[slice].values[k]))
         .collect::<Vec<_>>();
-    let tier = format!(
+    format!(
         "tier `{}`, {} particles{}",
         plan.tier,
         result.particles.map_or("?".into(), |n| format!("{n}")),
@@ -119,10 +205,17 @@ pub fn calibration_maps(
         } else {
             format!("; at {}", sliced.join(", "))
         }
-    );
-    let at = |e: &super::calibrate::Evaluation| -> Option<(f64, f64)> {
-        Some((*e.params.get(&kx)?, *e.params.get(&ky)?))
-    };
+    )
+}
+
+/// Where an evaluation sits on the map's axes (None when it lacks one of them).
+fn point_of(plan: &Plan, (ax, ay): (usize, usize), e: &Evaluation) -> Option<Point> {
+    let (kx, ky) = (&plan.axes[ax].key, &plan.axes[ay].key);
+    Some((*e.params.get(kx)?, *e.params.get(ky)?))
+}
+
+/// The paper's fit (white circle) and the optimum (red cross), where they sit on the map.
+fn markers(result: &CalibrationResult, at: impl Fn(&Evaluation) -> Option<Point>) -> Vec<Marker> {
     let mut markers = Vec::new();
     if let Some(p) = at(&result.paper) {
         markers.push(Marker {
@@ -140,86 +233,65 @@ pub fn calibration_maps(
             cross: true,
         });
     }
-    let refinement: Vec<(f64, f64)> = result
-        .refinement
-        .iter()
-        .filter(|e| e.score.is_some())
-        .filter_map(at)
-        .collect();
-    let target_of = |observable: Observable| {
-        result
-            .targets
-            .iter()
-            .find(|t| t.observable == observable && t.weight > 0.0)
-    };
-    let mut stems = Vec::new();
+    markers
+}
 
-    // Fig. 9: R.
-    let r_target = target_of(Observable::LengthRatio);
-    let plot = ContourPlot {
+/// Fig. 9: R, the experiment's value in red.
+fn length_ratio_map(f: &MapFrame) -> Result<ContourPlot> {
+    let target = f.target_of(Observable::LengthRatio);
+    let field = f.field(|r| r.observables.get(Observable::LengthRatio))?;
+    Ok(ContourPlot {
         title: "Debris-cloud length ratio R = La/Lr (Fig. 9)".into(),
         subtitle: format!(
-            "{tier}; red: the experiment's R = {}",
-            r_target.map_or("n/a".into(), |t| t.value.to_string())
+            "{}; red: the experiment's R = {}",
+            f.tier,
+            target.map_or("n/a".into(), |t| t.value.to_string())
         ),
-        x_label: label(plan, ax, lx),
-        y_label: label(plan, ay, ly),
-        x_log: lx,
-        y_log: ly,
-        field: field_of(plan, records, (ax, ay), slice, |r| {
-            r.observables.get(Observable::LengthRatio)
-        })?,
-        value_label: "R".into(),
-        levels: 6,
-        highlight: r_target.map(|t| (t.value, format!("experiment R = {}", t.value))),
-        extra_points: Vec::new(),
-        markers: markers.clone(),
-    };
-    let stem = dir.join("map_R");
-    contour_plot(&stem, &plot)?;
-    stems.push(stem);
+        highlight: target.map(|t| (t.value, format!("experiment R = {}", t.value))),
+        ..f.plot(field, "R")
+    })
+}
 
-    // Fig. 10: va / v0 (no experimental value available: no red line, said so).
-    let va_target = target_of(Observable::FrontVelocityRatio);
-    let plot = ContourPlot {
+/// Fig. 10: va / v0 (no experimental value available: no red line, said so).
+fn front_velocity_map(f: &MapFrame) -> Result<ContourPlot> {
+    let target = f.target_of(Observable::FrontVelocityRatio);
+    let field = f.field(|r| r.observables.get(Observable::FrontVelocityRatio))?;
+    let tier = &f.tier;
+    Ok(ContourPlot {
         title: "Axial front velocity va/v0 (Fig. 10)".into(),
-        subtitle: match va_target {
+        subtitle: match target {
             Some(t) => format!("{tier}; red: the experiment's va/v0 = {}", t.value),
             None => format!(
                 "{tier}; the experiment's va/v0 is not available (experiments_data gap): no red line"
             ),
         },
-        highlight: va_target.map(|t| (t.value, format!("experiment va/v0 = {}", t.value))),
-        field: field_of(plan, records, (ax, ay), slice, |r| {
-            r.observables.get(Observable::FrontVelocityRatio)
-        })?,
-        value_label: "va/v0".into(),
-        ..plot
-    };
-    let stem = dir.join("map_va");
-    contour_plot(&stem, &plot)?;
-    stems.push(stem);
+        highlight: target.map(|t| (t.value, format!("experiment va/v0 = {}", t.value))),
+        ..f.plot(field, "va/v0")
+    })
+}
 
-    // The objective, in log10 (it spans decades), with the refinement and the optimum.
-    let plot = ContourPlot {
+/// The objective, in log10 (it spans decades), with the refinement's points and the optimum.
+fn objective_map(f: &MapFrame) -> Result<ContourPlot> {
+    let result = f.result;
+    let field = f.field(|r| {
+        let j = objective(&result.targets, |n| r.observables.get(n)).objective;
+        j.is_finite().then(|| j.max(1e-6).log10())
+    })?;
+    Ok(ContourPlot {
         title: "Objective J over the grid, log10 (optimum marked)".into(),
         subtitle: format!(
-            "{tier}; J = weighted mean of the target terms (experiments_data/README.md); {}",
-            result.termination
+            "{}; J = weighted mean of the target terms (experiments_data/README.md); {}",
+            f.tier, result.termination
         ),
         highlight: Some((0.0, "J = 1: every target within tolerance".into())),
-        field: field_of(plan, records, (ax, ay), slice, |r| {
-            let j = objective(&result.targets, |n| r.observables.get(n)).objective;
-            j.is_finite().then(|| j.max(1e-6).log10())
-        })?,
-        value_label: "log10 J".into(),
-        extra_points: refinement,
-        ..plot
-    };
-    let stem = dir.join("map_objective");
-    contour_plot(&stem, &plot)?;
-    stems.push(stem);
-    Ok(stems)
+        extra_points: result
+            .refinement
+            .iter()
+            .filter(|e| e.score.is_some())
+            .filter_map(|e| point_of(f.plan, f.axes, e))
+            .collect(),
+        ..f.plot(field, "log10 J")
+    })
 }
 
 /// The tiles of a plan's runs over axes (ax, ay) at run `slice_run`'s other axis values.

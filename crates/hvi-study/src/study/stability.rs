@@ -13,13 +13,14 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use plotters::prelude::*;
 use serde::Serialize;
 
 use crate::cli::{StabilityArgs, StudyArgs};
-use hvi_plot::render::{fonts, write_png, FAMILY};
+use hvi_engine::sim::LEDGER_DRIFT_BOUND;
+use hvi_plot::stability_map::{stability_map, MapCell, StabilityMap};
 use hvi_run::output::{write_atomic_bytes, write_csv_atomic};
-use hvi_run::store::{read_summary, RunStatus, Store};
+use hvi_run::plan::Plan;
+use hvi_run::store::{read_summary, Record, RunStatus, Store};
 use hvi_run::study::execute_plan;
 
 /// One cell of the stress matrix.
@@ -95,47 +96,94 @@ pub fn stability(args: &StabilityArgs) -> Result<Vec<Cell>> {
     let _ = writeln!(
         md,
         "Each slice is a two-axis study; each cell one run. *stable*: the run reached its end with every guard quiet (no non-finite value, no pair closer than run.min_distance_over_sigma, ledger within run.max_energy_drift); *stopped*: the engine's diagnostic is quoted. The ledger bound this project states is {:.0e}.\n",
-        hvi_engine::sim::LEDGER_DRIFT_BOUND
+        LEDGER_DRIFT_BOUND
     );
     for file in &slices {
-        let stem = file
-            .file_stem()
-            .map_or("slice".into(), |s| s.to_string_lossy().into_owned());
-        let study_args = StudyArgs {
-            study: file.clone(),
-            tier: args.tier.clone(),
-            particles: None,
-            sets: Vec::new(),
-            out: Some(args.store.join(&stem)),
-            threads: args.threads,
-            jobs: None,
-            quiet: args.quiet,
-        };
-        let (study, plan, out) = study_args.plan()?;
-        if plan.axes.len() != 2 {
-            bail!(
-                "{}: a stability slice needs exactly 2 axes (has {})",
-                file.display(),
-                plan.axes.len()
-            );
-        }
-        if !args.quiet {
-            eprintln!(
-                "stability: slice `{}` ({} runs, tier {})",
-                plan.study,
-                plan.runs.len(),
-                plan.tier
-            );
-        }
-        let (_, report) = execute_plan(&plan, &out, &study_args.exec_options())?;
-        let store = Store::open(&out)?;
-        let mut slice_cells = Vec::new();
-        for (run, rec) in plan.runs.iter().zip(&report.records) {
+        let slice = run_slice(args, file)?;
+        draw_slice(&args.out, &slice)?;
+        md.push_str(&slice_summary(&slice));
+        cells.extend(slice.cells);
+    }
+    write_csv_atomic(&args.out.join("stability.csv"), &cells)?;
+    write_atomic_bytes(&args.out.join("stability.md"), md.as_bytes())?;
+    Ok(cells)
+}
+
+/// One slice's runs as cells, with what the map and the summary say about the slice.
+struct Slice {
+    /// The slice file's stem: the map is `<stem>.png`.
+    stem: String,
+    /// The study's name.
+    name: String,
+    /// The study's description.
+    description: String,
+    /// The tier's name and description.
+    tier: (String, String),
+    /// Each axis: its label and its values as text.
+    axes: [(String, Vec<String>); 2],
+    /// A cell per run.
+    cells: Vec<Cell>,
+}
+
+/// Plans and runs one slice (a two-axis study) through its store under `args.store`.
+fn run_slice(args: &StabilityArgs, file: &Path) -> Result<Slice> {
+    let stem = file
+        .file_stem()
+        .map_or("slice".into(), |s| s.to_string_lossy().into_owned());
+    let study_args = StudyArgs {
+        study: file.to_path_buf(),
+        tier: args.tier.clone(),
+        particles: None,
+        sets: Vec::new(),
+        out: Some(args.store.join(&stem)),
+        threads: args.threads,
+        jobs: None,
+        quiet: args.quiet,
+    };
+    let (study, plan, out) = study_args.plan()?;
+    if plan.axes.len() != 2 {
+        bail!(
+            "{}: a stability slice needs exactly 2 axes (has {})",
+            file.display(),
+            plan.axes.len()
+        );
+    }
+    if !args.quiet {
+        eprintln!(
+            "stability: slice `{}` ({} runs, tier {})",
+            plan.study,
+            plan.runs.len(),
+            plan.tier
+        );
+    }
+    let (_, report) = execute_plan(&plan, &out, &study_args.exec_options())?;
+    let cells = cells_of(&plan, &report.records, &Store::open(&out)?);
+    let axis = |k: usize| {
+        let a = &plan.axes[k];
+        (a.label.clone(), a.values.iter().map(value_text).collect())
+    };
+    Ok(Slice {
+        stem,
+        axes: [axis(0), axis(1)],
+        name: plan.study,
+        description: study.description,
+        tier: (plan.tier, plan.tier_description),
+        cells,
+    })
+}
+
+/// A cell per run of a two-axis plan: its status, drift and step from the run's record and
+/// summary.
+fn cells_of(plan: &Plan, records: &[Record], store: &Store) -> Vec<Cell> {
+    plan.runs
+        .iter()
+        .zip(records)
+        .map(|(run, rec)| {
             let summary = read_summary(&store.dir(&run.fingerprint));
             let num = |pointer: &str| summary.as_ref()?.pointer(pointer)?.as_f64();
             let dt = num("/dt_s");
             let bound = num("/derived/dt_max_s");
-            slice_cells.push(Cell {
+            Cell {
                 slice: plan.study.clone(),
                 x_key: plan.axes[0].key.clone(),
                 x: value_text(&run.values[0]),
@@ -153,189 +201,152 @@ pub fn stability(args: &StabilityArgs) -> Result<Vec<Cell>> {
                 broken_fraction: rec.observables.get(Observable::BondsBrokenFraction),
                 trouble: rec.error.clone().unwrap_or_default(),
                 at: (run.coords[0], run.coords[1]),
-            });
-        }
-        let x_labels: Vec<String> = plan.axes[0].values.iter().map(value_text).collect();
-        let y_labels: Vec<String> = plan.axes[1].values.iter().map(value_text).collect();
-        let x_name = plan.axes[0].label.clone();
-        let y_name = plan.axes[1].label.clone();
-        map_plot(
-            &args.out.join(format!("{stem}.png")),
-            &format!("{} \u{2014} {}", plan.study, study.description),
-            &plan.tier_description,
-            (&x_name, &x_labels),
-            (&y_name, &y_labels),
-            &slice_cells,
-        )?;
-        let stopped: Vec<&Cell> = slice_cells
-            .iter()
-            .filter(|c| c.status != "stable")
-            .collect();
-        let worst = slice_cells
-            .iter()
-            .filter_map(|c| c.max_drift.map(|d| (d, c)))
-            .max_by(|a, b| a.0.total_cmp(&b.0));
-        let _ = writeln!(md, "## {} ({})\n", plan.study, study.description);
-        let _ = writeln!(
-            md,
-            "Tier `{}`: {}. Map: `{stem}.png`.\n",
-            plan.tier, plan.tier_description
-        );
-        let _ = writeln!(
-            md,
-            "- cells: {}; stable: {}; stopped: {}",
-            slice_cells.len(),
-            slice_cells.len() - stopped.len(),
-            stopped.len()
-        );
-        if let Some((d, c)) = worst {
-            let _ = writeln!(
-                md,
-                "- largest ledger drift: {d:.2e} at {} = {}, {} = {}{}",
-                c.x_key,
-                c.x,
-                c.y_key,
-                c.y,
-                c.dt_over_bound
-                    .map_or(String::new(), |f| format!(" (step {f:.2} of the bound)"))
-            );
-        }
-        let within = slice_cells
-            .iter()
-            .filter(|c| {
-                c.status == "stable"
-                    && c.max_drift
-                        .is_some_and(|d| d < hvi_engine::sim::LEDGER_DRIFT_BOUND)
-            })
-            .count();
-        let _ = writeln!(
-            md,
-            "- within the ledger bound {:.0e}: {} of {}",
-            hvi_engine::sim::LEDGER_DRIFT_BOUND,
-            within,
-            slice_cells.len()
-        );
-        for c in &stopped {
-            let _ = writeln!(
-                md,
-                "- stopped at {} = {}, {} = {}: {}",
-                c.x_key, c.x, c.y_key, c.y, c.trouble
-            );
-        }
-        md.push('\n');
-        cells.extend(slice_cells);
-    }
-    write_csv_atomic(&args.out.join("stability.csv"), &cells)?;
-    write_atomic_bytes(&args.out.join("stability.md"), md.as_bytes())?;
-    Ok(cells)
-}
-
-/// Colour of a stable cell by its drift: green (1e-7 or less) to orange (the ledger bound).
-fn drift_color(d: f64) -> RGBColor {
-    let lo = -7.0;
-    let hi = hvi_engine::sim::LEDGER_DRIFT_BOUND.log10();
-    let t = ((d.max(1e-300).log10() - lo) / (hi - lo)).clamp(0.0, 1.0);
-    let (a, b) = ([120.0, 200.0, 120.0], [245.0, 160.0, 40.0]);
-    let c = |k: usize| (a[k] + (b[k] - a[k]) * t) as u8;
-    RGBColor(c(0), c(1), c(2))
-}
-
-fn map_plot(
-    path: &Path,
-    title: &str,
-    subtitle: &str,
-    x: (&str, &[String]),
-    y: (&str, &[String]),
-    cells: &[Cell],
-) -> Result<()> {
-    fonts()?;
-    let (w, h) = (1300u32, 900u32);
-    let mut rgb = vec![255u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        let (nx, ny) = (x.1.len(), y.1.len());
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, (FAMILY, 22))
-            .margin(20)
-            .x_label_area_size(60)
-            .y_label_area_size(90)
-            .build_cartesian_2d(0.0..nx as f64, 0.0..ny as f64)?;
-        let xl = x.1.to_vec();
-        let yl = y.1.to_vec();
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_labels(nx * 2 + 1)
-            .y_labels(ny * 2 + 1)
-            .x_desc(x.0)
-            .y_desc(y.0)
-            .label_style((FAMILY, 16))
-            .axis_desc_style((FAMILY, 18))
-            .x_label_formatter(&|v| {
-                let k = (v - 0.5).round();
-                if (v - 0.5 - k).abs() < 1e-6 && k >= 0.0 {
-                    xl.get(k as usize).cloned().unwrap_or_default()
-                } else {
-                    String::new()
-                }
-            })
-            .y_label_formatter(&|v| {
-                let k = (v - 0.5).round();
-                if (v - 0.5 - k).abs() < 1e-6 && k >= 0.0 {
-                    yl.get(k as usize).cloned().unwrap_or_default()
-                } else {
-                    String::new()
-                }
-            })
-            .draw()?;
-        for c in cells {
-            let (x0, y0) = (c.at.0 as f64, c.at.1 as f64);
-            let fill = if c.status == "stable" {
-                c.max_drift.map_or(RGBColor(200, 200, 200), drift_color)
-            } else {
-                RGBColor(210, 40, 40)
-            };
-            chart.draw_series(std::iter::once(Rectangle::new(
-                [(x0 + 0.03, y0 + 0.03), (x0 + 0.97, y0 + 0.97)],
-                fill.filled(),
-            )))?;
-            let line1 = if c.status == "stable" {
-                c.max_drift.map_or("-".into(), |d| format!("{d:.0e}"))
-            } else {
-                "stopped".into()
-            };
-            let line2 = c
-                .dt_over_bound
-                .map_or(String::new(), |f| format!("dt {f:.2}"));
-            for (k, text) in [line1, line2].into_iter().enumerate() {
-                chart.draw_series(std::iter::once(Text::new(
-                    text,
-                    (x0 + 0.12, y0 + 0.68 - 0.3 * k as f64),
-                    (FAMILY, 14).into_font().color(&BLACK),
-                )))?;
             }
-        }
-        root.draw(&Text::new(
-            format!(
-                "{subtitle}. Cell: largest ledger drift, step / stability bound; red = stopped."
-            ),
-            (20, h as i32 - 22),
-            (FAMILY, 14).into_font().color(&RGBColor(60, 60, 60)),
-        ))?;
-        root.present()?;
+        })
+        .collect()
+}
+
+/// `<stem>.png` of a slice.
+fn draw_slice(dir: &Path, slice: &Slice) -> Result<()> {
+    let cells: Vec<MapCell> = slice
+        .cells
+        .iter()
+        .map(|c| MapCell {
+            at: c.at,
+            stopped: c.status != "stable",
+            max_drift: c.max_drift,
+            dt_over_bound: c.dt_over_bound,
+        })
+        .collect();
+    let [(x_name, x_labels), (y_name, y_labels)] = &slice.axes;
+    stability_map(
+        &dir.join(format!("{}.png", slice.stem)),
+        &StabilityMap {
+            title: &format!("{} \u{2014} {}", slice.name, slice.description),
+            subtitle: &slice.tier.1,
+            x: (x_name, x_labels),
+            y: (y_name, y_labels),
+            cells: &cells,
+            drift_bound: LEDGER_DRIFT_BOUND,
+        },
+    )
+}
+
+/// A slice's section of `stability.md`: the counts, the largest drift, the cells within the
+/// ledger bound and every stopped run with the engine's diagnostic.
+fn slice_summary(slice: &Slice) -> String {
+    let cells = &slice.cells;
+    let mut md = String::new();
+    let stopped: Vec<&Cell> = cells.iter().filter(|c| c.status != "stable").collect();
+    let worst = cells
+        .iter()
+        .filter_map(|c| c.max_drift.map(|d| (d, c)))
+        .max_by(|a, b| a.0.total_cmp(&b.0));
+    let _ = writeln!(md, "## {} ({})\n", slice.name, slice.description);
+    let _ = writeln!(
+        md,
+        "Tier `{}`: {}. Map: `{}.png`.\n",
+        slice.tier.0, slice.tier.1, slice.stem
+    );
+    let _ = writeln!(
+        md,
+        "- cells: {}; stable: {}; stopped: {}",
+        cells.len(),
+        cells.len() - stopped.len(),
+        stopped.len()
+    );
+    if let Some((d, c)) = worst {
+        let _ = writeln!(
+            md,
+            "- largest ledger drift: {d:.2e} at {} = {}, {} = {}{}",
+            c.x_key,
+            c.x,
+            c.y_key,
+            c.y,
+            c.dt_over_bound
+                .map_or(String::new(), |f| format!(" (step {f:.2} of the bound)"))
+        );
     }
-    write_png(path, &rgb, w, h)
+    let within = cells
+        .iter()
+        .filter(|c| c.status == "stable" && c.max_drift.is_some_and(|d| d < LEDGER_DRIFT_BOUND))
+        .count();
+    let _ = writeln!(
+        md,
+        "- within the ledger bound {:.0e}: {} of {}",
+        LEDGER_DRIFT_BOUND,
+        within,
+        cells.len()
+    );
+    for c in &stopped {
+        let _ = writeln!(
+            md,
+            "- stopped at {} = {}, {} = {}: {}",
+            c.x_key, c.x, c.y_key, c.y, c.trouble
+        );
+    }
+    md.push('\n');
+    md
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    fn cell(at: (usize, usize), stopped: bool, max_drift: Option<f64>) -> Cell {
+        Cell {
+            slice: "s".into(),
+            x_key: "scene.v0_m_s".into(),
+            x: (1000 * (at.0 + 1)).to_string(),
+            y_key: "run.dt_over_bound".into(),
+            y: (at.1 + 1).to_string(),
+            status: if stopped { "stopped" } else { "stable" }.into(),
+            max_drift,
+            dt_s: None,
+            dt_over_bound: Some((at.1 + 1) as f64),
+            broken_fraction: None,
+            trouble: if stopped {
+                "too close".into()
+            } else {
+                String::new()
+            },
+            at,
+        }
+    }
+
     #[test]
-    fn drift_colours_run_green_to_orange() {
-        assert_eq!(drift_color(1e-9), RGBColor(120, 200, 120));
-        assert_eq!(drift_color(1.0), RGBColor(245, 160, 40));
-        let mid = drift_color(1e-5);
-        assert!(mid.0 > 120 && mid.0 < 245);
+    fn a_slice_summary_counts_stopped_runs_and_names_the_largest_drift() {
+        let slice = Slice {
+            stem: "step".into(),
+            name: "stability-step".into(),
+            description: "v0 x step".into(),
+            tier: ("quick".into(), "tiny".into()),
+            axes: [
+                ("v0".into(), vec!["1000".into()]),
+                ("step".into(), vec!["1".into(), "2".into()]),
+            ],
+            cells: vec![
+                cell((0, 0), false, Some(1e-5)),
+                cell((0, 1), false, Some(2e-3)),
+                cell((1, 1), true, Some(1e6)),
+            ],
+        };
+        let md = slice_summary(&slice);
+        assert!(
+            md.starts_with(
+                "## stability-step (v0 x step)\n\nTier `quick`: tiny. Map: `step.png`.\n"
+            ),
+            "{md}"
+        );
+        assert!(md.contains("- cells: 3; stable: 2; stopped: 1\n"), "{md}");
+        assert!(md.contains("- largest ledger drift: 1.00e6 at scene.v0_m_s = 2000, run.dt_over_bound = 2 (step 2.00 of the bound)\n"), "{md}");
+        assert!(
+            md.contains("- within the ledger bound 1e-3: 1 of 3\n"),
+            "{md}"
+        );
+        assert!(
+            md.contains("- stopped at scene.v0_m_s = 2000, run.dt_over_bound = 2: too close\n"),
+            "{md}"
+        );
     }
 }

@@ -1,4 +1,5 @@
-//! The study subcommands' arguments and entry points (`main.rs` only dispatches here).
+//! `hvi-study plan`, `sweep` and `run-unit`: a study planned, run whole, or one of its runs
+//! executed for an external scheduler.
 
 use crate::cli::StudyArgs;
 use anyhow::Result;

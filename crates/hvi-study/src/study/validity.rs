@@ -20,7 +20,7 @@ use super::figures::plan_tiles;
 use super::figures::{field_of, map_axes};
 use super::sweep::print_failures;
 use crate::cli::ValidityArgs;
-use hvi_analysis::contour::Point;
+use hvi_analysis::contour::{Field, Point};
 use hvi_analysis::observable::Observable;
 use hvi_plot::contour::{contour_plot, ContourPlot};
 use hvi_plot::snapshots::snapshot_matrix;
@@ -150,39 +150,89 @@ pub fn validity_outputs(
     quiet: bool,
 ) -> Result<ValidityMap> {
     let axes = map_axes(plan)?;
-    let value = |r: &Record| r.observables.get(observable);
-    let valid_col: Vec<Value> = records
-        .iter()
-        .map(|r| match (r.status, value(r)) {
-            (RunStatus::Completed, Some(v)) => Value::Bool(v >= cutoff),
-            _ => Value::Null,
-        })
-        .collect();
-    let valid = valid_col
-        .iter()
-        .filter(|v| **v == Value::Bool(true))
-        .count();
-    let invalid = valid_col
-        .iter()
-        .filter(|v| **v == Value::Bool(false))
-        .count();
+    let cut = Cut { observable, cutoff };
+    let (valid_col, valid, invalid) = valid_column(records, cut);
     table.push_column("valid", valid_col);
     table.write(out, "results")?;
 
-    let field = field_of(plan, records, axes, 0, |r| value(r))?;
+    let field = field_of(plan, records, axes, 0, |r| cut.value(r))?;
     let boundary = field.contour(cutoff);
     let (kx, ky) = (&plan.axes[axes.0].key, &plan.axes[axes.1].key);
     write_boundary(&out.join("validity_boundary.csv"), (kx, ky), &boundary)?;
+    let stem = out.join("validity_map");
+    contour_plot(
+        &stem,
+        &map_plot(plan, axes, records, field, cut, (valid, invalid)),
+    )?;
+    let snapshots = draw_snapshots(plan, out, axes, records, cut)?;
+    if !quiet {
+        eprintln!(
+            "validity: {valid} runs with {} >= {cutoff}, {invalid} below; boundary: {} polyline(s) in {}",
+            observable,
+            boundary.len(),
+            out.join("validity_boundary.csv").display()
+        );
+        eprintln!("plot: {}", stem.with_extension("png").display());
+        eprintln!("snapshots: {}", snapshots.display());
+    }
+    println!("{}", out.join("results.csv").display());
+    Ok(ValidityMap {
+        boundary,
+        valid,
+        invalid,
+        plot: stem,
+    })
+}
+
+/// The observable mapped and its cut-off: a run at or above it is valid.
+#[derive(Debug, Clone, Copy)]
+struct Cut {
+    observable: Observable,
+    cutoff: f64,
+}
+
+impl Cut {
+    /// A run's value of the observable.
+    fn value(&self, r: &Record) -> Option<f64> {
+        r.observables.get(self.observable)
+    }
+}
+
+/// The `valid` column (true, false, or null for a run without a value) and the counts of
+/// valid and invalid runs.
+fn valid_column(records: &[Record], cut: Cut) -> (Vec<Value>, usize, usize) {
+    let column: Vec<Value> = records
+        .iter()
+        .map(|r| match (r.status, cut.value(r)) {
+            (RunStatus::Completed, Some(v)) => Value::Bool(v >= cut.cutoff),
+            _ => Value::Null,
+        })
+        .collect();
+    let count = |b: bool| column.iter().filter(|v| **v == Value::Bool(b)).count();
+    let (valid, invalid) = (count(true), count(false));
+    (column, valid, invalid)
+}
+
+/// Fig. 16b: the observable over the map's axes, the cut-off in red.
+fn map_plot(
+    plan: &Plan,
+    axes: (usize, usize),
+    records: &[Record],
+    field: Field,
+    Cut { observable, cutoff }: Cut,
+    (valid, invalid): (usize, usize),
+) -> ContourPlot {
     let particles = records
         .iter()
         .filter_map(|r| r.observables.get(Observable::Particles))
         .fold((f64::INFINITY, 0.0f64), |(lo, hi), n| {
             (lo.min(n), hi.max(n))
         });
-    let plot = ContourPlot {
+    let fragmentation = observable == Observable::Fragmentation;
+    ContourPlot {
         title: format!(
             "{} over ({}, {}) (Fig. 16b)",
-            if observable == Observable::Fragmentation {
+            if fragmentation {
                 "Fragmentation F"
             } else {
                 observable.name()
@@ -199,7 +249,7 @@ pub fn validity_outputs(
         x_log: false,
         y_log: false,
         field,
-        value_label: if observable == Observable::Fragmentation {
+        value_label: if fragmentation {
             "F".into()
         } else {
             observable.to_string()
@@ -208,13 +258,20 @@ pub fn validity_outputs(
         highlight: Some((cutoff, format!("{} = {cutoff}", observable))),
         extra_points: Vec::new(),
         markers: Vec::new(),
-    };
-    let stem = out.join("validity_map");
-    contour_plot(&stem, &plot)?;
-    // Fig. 17: the runs' side views, valid framed red, invalid blue.
+    }
+}
+
+/// Fig. 17: the runs' side views, valid framed red, invalid blue. Returns the file.
+fn draw_snapshots(
+    plan: &Plan,
+    out: &Path,
+    axes: (usize, usize),
+    records: &[Record],
+    cut: Cut,
+) -> Result<PathBuf> {
+    let Cut { observable, cutoff } = cut;
     let (cols, rows, tiles) = plan_tiles(plan, out, axes, 0, |i| {
-        let r = &records[i];
-        let v = value(r);
+        let v = cut.value(&records[i]);
         (
             v.map(|v| if v >= cutoff { RED } else { BLUE }),
             v.map_or("no cloud".to_string(), |v| {
@@ -233,21 +290,5 @@ pub fn validity_outputs(
         (&plan.axes[axes.1].label, &rows),
         &tiles,
     )?;
-    if !quiet {
-        eprintln!(
-            "validity: {valid} runs with {} >= {cutoff}, {invalid} below; boundary: {} polyline(s) in {}",
-            observable,
-            boundary.len(),
-            out.join("validity_boundary.csv").display()
-        );
-        eprintln!("plot: {}", stem.with_extension("png").display());
-        eprintln!("snapshots: {}", snapshots.display());
-    }
-    println!("{}", out.join("results.csv").display());
-    Ok(ValidityMap {
-        boundary,
-        valid,
-        invalid,
-        plot: stem,
-    })
+    Ok(snapshots)
 }
