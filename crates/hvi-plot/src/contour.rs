@@ -7,19 +7,24 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, Result};
 use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::save::write_atomic_bytes;
+use crate::save::{encode_png, write_atomic_bytes};
+use crate::theme::{
+    font, fonts, line_key, series_legend, subtitle, LegendStyle, ThemedAxes, AXIS_TEXT, FAMILY,
+};
 use hvi_analysis::contour::{Field, Point};
 
-/// DejaVu Sans, shared with `render` (same file; registered here too so plots do not depend
-/// on a picture having been drawn first).
-pub(crate) use crate::render::fonts;
-use crate::render::FAMILY;
+/// The legend of a contour map: a lighter box with a black border over the field.
+const MAP_LEGEND: LegendStyle = LegendStyle {
+    opacity: 0.85,
+    border: BLACK,
+    label_px: 15,
+};
 
 /// A marked point with a label (the optimum, the paper's fit).
 #[derive(Debug, Clone)]
@@ -217,8 +222,7 @@ where
         .disable_mesh()
         .x_desc(&p.x_label)
         .y_desc(&p.y_label)
-        .label_style((FAMILY, 17))
-        .axis_desc_style((FAMILY, 19))
+        .axis_text(AXIS_TEXT)
         .x_label_formatter(&|v| tick(*v, p.x_log))
         .y_label_formatter(&|v| tick(*v, p.y_log))
         .draw()?;
@@ -264,9 +268,8 @@ where
             let s =
                 chart.draw_series(std::iter::once(PathElement::new(line, RED.stroke_width(4))))?;
             if first {
-                s.label(label.clone()).legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 22, y)], RED.stroke_width(4))
-                });
+                s.label(label.clone())
+                    .legend(|(x, y)| line_key(x, y, 22, RED.stroke_width(4)));
                 first = false;
             }
         }
@@ -316,18 +319,8 @@ where
             s.legend(move |(x, y)| Circle::new((x + 10, y), 6, BLACK.stroke_width(3)));
         }
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FAMILY, 15))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()?;
-    main.draw(&Text::new(
-        p.subtitle.clone(),
-        (20, main.dim_in_pixel().1 as i32 - 26),
-        (FAMILY, 15).into_font().color(&RGBColor(60, 60, 60)),
-    ))?;
+    series_legend(&mut chart, SeriesLabelPosition::UpperRight, MAP_LEGEND)?;
+    subtitle(&main, &p.subtitle, 26)?;
 
     // Colour bar.
     let (bw, bh) = bar.dim_in_pixel();
@@ -347,11 +340,7 @@ where
     for k in 0..=4 {
         let z = zmin + zspan * k as f64 / 4.0;
         let y = bottom - ((bottom - top) as f64 * k as f64 / 4.0) as i32;
-        bar.draw(&Text::new(
-            tick(z, false),
-            (left + 34, y - 8),
-            (FAMILY, 15).into_font(),
-        ))?;
+        bar.draw(&Text::new(tick(z, false), (left + 34, y - 8), font(15)))?;
     }
     if let Some((level, _)) = &p.highlight {
         if *level >= zmin && *level <= zmax {
@@ -365,7 +354,7 @@ where
     bar.draw(&Text::new(
         p.value_label.clone(),
         (left, top - 30),
-        (FAMILY, 16).into_font(),
+        font(16),
     ))?;
     let _ = bw;
     root.present()?;
@@ -389,16 +378,7 @@ pub fn contour_plot(stem: &Path, p: &ContourPlot) -> Result<()> {
         draw(&root, p)?;
     }
     let png_path = stem.with_extension("png");
-    let mut bytes = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut bytes, w, h);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        let mut writer = enc.write_header().context("PNG header")?;
-        writer.write_image_data(&rgb).context("PNG data")?;
-        writer.finish().context("PNG end")?;
-    }
-    write_atomic_bytes(&png_path, &bytes)?;
+    write_atomic_bytes(&png_path, &encode_png(&rgb, w, h, None)?)?;
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();

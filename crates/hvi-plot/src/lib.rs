@@ -3,10 +3,11 @@
 //! Every picture hvi draws, from data in memory to PNG (and SVG where a user edits it):
 //! particle renders of a run ([`render`]), contour maps ([`contour`]), snapshot matrices
 //! ([`snapshots`]) and the paper's line figures ([`paper`]). One embedded font and one theme
-//! ([`render::fonts`], [`render::FAMILY`]); no system libraries.
+//! ([`theme`]: colours, text, legend and subtitle) for all of them; no system libraries.
 
 pub mod contour;
 pub mod paper;
 pub mod render;
 mod save;
 pub mod snapshots;
+pub mod theme;

@@ -12,12 +12,14 @@ use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::render::{fonts, write_png, FAMILY};
+use crate::save::write_png;
+use crate::theme::{
+    self, dashed_key, font, fonts, line_key, paper_legend, series_legend, ThemedAxes, AXIS_TEXT,
+    BLUE_LINE, FAMILY, GREY, GRID, RED_LINE,
+};
 use hvi_analysis::decide::EnergySample;
 
-const BLUE_LINE: RGBColor = RGBColor(31, 96, 196);
-const RED_LINE: RGBColor = RGBColor(214, 39, 40);
-const GREY: RGBColor = RGBColor(110, 110, 110);
+/// The colours of the curves of Fig. 4, one per particle count.
 const SERIES: [RGBColor; 4] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
@@ -105,11 +107,7 @@ pub fn potentials(
     let w = laws(wca, lo, hi, 600);
     png(path, (1300, 1150), |root| {
         let (top, rest) = root.split_vertically(70);
-        top.draw(&Text::new(
-            title.to_string(),
-            (20, 20),
-            (FAMILY, 22).into_font(),
-        ))?;
+        top.draw(&Text::new(title.to_string(), (20, 20), font(22)))?;
         let panels = rest.split_evenly((2, 1));
         for (k, panel) in panels.iter().enumerate() {
             let pick = |l: &(f64, f64, f64)| if k == 0 { l.1 } else { l.2 };
@@ -130,15 +128,14 @@ pub fn potentials(
                 .build_cartesian_2d(lo..hi, y_lo..y_hi)?;
             chart
                 .configure_mesh()
-                .light_line_style(RGBColor(235, 235, 235))
+                .light_line_style(GRID)
                 .x_desc("r / \u{3c3}")
                 .y_desc(if k == 0 {
                     "pair energy (J)"
                 } else {
                     "pair force (N), > 0 repulsive"
                 })
-                .label_style((FAMILY, 17))
-                .axis_desc_style((FAMILY, 19))
+                .axis_text(AXIS_TEXT)
                 .x_label_formatter(&|v| format!("{v:.2}"))
                 .y_label_formatter(&|v| {
                     if k == 0 {
@@ -156,13 +153,11 @@ pub fn potentials(
             chart
                 .draw_series(LineSeries::new(line(&p.contact), BLUE_LINE.stroke_width(3)))?
                 .label("contact repulsion, eq. (3) as printed (prefactor \u{3b5})")
-                .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], BLUE_LINE.stroke_width(3))
-                });
+                .legend(|(x, y)| line_key(x, y, 24, BLUE_LINE.stroke_width(3)));
             chart
                 .draw_series(std::iter::once(dashed(line(&w.contact), BLUE_LINE, 2)))?
                 .label("contact repulsion, WCA form (prefactor 4\u{3b5})")
-                .legend(|(x, y)| dashed_legend(x, y, BLUE_LINE));
+                .legend(|(x, y)| dashed_key(x, y, BLUE_LINE));
             let bonded: Vec<(f64, f64)> = p
                 .spring
                 .iter()
@@ -178,9 +173,7 @@ pub fn potentials(
             chart
                 .draw_series(LineSeries::new(bonded, RED_LINE.stroke_width(3)))?
                 .label("bond spring, eq. (4), intact up to rcut")
-                .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], RED_LINE.stroke_width(3))
-                });
+                .legend(|(x, y)| line_key(x, y, 24, RED_LINE.stroke_width(3)));
             chart
                 .draw_series(PointSeries::of_element(
                     broken.into_iter().step_by(6),
@@ -202,12 +195,10 @@ pub fn potentials(
                     color,
                     2,
                 )))?;
-                let style = TextStyle::from((FAMILY, 17).into_font())
-                    .color(&color)
-                    .pos(Pos::new(
-                        if right { HPos::Left } else { HPos::Right },
-                        VPos::Center,
-                    ));
+                let style = font(17).color(&color).pos(Pos::new(
+                    if right { HPos::Left } else { HPos::Right },
+                    VPos::Center,
+                ));
                 let dx = if right { 0.008 } else { -0.008 };
                 chart.draw_series(std::iter::once(Text::new(
                     format!("{name} = {x:.3} \u{3c3}"),
@@ -215,28 +206,15 @@ pub fn potentials(
                     style,
                 )))?;
             }
-            chart
-                .configure_series_labels()
-                .position(if k == 0 {
-                    SeriesLabelPosition::UpperMiddle
-                } else {
-                    SeriesLabelPosition::UpperRight
-                })
-                .background_style(WHITE.mix(0.9))
-                .border_style(GREY)
-                .label_font((FAMILY, 16))
-                .draw()?;
+            let position = if k == 0 {
+                SeriesLabelPosition::UpperMiddle
+            } else {
+                SeriesLabelPosition::UpperRight
+            };
+            series_legend(&mut chart, position, paper_legend(16))?;
         }
         Ok(())
     })
-}
-
-fn dashed_legend(
-    x: i32,
-    y: i32,
-    color: RGBColor,
-) -> DashedPathElement<std::vec::IntoIter<(i32, i32)>, i32> {
-    DashedPathElement::new(vec![(x, y), (x + 24, y)], 6, 4, color.stroke_width(2))
 }
 
 /// One energy curve of Fig. 4.
@@ -272,11 +250,7 @@ pub fn sizing(
     counts.dedup();
     png(path, (1300, 1150), |root| {
         let (top, rest) = root.split_vertically(60);
-        top.draw(&Text::new(
-            title.to_string(),
-            (20, 18),
-            (FAMILY, 22).into_font(),
-        ))?;
+        top.draw(&Text::new(title.to_string(), (20, 18), font(22)))?;
         let panels = rest.split_evenly((2, 1));
         for (k, panel) in panels.iter().enumerate() {
             let sized = k == 1;
@@ -300,11 +274,10 @@ pub fn sizing(
                 .build_cartesian_2d(0.0..t_hi, 0.0..e_hi)?;
             chart
                 .configure_mesh()
-                .light_line_style(RGBColor(235, 235, 235))
+                .light_line_style(GRID)
                 .x_desc("\u{3c4} (\u{b5}s)")
                 .y_desc("energy (J)")
-                .label_style((FAMILY, 17))
-                .axis_desc_style((FAMILY, 19))
+                .axis_text(AXIS_TEXT)
                 .x_label_formatter(&|v| format!("{v:.1}"))
                 .y_label_formatter(&|v| format!("{v:.2}"))
                 .draw()?;
@@ -324,21 +297,17 @@ pub fn sizing(
                 chart
                     .draw_series(LineSeries::new(kin, color.stroke_width(3)))?
                     .label(format!("N = {}: kinetic", c.particles))
-                    .legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
-                    });
+                    .legend(move |(x, y)| line_key(x, y, 24, color.stroke_width(3)));
                 chart
                     .draw_series(std::iter::once(dashed(pot, color, 3)))?
                     .label(format!("N = {}: potential (contact + bonds)", c.particles))
-                    .legend(move |(x, y)| dashed_legend(x, y, color));
+                    .legend(move |(x, y)| dashed_key(x, y, color));
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .background_style(WHITE.mix(0.9))
-                .border_style(GREY)
-                .label_font((FAMILY, 15))
-                .draw()?;
+            series_legend(
+                &mut chart,
+                SeriesLabelPosition::UpperRight,
+                paper_legend(15),
+            )?;
         }
         Ok(())
     })
@@ -400,11 +369,10 @@ pub fn convergence(
             )?;
         chart
             .configure_mesh()
-            .light_line_style(RGBColor(235, 235, 235))
+            .light_line_style(GRID)
             .x_desc("particles N (log scale)")
             .y_desc("fragmentation F = N_frag / N_part")
-            .label_style((FAMILY, 17))
-            .axis_desc_style((FAMILY, 19))
+            .axis_text(AXIS_TEXT)
             // Labels at 1, 2 and 5 per decade: the default key points left the lowest counts
             // unlabelled and crowded the decade's end.
             .x_label_formatter(&|v| log_label_125(*v))
@@ -426,7 +394,7 @@ pub fn convergence(
                 "the paper: converges from about {} particles",
                 hvi_analysis::number::short(paper)
             ))
-            .legend(|(x, y)| dashed_legend(x, y, RED_LINE));
+            .legend(|(x, y)| dashed_key(x, y, RED_LINE));
         if let Some(n) = ours {
             chart
                 .draw_series(std::iter::once(dashed(vec![(n, 0.0), (n, y_hi)], BLACK, 2)))?
@@ -434,20 +402,10 @@ pub fn convergence(
                     "ours: F changes by < {} % per step from N = {n} on",
                     100.0 * tolerance
                 ))
-                .legend(|(x, y)| dashed_legend(x, y, BLACK));
+                .legend(|(x, y)| dashed_key(x, y, BLACK));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.9))
-            .border_style(GREY)
-            .label_font((FAMILY, 16))
-            .draw()?;
-        root.draw(&Text::new(
-            subtitle.to_string(),
-            (20, root.dim_in_pixel().1 as i32 - 30),
-            (FAMILY, 15).into_font().color(&RGBColor(60, 60, 60)),
-        ))?;
+        series_legend(&mut chart, SeriesLabelPosition::UpperLeft, paper_legend(16))?;
+        theme::subtitle(root, subtitle, 30)?;
         Ok(())
     })
 }
@@ -469,11 +427,10 @@ pub fn front_velocity(path: &Path, points: &[(f64, f64)], title: &str, note: &st
             .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)?;
         chart
             .configure_mesh()
-            .light_line_style(RGBColor(235, 235, 235))
+            .light_line_style(GRID)
             .x_desc("t / D")
             .y_desc("axial front velocity va / v0")
-            .label_style((FAMILY, 17))
-            .axis_desc_style((FAMILY, 19))
+            .axis_text(AXIS_TEXT)
             .x_label_formatter(&|v| format!("{v:.2}"))
             .y_label_formatter(&|v| format!("{v:.2}"))
             .draw()?;
@@ -486,18 +443,12 @@ pub fn front_velocity(path: &Path, points: &[(f64, f64)], title: &str, note: &st
             )?
             .label("our runs")
             .legend(|(x, y)| Circle::new((x + 12, y), 6, BLUE_LINE.filled()));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.9))
-            .border_style(GREY)
-            .label_font((FAMILY, 16))
-            .draw()?;
-        root.draw(&Text::new(
-            note.to_string(),
-            (20, root.dim_in_pixel().1 as i32 - 30),
-            (FAMILY, 15).into_font().color(&RGBColor(60, 60, 60)),
-        ))?;
+        series_legend(
+            &mut chart,
+            SeriesLabelPosition::UpperRight,
+            paper_legend(16),
+        )?;
+        theme::subtitle(root, note, 30)?;
         Ok(())
     })
 }

@@ -15,47 +15,28 @@
 
 use std::ops::Range;
 use std::path::Path;
-use std::sync::OnceLock;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, Result};
 use glam::DVec3;
 use hvi_engine::cloud::{quantile, CloudMeasurement, Fragment, TrackRow};
 use hvi_engine::scene::{Derived, Geometry, SceneSpec};
 use hvi_engine::sim::Simulation;
 use hvi_engine::state::Body;
-use plotters::coord::types::RangedCoordf64;
-use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::save::write_atomic_bytes;
+use crate::theme::{
+    line_key, series_legend, text_style, Area, Chart2d, ThemedAxes, AXIS_TEXT, AXIS_TEXT_LARGE,
+    GRID, GUIDE, IMPACTOR, IMPACTOR_RGB, MEASURE, PLATE, PLATE_RGB, RUN_LEGEND,
+};
 
-/// DejaVu Sans (Bitstream Vera licence, see `assets/fonts/LICENSE-DejaVu.txt`).
-pub(crate) const FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
-/// The font family every picture uses (DejaVu Sans, embedded).
-pub const FAMILY: &str = "sans-serif";
+/// The font and PNG writer, where callers of this module have always found them.
+pub use crate::save::write_png;
+pub use crate::theme::{fonts, FAMILY};
 
-const IMPACTOR_RGB: [u8; 3] = [214, 39, 40];
-const PLATE_RGB: [u8; 3] = [31, 96, 196];
-const IMPACTOR: RGBColor = RGBColor(214, 39, 40);
-const PLATE: RGBColor = RGBColor(31, 96, 196);
 /// Smallest drawn particle, pixels: a lone particle in a sparse cloud stays visible.
 const MIN_DOT_PX: i32 = 2;
-const GUIDE: RGBColor = RGBColor(90, 90, 90);
-const MEASURE: RGBColor = RGBColor(0, 130, 60);
-
-/// Registers the embedded font with plotters once (every picture of the crate calls it).
-pub fn fonts() -> Result<()> {
-    static DONE: OnceLock<bool> = OnceLock::new();
-    let ok = *DONE
-        .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
-    if ok {
-        Ok(())
-    } else {
-        Err(anyhow!("the embedded font could not be loaded"))
-    }
-}
 
 /// The particles at one instant, as pictures need them (f32 is plenty for pixels).
 #[derive(Debug, Clone)]
@@ -178,21 +159,6 @@ fn format_mm(mm: f64) -> String {
     }
 }
 
-/// Encodes an RGB buffer as PNG and writes it atomically.
-pub fn write_png(path: &Path, rgb: &[u8], w: u32, h: u32) -> Result<()> {
-    let mut bytes = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut bytes, w, h);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.set_compression(png::Compression::Fast);
-        let mut writer = enc.write_header().context("PNG header")?;
-        writer.write_image_data(rgb).context("PNG data")?;
-        writer.finish().context("PNG end")?;
-    }
-    write_atomic_bytes(path, &bytes).with_context(|| format!("cannot write {}", path.display()))
-}
-
 /// A rectangle of the image in pixels, [x0, x1) x [y0, y1).
 #[derive(Debug, Clone, Copy)]
 struct PixelRect {
@@ -267,14 +233,6 @@ fn trimmed_range(mut v: Vec<f64>, lo: f64, hi: f64) -> Option<(f64, f64)> {
     let a = quantile(&mut v, lo)?;
     let b = quantile(&mut v, hi)?;
     Some((a, b))
-}
-
-type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
-type Chart2d<'a, 'b> =
-    ChartContext<'b, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
-
-fn text_style(size: f64) -> TextStyle<'static> {
-    TextStyle::from((FAMILY, size).into_font()).color(&BLACK)
 }
 
 /// The chart of one side-view panel (z horizontal, x vertical, both in mm).
@@ -383,8 +341,7 @@ pub fn side_view(
                 .disable_mesh()
                 .x_desc("z (mm), impact direction \u{2192}")
                 .y_desc("x (mm)")
-                .label_style((FAMILY, 17))
-                .axis_desc_style((FAMILY, 19))
+                .axis_text(AXIS_TEXT)
                 .x_label_formatter(&|v| format!("{v:.0}"))
                 .y_label_formatter(&|v| format!("{v:.0}"))
                 .draw()?;
@@ -952,19 +909,17 @@ pub fn fragment_histogram(
                 .set_secondary_coord((x_lo..x_hi).log_scale(), (0.5..n_hi).log_scale());
             chart
                 .configure_mesh()
-                .light_line_style(RGBColor(235, 235, 235))
+                .light_line_style(GRID)
                 .x_desc("volume-equivalent diameter d (mm)")
                 .y_desc("share of the cloud's mass")
-                .label_style((FAMILY, 18))
-                .axis_desc_style((FAMILY, 20))
+                .axis_text(AXIS_TEXT_LARGE)
                 .x_label_formatter(&|v| format!("{}", (v * 1e6).round() / 1e6))
                 .y_label_formatter(&|v| format!("{v:.2}"))
                 .draw()?;
             chart
                 .configure_secondary_axes()
                 .y_desc("number of fragments")
-                .label_style((FAMILY, 18))
-                .axis_desc_style((FAMILY, 20))
+                .axis_text(AXIS_TEXT_LARGE)
                 .y_label_formatter(&|v| format!("{v:.0}"))
                 .draw()?;
             chart
@@ -1000,16 +955,8 @@ pub fn fragment_histogram(
                     ShapeStyle::from(&GUIDE).stroke_width(2),
                 ))?
                 .label(format!("one particle, d = {one:.3} mm (resolution limit)"))
-                .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], GUIDE.stroke_width(2))
-                });
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .background_style(WHITE.mix(0.9))
-                .border_style(GUIDE)
-                .label_font((FAMILY, 18))
-                .draw()?;
+                .legend(|(x, y)| line_key(x, y, 20, GUIDE.stroke_width(2)));
+            series_legend(&mut chart, SeriesLabelPosition::UpperRight, RUN_LEGEND)?;
             let lines = [
                 format!(
                     "F = {:.3}, N_part = {}, N_frag = {}",
@@ -1076,19 +1023,17 @@ pub fn track_plot(
             .set_secondary_coord(t_lo..t_hi, 0.0..1.6);
         chart
             .configure_mesh()
-            .light_line_style(RGBColor(235, 235, 235))
+            .light_line_style(GRID)
             .x_desc("\u{3c4} (\u{b5}s)")
             .y_desc("length (mm)")
-            .label_style((FAMILY, 18))
-            .axis_desc_style((FAMILY, 20))
+            .axis_text(AXIS_TEXT_LARGE)
             .x_label_formatter(&|v| format!("{v:.0}"))
             .y_label_formatter(&|v| format!("{v:.0}"))
             .draw()?;
         chart
             .configure_secondary_axes()
             .y_desc("front velocity / v0")
-            .label_style((FAMILY, 18))
-            .axis_desc_style((FAMILY, 20))
+            .axis_text(AXIS_TEXT_LARGE)
             .y_label_formatter(&|v| format!("{v:.1}"))
             .draw()?;
         let series = |f: fn(&TrackRow) -> Option<f64>| -> Vec<(f64, f64)> {
@@ -1103,14 +1048,14 @@ pub fn track_plot(
                 MEASURE.stroke_width(3),
             ))?
             .label("La")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], MEASURE.stroke_width(3)));
+            .legend(|(x, y)| line_key(x, y, 20, MEASURE.stroke_width(3)));
         chart
             .draw_series(LineSeries::new(
                 series(|r| r.length_radial_m),
                 PLATE.stroke_width(3),
             ))?
             .label("Lr")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], PLATE.stroke_width(3)));
+            .legend(|(x, y)| line_key(x, y, 20, PLATE.stroke_width(3)));
         let v0 = info.v0_m_s;
         let speed: Vec<(f64, f64)> = track
             .iter()
@@ -1119,7 +1064,7 @@ pub fn track_plot(
         chart
             .draw_secondary_series(LineSeries::new(speed, IMPACTOR.stroke_width(1)))?
             .label("front velocity / v0 between samples (right axis)")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], IMPACTOR.stroke_width(2)));
+            .legend(|(x, y)| line_key(x, y, 20, IMPACTOR.stroke_width(2)));
         for t in front_times_s.iter().flatten() {
             chart.draw_secondary_series(DashedLineSeries::new(
                 vec![(t * us, 0.0), (t * us, 1.6)],
@@ -1137,17 +1082,9 @@ pub fn track_plot(
                     ShapeStyle::from(&BLACK).stroke_width(1),
                 ))?
                 .label(format!("va / v0 = {r:.3} (front at the two dashed times)"))
-                .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(1))
-                });
+                .legend(|(x, y)| line_key(x, y, 20, BLACK.stroke_width(1)));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.9))
-            .border_style(GUIDE)
-            .label_font((FAMILY, 18))
-            .draw()?;
+        series_legend(&mut chart, SeriesLabelPosition::UpperLeft, RUN_LEGEND)?;
         root.present()?;
     }
     write_png(path, &rgb, w, h)

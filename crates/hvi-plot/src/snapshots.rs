@@ -9,7 +9,8 @@ use std::path::Path;
 use anyhow::{anyhow, bail, Context, Result};
 use plotters::prelude::*;
 
-use crate::save::write_atomic_bytes;
+use crate::save::{encode_png, write_atomic_bytes};
+use crate::theme::{font, fonts};
 
 /// An RGB image.
 #[derive(Debug, Clone)]
@@ -117,7 +118,7 @@ pub fn snapshot_matrix(
     (y_label, rows): (&str, &[String]),
     tiles: &[Tile],
 ) -> Result<usize> {
-    crate::render::fonts()?;
+    fonts()?;
     let tw = if cols.len() > 4 { 260 } else { 380 };
     // The side view's left panel: the projection along y (render::side_view's layout).
     let crop =
@@ -159,7 +160,6 @@ pub fn snapshot_matrix(
     }
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (w as u32, h as u32)).into_drawing_area();
-        let font = |size: u32| ("sans-serif", size).into_font();
         root.draw(&Text::new(title.to_string(), (20, 20), font(28)))?;
         root.draw(&Text::new(
             format!("columns: {x_label}; rows: {y_label}"),
@@ -193,16 +193,7 @@ pub fn snapshot_matrix(
         }
         root.present()?;
     }
-    let mut bytes = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut bytes, w as u32, h as u32);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.set_compression(png::Compression::Fast);
-        let mut writer = enc.write_header().context("PNG header")?;
-        writer.write_image_data(&rgb).context("PNG data")?;
-        writer.finish().context("PNG end")?;
-    }
+    let bytes = encode_png(&rgb, w as u32, h as u32, Some(png::Compression::Fast))?;
     write_atomic_bytes(path, &bytes)?;
     Ok(pictures.iter().filter(|p| p.is_some()).count())
 }
