@@ -7,19 +7,24 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, Result};
 use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::save::write_atomic_bytes;
+use crate::save::{encode_png, write_atomic_bytes};
+use crate::theme::{
+    font, fonts, line_key, series_legend, subtitle, LegendStyle, ThemedAxes, AXIS_TEXT, FAMILY,
+};
 use hvi_analysis::contour::{Field, Point};
 
-/// DejaVu Sans, shared with `render` (same file; registered here too so plots do not depend
-/// on a picture having been drawn first).
-pub(crate) use crate::render::fonts;
-use crate::render::FAMILY;
+/// The legend of a contour map: a lighter box with a black border over the field.
+const MAP_LEGEND: LegendStyle = LegendStyle {
+    opacity: 0.85,
+    border: BLACK,
+    label_px: 15,
+};
 
 /// A marked point with a label (the optimum, the paper's fit).
 #[derive(Debug, Clone)]
@@ -176,54 +181,122 @@ fn tick(v: f64, log: bool) -> String {
     }
 }
 
+/// A contour map's chart: log10 or linear coordinates on both axes, ticks from [`axis_keys`].
+type MapChart<'a, DB> = ChartContext<'a, DB, Cartesian2d<KeyedAxis, KeyedAxis>>;
+
+/// What the map spans: the axis ranges in drawn coordinates (padded, with room above the data
+/// for the legend) and the values the colours cover.
+struct MapFrame {
+    x: (f64, f64),
+    y: (f64, f64),
+    zmin: f64,
+    zmax: f64,
+    zspan: f64,
+}
+
+impl MapFrame {
+    /// The frame of a field in drawn coordinates.
+    fn of(field: &Field) -> Self {
+        let (x0, x1) = (field.x[0], field.x[field.x.len() - 1]);
+        let (y0, y1) = (field.y[0], field.y[field.y.len() - 1]);
+        let pad = |a: f64, b: f64| {
+            let d = if b > a { 0.04 * (b - a) } else { 0.5 };
+            (a - d, b + d)
+        };
+        let (xa, xb) = pad(x0, x1);
+        let (ya, yb) = pad(y0, y1);
+        // Room above the data for the legend, so it hides no run.
+        let yb = yb + 0.22 * (yb - ya);
+        let (zmin, zmax) = field.range().unwrap_or((0.0, 1.0));
+        let zspan = if zmax > zmin { zmax - zmin } else { 1.0 };
+        MapFrame {
+            x: (xa, xb),
+            y: (ya, yb),
+            zmin,
+            zmax,
+            zspan,
+        }
+    }
+
+    /// A value's place on the colour map: 0 at the smallest, 1 at the largest.
+    fn norm(&self, z: f64) -> f64 {
+        (z - self.zmin) / self.zspan
+    }
+}
+
+/// The field in drawn coordinates (log10 on a log axis).
+fn drawn_field(p: &ContourPlot) -> Field {
+    let f = &p.field;
+    Field {
+        x: f.x.iter().map(|&v| tx(v, p.x_log)).collect(),
+        y: f.y.iter().map(|&v| tx(v, p.y_log)).collect(),
+        z: f.z.clone(),
+    }
+}
+
+/// Draws the whole plot on `root` (a bitmap or an SVG): the map, its legend and subtitle, and
+/// the colour bar.
 fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &ContourPlot) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
     root.fill(&WHITE)?;
-    let f = &p.field;
-    let field = Field {
-        x: f.x.iter().map(|&v| tx(v, p.x_log)).collect(),
-        y: f.y.iter().map(|&v| tx(v, p.y_log)).collect(),
-        z: f.z.clone(),
-    };
-    let (x0, x1) = (field.x[0], field.x[field.x.len() - 1]);
-    let (y0, y1) = (field.y[0], field.y[field.y.len() - 1]);
-    let pad = |a: f64, b: f64| {
-        let d = if b > a { 0.04 * (b - a) } else { 0.5 };
-        (a - d, b + d)
-    };
-    let (xa, xb) = pad(x0, x1);
-    let (ya, yb) = pad(y0, y1);
-    // Room above the data for the legend, so it hides no run.
-    let yb = yb + 0.22 * (yb - ya);
-    let (zmin, zmax) = field.range().unwrap_or((0.0, 1.0));
-    let zspan = if zmax > zmin { zmax - zmin } else { 1.0 };
-    let norm = |z: f64| (z - zmin) / zspan;
-
+    let field = drawn_field(p);
+    let frame = MapFrame::of(&field);
     let (main, bar) = root.split_horizontally(root.dim_in_pixel().0 - 150);
-    let mut chart = ChartBuilder::on(&main)
+    let mut chart = map_axes(&main, p, &frame)?;
+    fill_field(&mut chart, &field, &frame)?;
+    iso_lines(&mut chart, &field, p, &frame)?;
+    run_points(&mut chart, &field, p)?;
+    markers(&mut chart, p)?;
+    series_legend(&mut chart, SeriesLabelPosition::UpperRight, MAP_LEGEND)?;
+    subtitle(&main, &p.subtitle, 26)?;
+    colour_bar(&bar, p, &frame)?;
+    root.present()?;
+    Ok(())
+}
+
+/// The map's chart with its title, axis titles and ticks (physical values on log axes).
+fn map_axes<'a, DB: DrawingBackend>(
+    main: &'a DrawingArea<DB, Shift>,
+    p: &ContourPlot,
+    frame: &MapFrame,
+) -> Result<MapChart<'a, DB>>
+where
+    DB::ErrorType: 'static,
+{
+    let mut chart = ChartBuilder::on(main)
         .caption(&p.title, (FAMILY, 26))
         .margin(18)
         .margin_bottom(44)
         .x_label_area_size(70)
         .y_label_area_size(95)
         .build_cartesian_2d(
-            KeyedAxis::new(xa, xb, p.x_log),
-            KeyedAxis::new(ya, yb, p.y_log),
+            KeyedAxis::new(frame.x.0, frame.x.1, p.x_log),
+            KeyedAxis::new(frame.y.0, frame.y.1, p.y_log),
         )?;
     chart
         .configure_mesh()
         .disable_mesh()
         .x_desc(&p.x_label)
         .y_desc(&p.y_label)
-        .label_style((FAMILY, 17))
-        .axis_desc_style((FAMILY, 19))
+        .axis_text(AXIS_TEXT)
         .x_label_formatter(&|v| tick(*v, p.x_log))
         .y_label_formatter(&|v| tick(*v, p.y_log))
         .draw()?;
+    Ok(chart)
+}
 
-    // Filled field: tiles of each cell coloured by the interpolation at their centre.
+/// The filled field: each grid cell as tiles coloured by the interpolation at their centre
+/// (grey where it is missing).
+fn fill_field<DB: DrawingBackend>(
+    chart: &mut MapChart<'_, DB>,
+    field: &Field,
+    frame: &MapFrame,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     const TILES: usize = 14;
     let mut tiles = Vec::new();
     for j in 0..field.y.len().saturating_sub(1) {
@@ -238,18 +311,30 @@ where
                     let v1 = cy0 + (cy1 - cy0) * (b + 1) as f64 / TILES as f64;
                     let color = field
                         .at(0.5 * (u0 + u1), 0.5 * (v0 + v1))
-                        .map_or(RGBColor(200, 200, 200), |z| colormap(norm(z)));
+                        .map_or(RGBColor(200, 200, 200), |z| colormap(frame.norm(z)));
                     tiles.push(Rectangle::new([(u0, v0), (u1, v1)], color.filled()));
                 }
             }
         }
     }
     chart.draw_series(tiles)?;
+    Ok(())
+}
 
-    // Iso-lines.
+/// `p.levels` plain iso-lines evenly between the smallest and largest value, and the
+/// highlighted level in red with its legend entry.
+fn iso_lines<DB: DrawingBackend>(
+    chart: &mut MapChart<'_, DB>,
+    field: &Field,
+    p: &ContourPlot,
+    frame: &MapFrame,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     let line_color = RGBColor(40, 40, 40);
     for k in 1..=p.levels {
-        let level = zmin + zspan * k as f64 / (p.levels + 1) as f64;
+        let level = frame.zmin + frame.zspan * k as f64 / (p.levels + 1) as f64;
         for line in field.contour(level) {
             chart.draw_series(std::iter::once(PathElement::new(
                 line,
@@ -264,15 +349,25 @@ where
             let s =
                 chart.draw_series(std::iter::once(PathElement::new(line, RED.stroke_width(4))))?;
             if first {
-                s.label(label.clone()).legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 22, y)], RED.stroke_width(4))
-                });
+                s.label(label.clone())
+                    .legend(|(x, y)| line_key(x, y, 22, RED.stroke_width(4)));
                 first = false;
             }
         }
     }
+    Ok(())
+}
 
-    // Runs as black dots, refinement points hollow, markers.
+/// The runs as black dots (red rings where a run has no value) and the refinement points
+/// hollow.
+fn run_points<DB: DrawingBackend>(
+    chart: &mut MapChart<'_, DB>,
+    field: &Field,
+    p: &ContourPlot,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     let mut dots = Vec::new();
     for (j, &y) in field.y.iter().enumerate() {
         for (i, &x) in field.x.iter().enumerate() {
@@ -300,6 +395,14 @@ where
             .label("refinement runs")
             .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.stroke_width(2)));
     }
+    Ok(())
+}
+
+/// The marked points, crosses or circles, each with its legend entry.
+fn markers<DB: DrawingBackend>(chart: &mut MapChart<'_, DB>, p: &ContourPlot) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     for m in &p.markers {
         let at = (tx(m.at.0, p.x_log), tx(m.at.1, p.y_log));
         let color = m.color;
@@ -316,21 +419,20 @@ where
             s.legend(move |(x, y)| Circle::new((x + 10, y), 6, BLACK.stroke_width(3)));
         }
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FAMILY, 15))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()?;
-    main.draw(&Text::new(
-        p.subtitle.clone(),
-        (20, main.dim_in_pixel().1 as i32 - 26),
-        (FAMILY, 15).into_font().color(&RGBColor(60, 60, 60)),
-    ))?;
+    Ok(())
+}
 
-    // Colour bar.
-    let (bw, bh) = bar.dim_in_pixel();
+/// The colour bar beside the map: the colours from the smallest value (bottom) to the
+/// largest, five value labels, the highlighted level in red, the value's name on top.
+fn colour_bar<DB: DrawingBackend>(
+    bar: &DrawingArea<DB, Shift>,
+    p: &ContourPlot,
+    frame: &MapFrame,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let (_, bh) = bar.dim_in_pixel();
     let (top, bottom) = (70i32, bh as i32 - 110);
     let left = 20i32;
     let steps = 120;
@@ -345,17 +447,13 @@ where
     }
     bar.draw(&Rectangle::new([(left, top), (left + 28, bottom)], BLACK))?;
     for k in 0..=4 {
-        let z = zmin + zspan * k as f64 / 4.0;
+        let z = frame.zmin + frame.zspan * k as f64 / 4.0;
         let y = bottom - ((bottom - top) as f64 * k as f64 / 4.0) as i32;
-        bar.draw(&Text::new(
-            tick(z, false),
-            (left + 34, y - 8),
-            (FAMILY, 15).into_font(),
-        ))?;
+        bar.draw(&Text::new(tick(z, false), (left + 34, y - 8), font(15)))?;
     }
     if let Some((level, _)) = &p.highlight {
-        if *level >= zmin && *level <= zmax {
-            let y = bottom - ((bottom - top) as f64 * norm(*level)) as i32;
+        if *level >= frame.zmin && *level <= frame.zmax {
+            let y = bottom - ((bottom - top) as f64 * frame.norm(*level)) as i32;
             bar.draw(&PathElement::new(
                 vec![(left - 4, y), (left + 32, y)],
                 RED.stroke_width(3),
@@ -365,10 +463,8 @@ where
     bar.draw(&Text::new(
         p.value_label.clone(),
         (left, top - 30),
-        (FAMILY, 16).into_font(),
+        font(16),
     ))?;
-    let _ = bw;
-    root.present()?;
     Ok(())
 }
 
@@ -389,16 +485,7 @@ pub fn contour_plot(stem: &Path, p: &ContourPlot) -> Result<()> {
         draw(&root, p)?;
     }
     let png_path = stem.with_extension("png");
-    let mut bytes = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut bytes, w, h);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        let mut writer = enc.write_header().context("PNG header")?;
-        writer.write_image_data(&rgb).context("PNG data")?;
-        writer.finish().context("PNG end")?;
-    }
-    write_atomic_bytes(&png_path, &bytes)?;
+    write_atomic_bytes(&png_path, &encode_png(&rgb, w, h, None)?)?;
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();

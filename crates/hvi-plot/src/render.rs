@@ -15,47 +15,31 @@
 
 use std::ops::Range;
 use std::path::Path;
-use std::sync::OnceLock;
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, Result};
 use glam::DVec3;
 use hvi_engine::cloud::{quantile, CloudMeasurement, Fragment, TrackRow};
 use hvi_engine::scene::{Derived, Geometry, SceneSpec};
 use hvi_engine::sim::Simulation;
 use hvi_engine::state::Body;
+use plotters::chart::DualCoordChartContext;
+use plotters::coord::combinators::{LogCoord, WithKeyPoints};
 use plotters::coord::types::RangedCoordf64;
-use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::save::write_atomic_bytes;
+use crate::theme::{
+    line_key, series_legend, text_style, Area, Chart2d, ThemedAxes, AXIS_TEXT, AXIS_TEXT_LARGE,
+    GRID, GUIDE, IMPACTOR, IMPACTOR_RGB, MEASURE, PLATE, PLATE_RGB, RUN_LEGEND,
+};
 
-/// DejaVu Sans (Bitstream Vera licence, see `assets/fonts/LICENSE-DejaVu.txt`).
-pub(crate) const FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
-/// The font family every picture uses (DejaVu Sans, embedded).
-pub const FAMILY: &str = "sans-serif";
+/// The font and PNG writer, where callers of this module have always found them.
+pub use crate::save::write_png;
+pub use crate::theme::{fonts, FAMILY};
 
-const IMPACTOR_RGB: [u8; 3] = [214, 39, 40];
-const PLATE_RGB: [u8; 3] = [31, 96, 196];
-const IMPACTOR: RGBColor = RGBColor(214, 39, 40);
-const PLATE: RGBColor = RGBColor(31, 96, 196);
 /// Smallest drawn particle, pixels: a lone particle in a sparse cloud stays visible.
 const MIN_DOT_PX: i32 = 2;
-const GUIDE: RGBColor = RGBColor(90, 90, 90);
-const MEASURE: RGBColor = RGBColor(0, 130, 60);
-
-/// Registers the embedded font with plotters once (every picture of the crate calls it).
-pub fn fonts() -> Result<()> {
-    static DONE: OnceLock<bool> = OnceLock::new();
-    let ok = *DONE
-        .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
-    if ok {
-        Ok(())
-    } else {
-        Err(anyhow!("the embedded font could not be loaded"))
-    }
-}
 
 /// The particles at one instant, as pictures need them (f32 is plenty for pixels).
 #[derive(Debug, Clone)]
@@ -178,21 +162,6 @@ fn format_mm(mm: f64) -> String {
     }
 }
 
-/// Encodes an RGB buffer as PNG and writes it atomically.
-pub fn write_png(path: &Path, rgb: &[u8], w: u32, h: u32) -> Result<()> {
-    let mut bytes = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut bytes, w, h);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.set_compression(png::Compression::Fast);
-        let mut writer = enc.write_header().context("PNG header")?;
-        writer.write_image_data(rgb).context("PNG data")?;
-        writer.finish().context("PNG end")?;
-    }
-    write_atomic_bytes(path, &bytes).with_context(|| format!("cannot write {}", path.display()))
-}
-
 /// A rectangle of the image in pixels, [x0, x1) x [y0, y1).
 #[derive(Debug, Clone, Copy)]
 struct PixelRect {
@@ -269,14 +238,6 @@ fn trimmed_range(mut v: Vec<f64>, lo: f64, hi: f64) -> Option<(f64, f64)> {
     Some((a, b))
 }
 
-type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
-type Chart2d<'a, 'b> =
-    ChartContext<'b, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
-
-fn text_style(size: f64) -> TextStyle<'static> {
-    TextStyle::from((FAMILY, size).into_font()).color(&BLACK)
-}
-
 /// The chart of one side-view panel (z horizontal, x vertical, both in mm).
 fn side_chart<'a, 'b>(
     area: &'b Area<'a>,
@@ -309,6 +270,83 @@ fn side_panels<'a>(root: &Area<'a>, title_h: u32, panel_w: u32, panel_h: u32) ->
     [a, b]
 }
 
+/// Where the side view puts things: the data's frame (mm) and the image's bands (px).
+struct SideLayout {
+    /// z from the front of the frame to its back, mm.
+    z_mm: (f64, f64),
+    /// Half the x range, mm.
+    x_half_mm: f64,
+    /// Height of the title band, px.
+    title_h: u32,
+    /// Width of one panel, px.
+    panel_w: u32,
+    /// Height of the panels, px.
+    panel_h: u32,
+    /// Image width, px.
+    w: u32,
+    /// Image height, px.
+    h: u32,
+    /// Half-thickness of the mid-plane slice, m.
+    slab_half_m: f64,
+}
+
+impl SideLayout {
+    /// The frame holds 0.05 % .. 99.95 % of the particles along z and |x| (a few strays may
+    /// fall outside) and always the whole original plate; the image is as tall as the data's
+    /// aspect asks, the slice 1 % of Lr thick (at least two lattice spacings).
+    fn new(frame: &Frame, info: &SceneInfo, cloud: Option<&CloudMeasurement>) -> Self {
+        let n = frame.pos.len();
+        let mm = 1e3;
+        let zs: Vec<f64> = (0..n).map(|i| frame.pos[i][2] as f64 * mm).collect();
+        let xs: Vec<f64> = (0..n)
+            .map(|i| (frame.pos[i][0] as f64).abs() * mm)
+            .collect();
+        let (z_lo, z_hi) = trimmed_range(zs, 0.0005, 0.9995).unwrap_or((0.0, 1.0));
+        let (_, x_hi) = trimmed_range(xs, 0.0, 0.9995).unwrap_or((0.0, 1.0));
+        let pad = 1.0 + 2.0 * info.r_eq_m * mm;
+        let z_mm = (
+            z_lo.min(info.plate_front_z_m * mm) - pad,
+            z_hi.max(info.plate_rear_z_m * mm) + pad,
+        );
+        let x_half_mm = x_hi.max(info.plate_half_width_m * mm) * 1.04 + pad;
+        // Plots about 760 px wide, as tall as the data asks.
+        let plot_w = 760.0;
+        let plot_h = (plot_w * 2.0 * x_half_mm / (z_mm.1 - z_mm.0)).clamp(380.0, 900.0);
+        let (title_h, footer_h) = (56u32, 150u32);
+        let panel_w = 870u32;
+        let panel_h = plot_h as u32 + 120;
+        let slab_half_m = (2.0 * info.r_eq_m).max(
+            cloud
+                .and_then(|c| c.length_radial_m)
+                .map_or(0.0, |lr| 0.01 * lr),
+        );
+        SideLayout {
+            z_mm,
+            x_half_mm,
+            title_h,
+            panel_w,
+            panel_h,
+            w: 2 * panel_w,
+            h: title_h + panel_h + footer_h,
+            slab_half_m,
+        }
+    }
+
+    /// The two panels under the title band.
+    fn panels<'a>(&self, root: &Area<'a>) -> [Area<'a>; 2] {
+        side_panels(root, self.title_h, self.panel_w, self.panel_h)
+    }
+}
+
+/// One side-view panel as drawn: its plotting rectangle (px), its ranges (mm) and scale
+/// (px per mm, equal in z and x).
+struct SidePanel {
+    rect: PixelRect,
+    z_mm: Range<f64>,
+    x_mm: Range<f64>,
+    scale: f64,
+}
+
 /// Side view of the cloud (Figs. 7, 11) at the frame's time, with the measurement drawn in:
 /// the projection along y on the left, the mid-plane slice on the right, both at the same
 /// scale (equal in z and x), legend and numbers below.
@@ -319,35 +357,8 @@ pub fn side_view(
     cloud: Option<&CloudMeasurement>,
 ) -> Result<()> {
     fonts()?;
-    let n = frame.pos.len();
-    let mm = 1e3;
-    // The frame: 0.05 % .. 99.95 % of the particles along z and |x| (a few strays may fall
-    // outside), always the whole original plate.
-    let zs: Vec<f64> = (0..n).map(|i| frame.pos[i][2] as f64 * mm).collect();
-    let xs: Vec<f64> = (0..n)
-        .map(|i| (frame.pos[i][0] as f64).abs() * mm)
-        .collect();
-    let (z_lo, z_hi) = trimmed_range(zs, 0.0005, 0.9995).unwrap_or((0.0, 1.0));
-    let (_, x_hi) = trimmed_range(xs, 0.0, 0.9995).unwrap_or((0.0, 1.0));
-    let pad = 1.0 + 2.0 * info.r_eq_m * mm;
-    let z_range = (
-        z_lo.min(info.plate_front_z_m * mm) - pad,
-        z_hi.max(info.plate_rear_z_m * mm) + pad,
-    );
-    let x_half = x_hi.max(info.plate_half_width_m * mm) * 1.04 + pad;
-    // Image size from the data's aspect: plots about 760 px wide, as tall as the data asks.
-    let plot_w = 760.0;
-    let plot_h = (plot_w * 2.0 * x_half / (z_range.1 - z_range.0)).clamp(380.0, 900.0);
-    let (title_h, footer_h) = (56u32, 150u32);
-    let panel_w = 870u32;
-    let panel_h = plot_h as u32 + 120;
-    let (w, h) = (2 * panel_w, title_h + panel_h + footer_h);
-    let mut rgb = vec![255u8; (w * h * 3) as usize];
-    let slab_half_m = (2.0 * info.r_eq_m).max(
-        cloud
-            .and_then(|c| c.length_radial_m)
-            .map_or(0.0, |lr| 0.01 * lr),
-    );
+    let layout = SideLayout::new(frame, info, cloud);
+    let mut rgb = vec![255u8; (layout.w * layout.h * 3) as usize];
     let title = format!(
         "Debris cloud at \u{3c4} = {:.1} \u{b5}s \u{2014} {}",
         frame.tau_s * 1e6,
@@ -357,57 +368,89 @@ pub fn side_view(
         "side view (projection along y)".to_string(),
         format!(
             "mid-plane slice |y| < {:.2} mm (the cloud's inside)",
-            slab_half_m * mm
+            layout.slab_half_m * 1e3
         ),
     ];
-    // Pass 1: titles and axes; remember each panel's plotting rectangle and ranges.
-    let mut panels: Vec<(PixelRect, Range<f64>, Range<f64>, f64)> = Vec::new();
-    {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        root.draw_text(
-            &title,
-            &text_style(28.0).pos(Pos::new(HPos::Center, VPos::Center)),
-            ((w / 2) as i32, (title_h / 2) as i32),
-        )?;
-        for (area, caption) in side_panels(&root, title_h, panel_w, panel_h)
-            .iter()
-            .zip(&captions)
-        {
-            let probe = side_chart(area, caption, 0.0..1.0, 0.0..1.0)?;
-            let rect = PixelRect::of(probe.plotting_area().get_pixel_range());
-            drop(probe);
-            let (zr, xr, scale) = equal_aspect(z_range, (-x_half, x_half), rect);
-            let mut chart = side_chart(area, caption, zr.clone(), xr.clone())?;
-            chart
-                .configure_mesh()
-                .disable_mesh()
-                .x_desc("z (mm), impact direction \u{2192}")
-                .y_desc("x (mm)")
-                .label_style((FAMILY, 17))
-                .axis_desc_style((FAMILY, 19))
-                .x_label_formatter(&|v| format!("{v:.0}"))
-                .y_label_formatter(&|v| format!("{v:.0}"))
-                .draw()?;
-            let rect = PixelRect::of(chart.plotting_area().get_pixel_range());
-            panels.push((rect, zr, xr, scale));
-        }
-        root.present()?;
+    let panels = side_axes(&mut rgb, &layout, &title, &captions)?;
+    side_particles(&mut rgb, &layout, frame, info, &panels);
+    side_overlays(&mut rgb, &layout, &captions, &panels, frame, info, cloud)?;
+    write_png(path, &rgb, layout.w, layout.h)
+}
+
+/// Pass 1 of the side view: the title and both panels' axes. Returns each panel's plotting
+/// rectangle and ranges, which the particles then fill.
+fn side_axes(
+    rgb: &mut [u8],
+    layout: &SideLayout,
+    title: &str,
+    captions: &[String; 2],
+) -> Result<Vec<SidePanel>> {
+    let root = BitMapBackend::with_buffer(rgb, (layout.w, layout.h)).into_drawing_area();
+    root.draw_text(
+        title,
+        &text_style(28.0).pos(Pos::new(HPos::Center, VPos::Center)),
+        ((layout.w / 2) as i32, (layout.title_h / 2) as i32),
+    )?;
+    let mut panels = Vec::new();
+    for (area, caption) in layout.panels(&root).iter().zip(captions) {
+        let probe = side_chart(area, caption, 0.0..1.0, 0.0..1.0)?;
+        let rect = PixelRect::of(probe.plotting_area().get_pixel_range());
+        drop(probe);
+        let x_half = layout.x_half_mm;
+        let (z_mm, x_mm, scale) = equal_aspect(layout.z_mm, (-x_half, x_half), rect);
+        let mut chart = side_chart(area, caption, z_mm.clone(), x_mm.clone())?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("z (mm), impact direction \u{2192}")
+            .y_desc("x (mm)")
+            .axis_text(AXIS_TEXT)
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0}"))
+            .draw()?;
+        let rect = PixelRect::of(chart.plotting_area().get_pixel_range());
+        panels.push(SidePanel {
+            rect,
+            z_mm,
+            x_mm,
+            scale,
+        });
     }
-    // Pass 2: particles, nearest (smallest y) in front, darker with depth in the projection.
+    root.present()?;
+    Ok(panels)
+}
+
+/// Pass 2 of the side view: the particles, nearest (smallest y) in front, darker with depth
+/// in the projection; the slice holds only those within the mid-plane slab.
+fn side_particles(
+    rgb: &mut [u8],
+    layout: &SideLayout,
+    frame: &Frame,
+    info: &SceneInfo,
+    panels: &[SidePanel],
+) {
+    let n = frame.pos.len();
+    let mm = 1e3;
     let ys: Vec<f64> = (0..n).map(|i| frame.pos[i][1] as f64).collect();
     let (y_lo, y_hi) = trimmed_range(ys, 0.0, 1.0).unwrap_or((0.0, 1.0));
     let y_span = (y_hi - y_lo).max(f64::MIN_POSITIVE);
-    for (k, (rect, zr, xr, scale)) in panels.iter().enumerate() {
+    for (k, panel) in panels.iter().enumerate() {
+        let SidePanel {
+            rect,
+            z_mm,
+            x_mm,
+            scale,
+        } = panel;
         let size = ((info.r_eq_m * mm * scale).round() as i32).clamp(MIN_DOT_PX, 6);
-        let mut sp = Splatter::new(&mut rgb, w as usize, *rect);
+        let mut sp = Splatter::new(rgb, layout.w as usize, *rect);
         for i in 0..n {
             let [x, y, z] = frame.pos[i];
             let (x, y, z) = (x as f64, y as f64, z as f64);
-            if k == 1 && y.abs() >= slab_half_m {
+            if k == 1 && y.abs() >= layout.slab_half_m {
                 continue;
             }
-            let px = rect.x0 as f64 + (z * mm - zr.start) * scale;
-            let py = rect.y0 as f64 + (xr.end - x * mm) * scale;
+            let px = rect.x0 as f64 + (z * mm - z_mm.start) * scale;
+            let py = rect.y0 as f64 + (x_mm.end - x * mm) * scale;
             let base = if frame.impactor[i] {
                 IMPACTOR_RGB
             } else {
@@ -417,107 +460,138 @@ pub fn side_view(
             sp.splat(px, py, y as f32, size, shade(base, t));
         }
     }
-    // Pass 3: the measurement, time stamp, scale bars; legend and numbers in the footer.
-    {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        for (k, (area, caption)) in side_panels(&root, title_h, panel_w, panel_h)
-            .iter()
-            .zip(&captions)
-            .enumerate()
-        {
-            let (rect, zr, xr, scale) = panels[k].clone();
-            let chart = side_chart(area, caption, zr.clone(), xr.clone())?;
-            let rear = info.plate_rear_z_m * mm;
-            let plot = chart.plotting_area();
-            plot.draw(&DashedPathElement::new(
-                vec![(rear, xr.start), (rear, xr.end)],
-                10,
-                7,
-                ShapeStyle::from(&GUIDE).stroke_width(2),
-            ))?;
-            if let (Some(front), Some(lr)) = (
-                cloud.and_then(|c| c.front_z_m),
-                cloud.and_then(|c| c.length_radial_m),
-            ) {
-                let (f, half) = (front * mm, 0.5 * lr * mm);
-                let style = ShapeStyle::from(&MEASURE).stroke_width(2);
-                plot.draw(&DashedPathElement::new(
-                    vec![(f, -half * 1.1), (f, half * 1.1)],
-                    10,
-                    6,
-                    style,
-                ))?;
-                for s in [-half, half] {
-                    plot.draw(&DashedPathElement::new(
-                        vec![(rear, s), (f, s)],
-                        10,
-                        6,
-                        style,
-                    ))?;
-                }
-            }
-            if k == 0 {
-                root.draw_text(
-                    &format!("\u{3c4} = {:.1} \u{b5}s", frame.tau_s * 1e6),
-                    &text_style(26.0),
-                    (rect.x0 + 12, rect.y0 + 10),
-                )?;
-            }
-            scale_bar(
-                &root,
-                (rect.x0 + 20, rect.y1 - 24),
-                scale,
-                rect.width() * 0.18,
+}
+
+/// Pass 3 of the side view: on each panel the original rear face, the measured front and
+/// width, a scale bar (and the time stamp on the first); the legend and the cloud's numbers
+/// in the footer.
+fn side_overlays(
+    rgb: &mut [u8],
+    layout: &SideLayout,
+    captions: &[String; 2],
+    panels: &[SidePanel],
+    frame: &Frame,
+    info: &SceneInfo,
+    cloud: Option<&CloudMeasurement>,
+) -> Result<()> {
+    let root = BitMapBackend::with_buffer(rgb, (layout.w, layout.h)).into_drawing_area();
+    for (k, (area, caption)) in layout.panels(&root).iter().zip(captions).enumerate() {
+        let SidePanel {
+            rect,
+            z_mm,
+            x_mm,
+            scale,
+        } = &panels[k];
+        let chart = side_chart(area, caption, z_mm.clone(), x_mm.clone())?;
+        measurement_lines(&chart, info, cloud, x_mm)?;
+        if k == 0 {
+            root.draw_text(
+                &format!("\u{3c4} = {:.1} \u{b5}s", frame.tau_s * 1e6),
+                &text_style(26.0),
+                (rect.x0 + 12, rect.y0 + 10),
             )?;
         }
-        let footer_y = (title_h + panel_h + 12) as i32;
-        legend(
+        scale_bar(
             &root,
-            (60, footer_y),
-            cloud.is_some(),
-            cloud.map_or(0.995, |c| c.quantile),
+            (rect.x0 + 20, rect.y1 - 24),
+            *scale,
+            rect.width() * 0.18,
         )?;
-        if let Some(c) = cloud {
-            let f = |x: Option<f64>, k: f64, p: usize| {
-                x.map_or("n/a".to_string(), |v| format!("{:.*}", p, v * k))
-            };
-            let lines = [
-                format!(
-                    "La = {} mm, Lr = {} mm, R = La/Lr = {}  ({:.1} % quantile)",
-                    f(c.length_axial_m, mm, 1),
-                    f(c.length_radial_m, mm, 1),
-                    f(c.length_ratio, 1.0, 3),
-                    100.0 * c.quantile
-                ),
-                format!(
-                    "by the maxima: La = {} mm, Lr = {} mm, R = {}",
-                    f(c.length_axial_max_m, mm, 1),
-                    f(c.length_radial_max_m, mm, 1),
-                    f(c.length_ratio_max, 1.0, 3)
-                ),
-                format!(
-                    "F = {}: {} fragments among {} cloud particles",
-                    f(c.fragmentation, 1.0, 3),
-                    thousands(c.n_frag),
-                    thousands(c.n_part)
-                ),
-                format!(
-                    "largest fragment: d = {} mm, {} % of the impactor's mass",
-                    f(c.largest_fragment_diameter_m, mm, 2),
-                    f(c.largest_fragment_mass_fraction, 100.0, 2)
-                ),
-            ];
-            for (k, l) in lines.iter().enumerate() {
-                root.draw_text(
-                    l,
-                    &text_style(20.0),
-                    ((w / 2) as i32 - 200, footer_y + 30 * k as i32),
-                )?;
-            }
-        }
-        root.present()?;
     }
-    write_png(path, &rgb, w, h)
+    let footer_y = (layout.title_h + layout.panel_h + 12) as i32;
+    legend(
+        &root,
+        (60, footer_y),
+        cloud.is_some(),
+        cloud.map_or(0.995, |c| c.quantile),
+    )?;
+    if let Some(c) = cloud {
+        for (k, l) in cloud_numbers(c).iter().enumerate() {
+            root.draw_text(
+                l,
+                &text_style(20.0),
+                ((layout.w / 2) as i32 - 200, footer_y + 30 * k as i32),
+            )?;
+        }
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// The original rear face (grey, dashed) and, when measured, the cloud's front and width
+/// (green, dashed) on a side-view panel whose x range is `x_mm`.
+fn measurement_lines(
+    chart: &Chart2d<'_, '_>,
+    info: &SceneInfo,
+    cloud: Option<&CloudMeasurement>,
+    x_mm: &Range<f64>,
+) -> Result<()> {
+    let mm = 1e3;
+    let rear = info.plate_rear_z_m * mm;
+    let plot = chart.plotting_area();
+    plot.draw(&DashedPathElement::new(
+        vec![(rear, x_mm.start), (rear, x_mm.end)],
+        10,
+        7,
+        ShapeStyle::from(&GUIDE).stroke_width(2),
+    ))?;
+    if let (Some(front), Some(lr)) = (
+        cloud.and_then(|c| c.front_z_m),
+        cloud.and_then(|c| c.length_radial_m),
+    ) {
+        let (f, half) = (front * mm, 0.5 * lr * mm);
+        let style = ShapeStyle::from(&MEASURE).stroke_width(2);
+        plot.draw(&DashedPathElement::new(
+            vec![(f, -half * 1.1), (f, half * 1.1)],
+            10,
+            6,
+            style,
+        ))?;
+        for s in [-half, half] {
+            plot.draw(&DashedPathElement::new(
+                vec![(rear, s), (f, s)],
+                10,
+                6,
+                style,
+            ))?;
+        }
+    }
+    Ok(())
+}
+
+/// The footer lines of the side view: the cloud's lengths (by the quantile and by the
+/// maxima), fragmentation and largest fragment.
+fn cloud_numbers(c: &CloudMeasurement) -> [String; 4] {
+    let mm = 1e3;
+    let f = |x: Option<f64>, k: f64, p: usize| {
+        x.map_or("n/a".to_string(), |v| format!("{:.*}", p, v * k))
+    };
+    [
+        format!(
+            "La = {} mm, Lr = {} mm, R = La/Lr = {}  ({:.1} % quantile)",
+            f(c.length_axial_m, mm, 1),
+            f(c.length_radial_m, mm, 1),
+            f(c.length_ratio, 1.0, 3),
+            100.0 * c.quantile
+        ),
+        format!(
+            "by the maxima: La = {} mm, Lr = {} mm, R = {}",
+            f(c.length_axial_max_m, mm, 1),
+            f(c.length_radial_max_m, mm, 1),
+            f(c.length_ratio_max, 1.0, 3)
+        ),
+        format!(
+            "F = {}: {} fragments among {} cloud particles",
+            f(c.fragmentation, 1.0, 3),
+            thousands(c.n_frag),
+            thousands(c.n_part)
+        ),
+        format!(
+            "largest fragment: d = {} mm, {} % of the impactor's mass",
+            f(c.largest_fragment_diameter_m, mm, 2),
+            f(c.largest_fragment_mass_fraction, 100.0, 2)
+        ),
+    ]
 }
 
 /// A white box with lines of text, top-left corner at `at` (pixels).
@@ -626,29 +700,27 @@ const VIEW_AZIMUTH_DEG: f64 = -35.0;
 /// See [`VIEW_AZIMUTH_DEG`].
 const VIEW_ELEVATION_DEG: f64 = 25.0;
 
-/// 3-D perspective views at the frames' times (Fig. 12), each framed on its particles.
-pub fn series(path: &Path, frames: &[Frame], info: &SceneInfo) -> Result<()> {
-    fonts()?;
-    if frames.is_empty() {
-        return Err(anyhow!("no frames to render"));
-    }
-    let cols = frames.len().min(2) as u32;
-    let rows = frames.len().div_ceil(2) as u32;
-    let (pw, ph) = (880u32, 680u32);
-    let title_h = 84u32;
-    let (w, h) = (pw * cols, ph * rows + title_h);
-    let mut rgb = vec![255u8; (w * h * 3) as usize];
-    let mm = 1e3;
-    // Each panel: camera, pixel rectangle, scale (px per tangent unit), centre of the screen box.
-    struct View {
-        camera: Camera,
-        rect: PixelRect,
-        scale: f64,
-        offset: (f64, f64),
-        centre_depth: f64,
-    }
-    let mut views = Vec::new();
-    for (k, f) in frames.iter().enumerate() {
+/// One panel of the 3-D series: its camera, pixel rectangle, scale (px per tangent unit), the
+/// centre of its screen box and the depth of the view's centre.
+struct View {
+    camera: Camera,
+    rect: PixelRect,
+    scale: f64,
+    offset: (f64, f64),
+    centre_depth: f64,
+}
+
+impl View {
+    /// The view of `f` in panel (col, row) of panels `pw` x `ph` px under a title band
+    /// `title_h` high: the camera looks at the middle of 0.1 % .. 99.9 % of the particles
+    /// along each axis, and the screen box of the same share fills the panel.
+    fn framing(
+        f: &Frame,
+        (col, row): (u32, u32),
+        (pw, ph): (u32, u32),
+        title_h: u32,
+        info: &SceneInfo,
+    ) -> View {
         let n = f.pos.len();
         let axis = |a: usize| {
             let v: Vec<f64> = (0..n).map(|i| f.pos[i][a] as f64).collect();
@@ -670,7 +742,6 @@ pub fn series(path: &Path, frames: &[Frame], info: &SceneInfo) -> Result<()> {
         }
         let (x0, x1) = trimmed_range(sx, 0.001, 0.999).unwrap_or((-1.0, 1.0));
         let (y0, y1) = trimmed_range(sy, 0.001, 0.999).unwrap_or((-1.0, 1.0));
-        let (col, row) = (k as u32 % cols, k as u32 / cols);
         let rect = PixelRect {
             x0: (col * pw + 20) as i32,
             x1: ((col + 1) * pw - 20) as i32,
@@ -680,23 +751,50 @@ pub fn series(path: &Path, frames: &[Frame], info: &SceneInfo) -> Result<()> {
         let scale =
             0.94 * (rect.width() / (x1 - x0).max(1e-12)).min(rect.height() / (y1 - y0).max(1e-12));
         let centre_depth = camera.project(centre).map_or(1.0, |p| p.2);
-        views.push(View {
+        View {
             camera,
             rect,
             scale,
             offset: (0.5 * (x0 + x1), 0.5 * (y0 + y1)),
             centre_depth,
-        });
+        }
     }
-    let to_px = |v: &View, sx: f64, sy: f64| {
-        let cx = 0.5 * (v.rect.x0 + v.rect.x1) as f64;
-        let cy = 0.5 * (v.rect.y0 + v.rect.y1) as f64;
+
+    /// Pixel position of the screen coordinates (tangents) `sx`, `sy`.
+    fn to_px(&self, sx: f64, sy: f64) -> (f64, f64) {
+        let cx = 0.5 * (self.rect.x0 + self.rect.x1) as f64;
+        let cy = 0.5 * (self.rect.y0 + self.rect.y1) as f64;
         (
-            cx + (sx - v.offset.0) * v.scale,
-            cy - (sy - v.offset.1) * v.scale,
+            cx + (sx - self.offset.0) * self.scale,
+            cy - (sy - self.offset.1) * self.scale,
         )
-    };
-    // Pass 1: title, panel frames, the original plate as a grey box (behind everything).
+    }
+}
+
+/// 3-D perspective views at the frames' times (Fig. 12), each framed on its particles.
+pub fn series(path: &Path, frames: &[Frame], info: &SceneInfo) -> Result<()> {
+    fonts()?;
+    if frames.is_empty() {
+        return Err(anyhow!("no frames to render"));
+    }
+    let cols = frames.len().min(2) as u32;
+    let rows = frames.len().div_ceil(2) as u32;
+    let (pw, ph) = (880u32, 680u32);
+    let title_h = 84u32;
+    let (w, h) = (pw * cols, ph * rows + title_h);
+    let mut rgb = vec![255u8; (w * h * 3) as usize];
+    let views: Vec<View> = (0..frames.len() as u32)
+        .map(|k| {
+            View::framing(
+                &frames[k as usize],
+                (k % cols, k / cols),
+                (pw, ph),
+                title_h,
+                info,
+            )
+        })
+        .collect();
+    // Pass 1: title, the original plate as a grey box (behind everything).
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
         root.draw_text(
@@ -705,148 +803,178 @@ pub fn series(path: &Path, frames: &[Frame], info: &SceneInfo) -> Result<()> {
             ((w / 2) as i32, 24),
         )?;
         for v in &views {
-            let c = &v.camera;
-            let (a, r, zf, zr) = (
-                info.plate_half_width_m,
-                info.plate_half_width_m,
-                info.plate_front_z_m,
-                info.plate_rear_z_m,
-            );
-            let corners = [
-                DVec3::new(-a, -r, zf),
-                DVec3::new(a, -r, zf),
-                DVec3::new(a, r, zf),
-                DVec3::new(-a, r, zf),
-                DVec3::new(-a, -r, zr),
-                DVec3::new(a, -r, zr),
-                DVec3::new(a, r, zr),
-                DVec3::new(-a, r, zr),
-            ];
-            let edges = [
-                (0, 1),
-                (1, 2),
-                (2, 3),
-                (3, 0),
-                (4, 5),
-                (5, 6),
-                (6, 7),
-                (7, 4),
-                (0, 4),
-                (1, 5),
-                (2, 6),
-                (3, 7),
-            ];
-            for (p, q) in edges {
-                if let (Some(pa), Some(pb)) = (c.project(corners[p]), c.project(corners[q])) {
-                    let (ax, ay) = to_px(v, pa.0, pa.1);
-                    let (bx, by) = to_px(v, pb.0, pb.1);
-                    root.draw(&PathElement::new(
-                        vec![(ax as i32, ay as i32), (bx as i32, by as i32)],
-                        ShapeStyle::from(&RGBColor(175, 175, 175)).stroke_width(1),
-                    ))?;
-                }
-            }
+            plate_box(&root, v, info)?;
         }
         root.present()?;
     }
     // Pass 2: particles.
     for (f, v) in frames.iter().zip(&views) {
-        let n = f.pos.len();
-        let mut sp = Splatter::new(&mut rgb, w as usize, v.rect);
-        let near = v.centre_depth * 0.7;
-        let far = v.centre_depth * 1.3;
-        for i in 0..n {
-            if let Some((sx, sy, d)) = v.camera.project(f.point(i)) {
-                let (px, py) = to_px(v, sx, sy);
-                let size = ((info.r_eq_m / d * v.scale).round() as i32).clamp(MIN_DOT_PX, 6);
-                let base = if f.impactor[i] {
-                    IMPACTOR_RGB
-                } else {
-                    PLATE_RGB
-                };
-                sp.splat(
-                    px,
-                    py,
-                    d as f32,
-                    size,
-                    shade(base, (d - near) / (far - near)),
-                );
-            }
-        }
+        splat_view(&mut rgb, w, f, v, info);
     }
-    // Pass 3: time stamps, scale bars, impact-direction arrows, legend.
+    // Pass 3: panel frames, time stamps, scale bars, impact-direction arrows, legend.
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
         for (f, v) in frames.iter().zip(&views) {
-            let r = v.rect;
-            root.draw(&Rectangle::new(
-                [(r.x0 - 8, r.y0 - 48), (r.x1 + 8, r.y1 + 56)],
-                ShapeStyle::from(&RGBColor(200, 200, 200)).stroke_width(1),
-            ))?;
-            root.draw_text(
-                &format!("\u{3c4} = {:.1} \u{b5}s", f.tau_s * 1e6),
-                &text_style(26.0),
-                (r.x0, r.y0 - 40),
-            )?;
-            // Scale at the depth of the view's centre.
-            let px_per_mm = v.scale / v.centre_depth / mm;
-            scale_bar(&root, (r.x0 + 10, r.y1 + 30), px_per_mm, r.width() * 0.18)?;
-            root.draw_text(
-                "(at the centre of view)",
-                &text_style(16.0),
-                (r.x0 + 10 + (r.width() * 0.18) as i32 + 60, r.y1 + 22),
-            )?;
-            // The impact direction +z, drawn from the panel's lower right.
-            let c = &v.camera;
-            let o = c.eye + c.forward * v.centre_depth;
-            if let (Some(a), Some(b)) = (c.project(o), c.project(o + DVec3::Z * 1e-3)) {
-                let (ax, ay) = to_px(v, a.0, a.1);
-                let (bx, by) = to_px(v, b.0, b.1);
-                let (dx, dy) = (bx - ax, by - ay);
-                let len = (dx * dx + dy * dy).sqrt().max(1e-9);
-                let (ux, uy) = (dx / len, dy / len);
-                let start = ((r.x1 - 120) as f64, (r.y1 + 28) as f64);
-                let end = (start.0 + 70.0 * ux, start.1 + 70.0 * uy);
-                let style = ShapeStyle::from(&BLACK).stroke_width(2);
-                root.draw(&PathElement::new(
-                    vec![
-                        (start.0 as i32, start.1 as i32),
-                        (end.0 as i32, end.1 as i32),
-                    ],
-                    style,
-                ))?;
-                for s in [-1.0, 1.0] {
-                    let (hx, hy) = (
-                        end.0 - 12.0 * ux + s * 6.0 * uy,
-                        end.1 - 12.0 * uy - s * 6.0 * ux,
-                    );
-                    root.draw(&PathElement::new(
-                        vec![(end.0 as i32, end.1 as i32), (hx as i32, hy as i32)],
-                        style,
-                    ))?;
-                }
-                root.draw_text(
-                    "v0",
-                    &text_style(18.0),
-                    ((end.0 + 8.0) as i32, (end.1 - 10.0) as i32),
-                )?;
-            }
+            view_marks(&root, f, v)?;
+            impact_arrow(&root, v)?;
         }
-        let legend_at = ((w / 2) as i32 - 130, 40);
-        for (k, (label, color)) in [("impactor", IMPACTOR), ("plate", PLATE)]
-            .into_iter()
-            .enumerate()
-        {
-            let x = legend_at.0 + 150 * k as i32;
-            root.draw(&Rectangle::new(
-                [(x, legend_at.1 + 16), (x + 16, legend_at.1 + 32)],
-                color.filled(),
-            ))?;
-            root.draw_text(label, &text_style(19.0), (x + 24, legend_at.1 + 13))?;
-        }
+        body_legend(&root, ((w / 2) as i32 - 130, 40))?;
         root.present()?;
     }
     write_png(path, &rgb, w, h)
+}
+
+/// The original plate's edges, grey, in view `v`.
+fn plate_box(root: &Area<'_>, v: &View, info: &SceneInfo) -> Result<()> {
+    let c = &v.camera;
+    let (a, r, zf, zr) = (
+        info.plate_half_width_m,
+        info.plate_half_width_m,
+        info.plate_front_z_m,
+        info.plate_rear_z_m,
+    );
+    let corners = [
+        DVec3::new(-a, -r, zf),
+        DVec3::new(a, -r, zf),
+        DVec3::new(a, r, zf),
+        DVec3::new(-a, r, zf),
+        DVec3::new(-a, -r, zr),
+        DVec3::new(a, -r, zr),
+        DVec3::new(a, r, zr),
+        DVec3::new(-a, r, zr),
+    ];
+    let edges = [
+        (0, 1),
+        (1, 2),
+        (2, 3),
+        (3, 0),
+        (4, 5),
+        (5, 6),
+        (6, 7),
+        (7, 4),
+        (0, 4),
+        (1, 5),
+        (2, 6),
+        (3, 7),
+    ];
+    for (p, q) in edges {
+        if let (Some(pa), Some(pb)) = (c.project(corners[p]), c.project(corners[q])) {
+            let (ax, ay) = v.to_px(pa.0, pa.1);
+            let (bx, by) = v.to_px(pb.0, pb.1);
+            root.draw(&PathElement::new(
+                vec![(ax as i32, ay as i32), (bx as i32, by as i32)],
+                ShapeStyle::from(&RGBColor(175, 175, 175)).stroke_width(1),
+            ))?;
+        }
+    }
+    Ok(())
+}
+
+/// The particles of `f` in view `v` (an image `w` wide): nearest in front, sized by their
+/// distance, darker from 0.7 to 1.3 times the depth of the view's centre.
+fn splat_view(rgb: &mut [u8], w: u32, f: &Frame, v: &View, info: &SceneInfo) {
+    let n = f.pos.len();
+    let mut sp = Splatter::new(rgb, w as usize, v.rect);
+    let near = v.centre_depth * 0.7;
+    let far = v.centre_depth * 1.3;
+    for i in 0..n {
+        if let Some((sx, sy, d)) = v.camera.project(f.point(i)) {
+            let (px, py) = v.to_px(sx, sy);
+            let size = ((info.r_eq_m / d * v.scale).round() as i32).clamp(MIN_DOT_PX, 6);
+            let base = if f.impactor[i] {
+                IMPACTOR_RGB
+            } else {
+                PLATE_RGB
+            };
+            sp.splat(
+                px,
+                py,
+                d as f32,
+                size,
+                shade(base, (d - near) / (far - near)),
+            );
+        }
+    }
+}
+
+/// The frame around view `v`, its time stamp and a scale bar at the depth of its centre.
+fn view_marks(root: &Area<'_>, f: &Frame, v: &View) -> Result<()> {
+    let mm = 1e3;
+    let r = v.rect;
+    root.draw(&Rectangle::new(
+        [(r.x0 - 8, r.y0 - 48), (r.x1 + 8, r.y1 + 56)],
+        ShapeStyle::from(&RGBColor(200, 200, 200)).stroke_width(1),
+    ))?;
+    root.draw_text(
+        &format!("\u{3c4} = {:.1} \u{b5}s", f.tau_s * 1e6),
+        &text_style(26.0),
+        (r.x0, r.y0 - 40),
+    )?;
+    let px_per_mm = v.scale / v.centre_depth / mm;
+    scale_bar(root, (r.x0 + 10, r.y1 + 30), px_per_mm, r.width() * 0.18)?;
+    root.draw_text(
+        "(at the centre of view)",
+        &text_style(16.0),
+        (r.x0 + 10 + (r.width() * 0.18) as i32 + 60, r.y1 + 22),
+    )?;
+    Ok(())
+}
+
+/// The impact direction +z as an arrow labelled v0, drawn from the lower right of view `v`.
+fn impact_arrow(root: &Area<'_>, v: &View) -> Result<()> {
+    let r = v.rect;
+    let c = &v.camera;
+    let o = c.eye + c.forward * v.centre_depth;
+    let (Some(a), Some(b)) = (c.project(o), c.project(o + DVec3::Z * 1e-3)) else {
+        return Ok(());
+    };
+    let (ax, ay) = v.to_px(a.0, a.1);
+    let (bx, by) = v.to_px(b.0, b.1);
+    let (dx, dy) = (bx - ax, by - ay);
+    let len = (dx * dx + dy * dy).sqrt().max(1e-9);
+    let (ux, uy) = (dx / len, dy / len);
+    let start = ((r.x1 - 120) as f64, (r.y1 + 28) as f64);
+    let end = (start.0 + 70.0 * ux, start.1 + 70.0 * uy);
+    let style = ShapeStyle::from(&BLACK).stroke_width(2);
+    root.draw(&PathElement::new(
+        vec![
+            (start.0 as i32, start.1 as i32),
+            (end.0 as i32, end.1 as i32),
+        ],
+        style,
+    ))?;
+    for s in [-1.0, 1.0] {
+        let (hx, hy) = (
+            end.0 - 12.0 * ux + s * 6.0 * uy,
+            end.1 - 12.0 * uy - s * 6.0 * ux,
+        );
+        root.draw(&PathElement::new(
+            vec![(end.0 as i32, end.1 as i32), (hx as i32, hy as i32)],
+            style,
+        ))?;
+    }
+    root.draw_text(
+        "v0",
+        &text_style(18.0),
+        ((end.0 + 8.0) as i32, (end.1 - 10.0) as i32),
+    )?;
+    Ok(())
+}
+
+/// The series' legend in one row: impactor and plate squares.
+fn body_legend(root: &Area<'_>, at: (i32, i32)) -> Result<()> {
+    for (k, (label, color)) in [("impactor", IMPACTOR), ("plate", PLATE)]
+        .into_iter()
+        .enumerate()
+    {
+        let x = at.0 + 150 * k as i32;
+        root.draw(&Rectangle::new(
+            [(x, at.1 + 16), (x + 16, at.1 + 32)],
+            color.filled(),
+        ))?;
+        root.draw_text(label, &text_style(19.0), (x + 24, at.1 + 13))?;
+    }
+    Ok(())
 }
 
 /// One bin of the histogram: diameters [lo, hi), mm.
@@ -909,6 +1037,15 @@ fn key_points(lo: f64, hi: f64) -> Vec<f64> {
     out
 }
 
+/// The fragment histogram's chart: log diameter against share of mass (left) and against
+/// the number of fragments, log (right).
+type HistogramChart<'a, 'b> = DualCoordChartContext<
+    'b,
+    BitMapBackend<'a>,
+    Cartesian2d<WithKeyPoints<LogCoord<f64>>, RangedCoordf64>,
+    Cartesian2d<LogCoord<f64>, LogCoord<f64>>,
+>;
+
 /// Fragment-size histogram: share of the cloud's mass per diameter bin (bars) and the number
 /// of fragments per bin (points, right axis).
 pub fn fragment_histogram(
@@ -931,113 +1068,152 @@ pub fn fragment_histogram(
         if bins.is_empty() {
             root.draw_text(&title, &text_style(24.0), (40, 30))?;
             root.draw_text("the cloud is empty", &text_style(24.0), (40, 80))?;
-            root.present()?;
         } else {
-            let x_lo = bins[0].lo_mm;
-            let x_hi = bins[bins.len() - 1].hi_mm.max(x_lo * 10.0);
-            let y_hi = bins.iter().map(|b| b.mass_fraction).fold(0.0, f64::max) * 1.18;
-            let n_hi = bins.iter().map(|b| b.fragments).max().unwrap_or(1) as f64 * 3.0;
-            let mut chart = ChartBuilder::on(&root)
-                .caption(&title, (FAMILY, 24))
-                .margin(20)
-                .x_label_area_size(60)
-                .y_label_area_size(90)
-                .right_y_label_area_size(90)
-                .build_cartesian_2d(
-                    (x_lo..x_hi)
-                        .log_scale()
-                        .with_key_points(key_points(x_lo, x_hi)),
-                    0.0..y_hi,
-                )?
-                .set_secondary_coord((x_lo..x_hi).log_scale(), (0.5..n_hi).log_scale());
-            chart
-                .configure_mesh()
-                .light_line_style(RGBColor(235, 235, 235))
-                .x_desc("volume-equivalent diameter d (mm)")
-                .y_desc("share of the cloud's mass")
-                .label_style((FAMILY, 18))
-                .axis_desc_style((FAMILY, 20))
-                .x_label_formatter(&|v| format!("{}", (v * 1e6).round() / 1e6))
-                .y_label_formatter(&|v| format!("{v:.2}"))
-                .draw()?;
-            chart
-                .configure_secondary_axes()
-                .y_desc("number of fragments")
-                .label_style((FAMILY, 18))
-                .axis_desc_style((FAMILY, 20))
-                .y_label_formatter(&|v| format!("{v:.0}"))
-                .draw()?;
-            chart
-                .draw_series(bins.iter().map(|b| {
-                    Rectangle::new(
-                        [(b.lo_mm * 1.01, 0.0), (b.hi_mm / 1.01, b.mass_fraction)],
-                        PLATE.mix(0.75).filled(),
-                    )
-                }))?
-                .label("share of mass (left axis)")
-                .legend(|(x, y)| {
-                    Rectangle::new([(x, y - 7), (x + 16, y + 7)], PLATE.mix(0.75).filled())
-                });
-            let counted: Vec<(f64, f64)> = bins
-                .iter()
-                .filter(|b| b.fragments > 0)
-                .map(|b| ((b.lo_mm * b.hi_mm).sqrt(), b.fragments as f64))
-                .collect();
-            chart
-                .draw_secondary_series(
-                    counted
-                        .iter()
-                        .map(|&(x, y)| Circle::new((x, y), 6, IMPACTOR.filled())),
-                )?
-                .label("number of fragments in the bin (right axis)")
-                .legend(|(x, y)| Circle::new((x + 8, y), 6, IMPACTOR.filled()));
-            let one = cloud.particle_diameter_m * 1e3;
-            chart
-                .draw_series(DashedLineSeries::new(
-                    vec![(one, 0.0), (one, y_hi)],
-                    8,
-                    6,
-                    ShapeStyle::from(&GUIDE).stroke_width(2),
-                ))?
-                .label(format!("one particle, d = {one:.3} mm (resolution limit)"))
-                .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], GUIDE.stroke_width(2))
-                });
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .background_style(WHITE.mix(0.9))
-                .border_style(GUIDE)
-                .label_font((FAMILY, 18))
-                .draw()?;
-            let lines = [
-                format!(
-                    "F = {:.3}, N_part = {}, N_frag = {}",
-                    cloud.fragmentation.unwrap_or(f64::NAN),
-                    thousands(cloud.n_part),
-                    thousands(cloud.n_frag)
-                ),
-                format!(
-                    "largest: {:.2} mm, {:.2} % of the impactor's mass",
-                    cloud.largest_fragment_diameter_m.unwrap_or(f64::NAN) * 1e3,
-                    100.0 * cloud.largest_fragment_mass_fraction.unwrap_or(f64::NAN)
-                ),
-                format!(
-                    "mass-weighted mean d = {:.3} mm",
-                    cloud.mean_fragment_diameter_m.unwrap_or(f64::NAN) * 1e3
-                ),
-            ];
-            let rect = PixelRect::of(chart.plotting_area().get_pixel_range());
-            info_box(
-                &root,
-                (rect.x1 - 470, rect.y0 + (rect.height() * 0.32) as i32),
-                &lines,
-            )?;
-            root.present()?;
+            draw_histogram(&root, &title, &bins, cloud)?;
         }
+        root.present()?;
     }
     write_png(path, &rgb, w, h)
 }
+
+/// The histogram of a cloud with fragments: axes, bars and counts, the resolution limit,
+/// the legend and a box with the cloud's fragment numbers.
+fn draw_histogram(
+    root: &Area<'_>,
+    title: &str,
+    bins: &[DiameterBin],
+    cloud: &CloudMeasurement,
+) -> Result<()> {
+    let x_lo = bins[0].lo_mm;
+    let x_hi = bins[bins.len() - 1].hi_mm.max(x_lo * 10.0);
+    let y_hi = bins.iter().map(|b| b.mass_fraction).fold(0.0, f64::max) * 1.18;
+    let n_hi = bins.iter().map(|b| b.fragments).max().unwrap_or(1) as f64 * 3.0;
+    let mut chart = histogram_axes(root, title, (x_lo, x_hi), y_hi, n_hi)?;
+    histogram_series(&mut chart, bins, cloud, y_hi)?;
+    series_legend(&mut chart, SeriesLabelPosition::UpperRight, RUN_LEGEND)?;
+    let rect = PixelRect::of(chart.plotting_area().get_pixel_range());
+    info_box(
+        root,
+        (rect.x1 - 470, rect.y0 + (rect.height() * 0.32) as i32),
+        &fragment_numbers(cloud),
+    )
+}
+
+/// The histogram's chart and both axes: diameters `x` (mm, log), share of mass up to
+/// `y_hi`, fragment counts up to `n_hi` (log).
+fn histogram_axes<'a, 'b>(
+    root: &'b Area<'a>,
+    title: &str,
+    (x_lo, x_hi): (f64, f64),
+    y_hi: f64,
+    n_hi: f64,
+) -> Result<HistogramChart<'a, 'b>> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FAMILY, 24))
+        .margin(20)
+        .x_label_area_size(60)
+        .y_label_area_size(90)
+        .right_y_label_area_size(90)
+        .build_cartesian_2d(
+            (x_lo..x_hi)
+                .log_scale()
+                .with_key_points(key_points(x_lo, x_hi)),
+            0.0..y_hi,
+        )?
+        .set_secondary_coord((x_lo..x_hi).log_scale(), (0.5..n_hi).log_scale());
+    chart
+        .configure_mesh()
+        .light_line_style(GRID)
+        .x_desc("volume-equivalent diameter d (mm)")
+        .y_desc("share of the cloud's mass")
+        .axis_text(AXIS_TEXT_LARGE)
+        .x_label_formatter(&|v| format!("{}", (v * 1e6).round() / 1e6))
+        .y_label_formatter(&|v| format!("{v:.2}"))
+        .draw()?;
+    chart
+        .configure_secondary_axes()
+        .y_desc("number of fragments")
+        .axis_text(AXIS_TEXT_LARGE)
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .draw()?;
+    Ok(chart)
+}
+
+/// The bars (share of mass), the points (fragments per bin) and the one-particle diameter,
+/// each with its legend entry.
+fn histogram_series(
+    chart: &mut HistogramChart<'_, '_>,
+    bins: &[DiameterBin],
+    cloud: &CloudMeasurement,
+    y_hi: f64,
+) -> Result<()> {
+    chart
+        .draw_series(bins.iter().map(|b| {
+            Rectangle::new(
+                [(b.lo_mm * 1.01, 0.0), (b.hi_mm / 1.01, b.mass_fraction)],
+                PLATE.mix(0.75).filled(),
+            )
+        }))?
+        .label("share of mass (left axis)")
+        .legend(|(x, y)| Rectangle::new([(x, y - 7), (x + 16, y + 7)], PLATE.mix(0.75).filled()));
+    let counted: Vec<(f64, f64)> = bins
+        .iter()
+        .filter(|b| b.fragments > 0)
+        .map(|b| ((b.lo_mm * b.hi_mm).sqrt(), b.fragments as f64))
+        .collect();
+    chart
+        .draw_secondary_series(
+            counted
+                .iter()
+                .map(|&(x, y)| Circle::new((x, y), 6, IMPACTOR.filled())),
+        )?
+        .label("number of fragments in the bin (right axis)")
+        .legend(|(x, y)| Circle::new((x + 8, y), 6, IMPACTOR.filled()));
+    let one = cloud.particle_diameter_m * 1e3;
+    chart
+        .draw_series(DashedLineSeries::new(
+            vec![(one, 0.0), (one, y_hi)],
+            8,
+            6,
+            ShapeStyle::from(&GUIDE).stroke_width(2),
+        ))?
+        .label(format!("one particle, d = {one:.3} mm (resolution limit)"))
+        .legend(|(x, y)| line_key(x, y, 20, GUIDE.stroke_width(2)));
+    Ok(())
+}
+
+/// The histogram's box: fragmentation and counts, the largest fragment, the mean diameter.
+fn fragment_numbers(cloud: &CloudMeasurement) -> [String; 3] {
+    [
+        format!(
+            "F = {:.3}, N_part = {}, N_frag = {}",
+            cloud.fragmentation.unwrap_or(f64::NAN),
+            thousands(cloud.n_part),
+            thousands(cloud.n_frag)
+        ),
+        format!(
+            "largest: {:.2} mm, {:.2} % of the impactor's mass",
+            cloud.largest_fragment_diameter_m.unwrap_or(f64::NAN) * 1e3,
+            100.0 * cloud.largest_fragment_mass_fraction.unwrap_or(f64::NAN)
+        ),
+        format!(
+            "mass-weighted mean d = {:.3} mm",
+            cloud.mean_fragment_diameter_m.unwrap_or(f64::NAN) * 1e3
+        ),
+    ]
+}
+
+/// The cloud track's chart: lengths (mm, left) and the front velocity over v0 (right)
+/// against tau (us).
+type TrackChart<'a, 'b> = DualCoordChartContext<
+    'b,
+    BitMapBackend<'a>,
+    Cartesian2d<RangedCoordf64, RangedCoordf64>,
+    Cartesian2d<RangedCoordf64, RangedCoordf64>,
+>;
+
+/// Top of the track chart's right axis, front velocity over v0.
+const TRACK_SPEED_MAX: f64 = 1.6;
 
 /// La and Lr (left axis, mm) and the front velocity over v0 (right axis) against tau, with the
 /// two front times of va marked.
@@ -1063,94 +1239,123 @@ pub fn track_plot(
             .fold(1e-6, f64::max)
             * 1e3
             * 1.1;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(
-                format!("Debris-cloud track \u{2014} {}", info.caption()),
-                (FAMILY, 24),
-            )
-            .margin(20)
-            .x_label_area_size(60)
-            .y_label_area_size(90)
-            .right_y_label_area_size(90)
-            .build_cartesian_2d(t_lo..t_hi, 0.0..l_hi)?
-            .set_secondary_coord(t_lo..t_hi, 0.0..1.6);
-        chart
-            .configure_mesh()
-            .light_line_style(RGBColor(235, 235, 235))
-            .x_desc("\u{3c4} (\u{b5}s)")
-            .y_desc("length (mm)")
-            .label_style((FAMILY, 18))
-            .axis_desc_style((FAMILY, 20))
-            .x_label_formatter(&|v| format!("{v:.0}"))
-            .y_label_formatter(&|v| format!("{v:.0}"))
-            .draw()?;
-        chart
-            .configure_secondary_axes()
-            .y_desc("front velocity / v0")
-            .label_style((FAMILY, 18))
-            .axis_desc_style((FAMILY, 20))
-            .y_label_formatter(&|v| format!("{v:.1}"))
-            .draw()?;
-        let series = |f: fn(&TrackRow) -> Option<f64>| -> Vec<(f64, f64)> {
-            track
-                .iter()
-                .filter_map(|r| f(r).map(|v| (r.tau_s * us, v * 1e3)))
-                .collect()
-        };
-        chart
-            .draw_series(LineSeries::new(
-                series(|r| r.length_axial_m),
-                MEASURE.stroke_width(3),
-            ))?
-            .label("La")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], MEASURE.stroke_width(3)));
-        chart
-            .draw_series(LineSeries::new(
-                series(|r| r.length_radial_m),
-                PLATE.stroke_width(3),
-            ))?
-            .label("Lr")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], PLATE.stroke_width(3)));
-        let v0 = info.v0_m_s;
-        let speed: Vec<(f64, f64)> = track
-            .iter()
-            .filter_map(|r| r.front_velocity_m_s.map(|v| (r.tau_s * us, v / v0)))
-            .collect();
-        chart
-            .draw_secondary_series(LineSeries::new(speed, IMPACTOR.stroke_width(1)))?
-            .label("front velocity / v0 between samples (right axis)")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], IMPACTOR.stroke_width(2)));
-        for t in front_times_s.iter().flatten() {
-            chart.draw_secondary_series(DashedLineSeries::new(
-                vec![(t * us, 0.0), (t * us, 1.6)],
-                8,
-                6,
-                ShapeStyle::from(&GUIDE).stroke_width(2),
-            ))?;
-        }
-        if let Some(r) = va_ratio {
-            chart
-                .draw_secondary_series(DashedLineSeries::new(
-                    vec![(t_lo, r), (t_hi, r)],
-                    8,
-                    6,
-                    ShapeStyle::from(&BLACK).stroke_width(1),
-                ))?
-                .label(format!("va / v0 = {r:.3} (front at the two dashed times)"))
-                .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(1))
-                });
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.9))
-            .border_style(GUIDE)
-            .label_font((FAMILY, 18))
-            .draw()?;
+        let mut chart = track_axes(&root, info, (t_lo, t_hi), l_hi)?;
+        track_lengths(&mut chart, track)?;
+        track_front(
+            &mut chart,
+            track,
+            info.v0_m_s,
+            (t_lo, t_hi),
+            front_times_s,
+            va_ratio,
+        )?;
+        series_legend(&mut chart, SeriesLabelPosition::UpperLeft, RUN_LEGEND)?;
         root.present()?;
     }
     write_png(path, &rgb, w, h)
+}
+
+/// The track chart and both axes: tau over `t` (us), lengths up to `l_hi` (mm).
+fn track_axes<'a, 'b>(
+    root: &'b Area<'a>,
+    info: &SceneInfo,
+    (t_lo, t_hi): (f64, f64),
+    l_hi: f64,
+) -> Result<TrackChart<'a, 'b>> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(
+            format!("Debris-cloud track \u{2014} {}", info.caption()),
+            (FAMILY, 24),
+        )
+        .margin(20)
+        .x_label_area_size(60)
+        .y_label_area_size(90)
+        .right_y_label_area_size(90)
+        .build_cartesian_2d(t_lo..t_hi, 0.0..l_hi)?
+        .set_secondary_coord(t_lo..t_hi, 0.0..TRACK_SPEED_MAX);
+    chart
+        .configure_mesh()
+        .light_line_style(GRID)
+        .x_desc("\u{3c4} (\u{b5}s)")
+        .y_desc("length (mm)")
+        .axis_text(AXIS_TEXT_LARGE)
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .draw()?;
+    chart
+        .configure_secondary_axes()
+        .y_desc("front velocity / v0")
+        .axis_text(AXIS_TEXT_LARGE)
+        .y_label_formatter(&|v| format!("{v:.1}"))
+        .draw()?;
+    Ok(chart)
+}
+
+/// La (green) and Lr (blue) over time, mm.
+fn track_lengths(chart: &mut TrackChart<'_, '_>, track: &[TrackRow]) -> Result<()> {
+    let us = 1e6;
+    let series = |f: fn(&TrackRow) -> Option<f64>| -> Vec<(f64, f64)> {
+        track
+            .iter()
+            .filter_map(|r| f(r).map(|v| (r.tau_s * us, v * 1e3)))
+            .collect()
+    };
+    chart
+        .draw_series(LineSeries::new(
+            series(|r| r.length_axial_m),
+            MEASURE.stroke_width(3),
+        ))?
+        .label("La")
+        .legend(|(x, y)| line_key(x, y, 20, MEASURE.stroke_width(3)));
+    chart
+        .draw_series(LineSeries::new(
+            series(|r| r.length_radial_m),
+            PLATE.stroke_width(3),
+        ))?
+        .label("Lr")
+        .legend(|(x, y)| line_key(x, y, 20, PLATE.stroke_width(3)));
+    Ok(())
+}
+
+/// The front velocity over `v0_m_s` between samples (right axis), the two front times of va
+/// (dashed, vertical) and va / v0 itself (dashed, across `t`).
+fn track_front(
+    chart: &mut TrackChart<'_, '_>,
+    track: &[TrackRow],
+    v0_m_s: f64,
+    (t_lo, t_hi): (f64, f64),
+    front_times_s: [Option<f64>; 2],
+    va_ratio: Option<f64>,
+) -> Result<()> {
+    let us = 1e6;
+    let speed: Vec<(f64, f64)> = track
+        .iter()
+        .filter_map(|r| r.front_velocity_m_s.map(|v| (r.tau_s * us, v / v0_m_s)))
+        .collect();
+    chart
+        .draw_secondary_series(LineSeries::new(speed, IMPACTOR.stroke_width(1)))?
+        .label("front velocity / v0 between samples (right axis)")
+        .legend(|(x, y)| line_key(x, y, 20, IMPACTOR.stroke_width(2)));
+    for t in front_times_s.iter().flatten() {
+        chart.draw_secondary_series(DashedLineSeries::new(
+            vec![(t * us, 0.0), (t * us, TRACK_SPEED_MAX)],
+            8,
+            6,
+            ShapeStyle::from(&GUIDE).stroke_width(2),
+        ))?;
+    }
+    if let Some(r) = va_ratio {
+        chart
+            .draw_secondary_series(DashedLineSeries::new(
+                vec![(t_lo, r), (t_hi, r)],
+                8,
+                6,
+                ShapeStyle::from(&BLACK).stroke_width(1),
+            ))?
+            .label(format!("va / v0 = {r:.3} (front at the two dashed times)"))
+            .legend(|(x, y)| line_key(x, y, 20, BLACK.stroke_width(1)));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -20,3 +20,32 @@ pub(crate) fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
         .with_context(|| format!("cannot move {} into place", path.display()))?;
     Ok(())
 }
+
+/// An 8-bit RGB buffer `w` x `h` as PNG bytes. Renders use [`png::Compression::Fast`] (large
+/// images, written often); contour maps the default.
+pub(crate) fn encode_png(
+    rgb: &[u8],
+    w: u32,
+    h: u32,
+    compression: Option<png::Compression>,
+) -> Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut bytes, w, h);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        if let Some(c) = compression {
+            enc.set_compression(c);
+        }
+        let mut writer = enc.write_header().context("PNG header")?;
+        writer.write_image_data(rgb).context("PNG data")?;
+        writer.finish().context("PNG end")?;
+    }
+    Ok(bytes)
+}
+
+/// Encodes an RGB buffer as PNG (fast compression) and writes it atomically.
+pub fn write_png(path: &Path, rgb: &[u8], w: u32, h: u32) -> Result<()> {
+    let bytes = encode_png(rgb, w, h, Some(png::Compression::Fast))?;
+    write_atomic_bytes(path, &bytes).with_context(|| format!("cannot write {}", path.display()))
+}

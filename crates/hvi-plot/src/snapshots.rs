@@ -9,7 +9,8 @@ use std::path::Path;
 use anyhow::{anyhow, bail, Context, Result};
 use plotters::prelude::*;
 
-use crate::save::write_atomic_bytes;
+use crate::save::{encode_png, write_atomic_bytes};
+use crate::theme::{font, fonts, Area};
 
 /// An RGB image.
 #[derive(Debug, Clone)]
@@ -108,6 +109,51 @@ pub struct Tile {
     pub caption: String,
 }
 
+/// Where the matrix puts things, px: label margins, the tile size and the grid of cells.
+struct MatrixLayout {
+    left: usize,
+    top: usize,
+    gap: usize,
+    /// Tile width and height.
+    tw: usize,
+    th: usize,
+    cell_w: usize,
+    cell_h: usize,
+    /// Rows of the matrix (row 0 is drawn at the bottom).
+    rows: usize,
+    /// Image width and height.
+    w: usize,
+    h: usize,
+}
+
+impl MatrixLayout {
+    /// The layout of `cols` x `rows` tiles of `tw` x `th`.
+    fn new(tw: usize, th: usize, cols: usize, rows: usize) -> Self {
+        let (left, top, gap, cap) = (150usize, 120usize, 14usize, 24usize);
+        let cell_w = tw + gap;
+        let cell_h = th + gap + cap;
+        MatrixLayout {
+            left,
+            top,
+            gap,
+            tw,
+            th,
+            cell_w,
+            cell_h,
+            rows,
+            w: left + cols * cell_w + 20,
+            h: top + rows * cell_h + 60,
+        }
+    }
+
+    /// The top-left corner of a tile's picture.
+    fn origin(&self, t: &Tile) -> (usize, usize) {
+        let x = self.left + t.col * self.cell_w + self.gap / 2;
+        let y = self.top + (self.rows - 1 - t.row) * self.cell_h + self.gap / 2;
+        (x, y)
+    }
+}
+
 /// Draws the matrix into `path` (PNG). `cols`/`rows` are the axis labels of the columns and
 /// rows (ascending). Returns how many tiles had a picture.
 pub fn snapshot_matrix(
@@ -117,9 +163,40 @@ pub fn snapshot_matrix(
     (y_label, rows): (&str, &[String]),
     tiles: &[Tile],
 ) -> Result<usize> {
-    crate::render::fonts()?;
+    fonts()?;
     let tw = if cols.len() > 4 { 260 } else { 380 };
-    // The side view's left panel: the projection along y (render::side_view's layout).
+    let (pictures, th) = tile_pictures(tiles, tw)?;
+    let layout = MatrixLayout::new(tw, th, cols.len(), rows.len());
+    let (w, h) = (layout.w, layout.h);
+    let mut rgb = vec![255u8; w * h * 3];
+    for (t, img) in tiles.iter().zip(&pictures) {
+        if let Some(img) = img {
+            blit(&mut rgb, w, img, layout.origin(t), th);
+        }
+    }
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (w as u32, h as u32)).into_drawing_area();
+        root.draw(&Text::new(title.to_string(), (20, 20), font(28)))?;
+        root.draw(&Text::new(
+            format!("columns: {x_label}; rows: {y_label}"),
+            (20, 60),
+            font(18),
+        ))?;
+        axis_labels(&root, &layout, cols, rows)?;
+        for (t, img) in tiles.iter().zip(&pictures) {
+            tile_frame(&root, &layout, t, img.is_some())?;
+        }
+        root.present()?;
+    }
+    let bytes = encode_png(&rgb, w as u32, h as u32, Some(png::Compression::Fast))?;
+    write_atomic_bytes(path, &bytes)?;
+    Ok(pictures.iter().filter(|p| p.is_some()).count())
+}
+
+/// Each tile's picture cropped to the side view's left panel (the projection along y, as
+/// `render::side_view` lays it out) at width `tw`, and the tile height: that of the last
+/// picture, 0.9 `tw` without any.
+fn tile_pictures(tiles: &[Tile], tw: usize) -> Result<(Vec<Option<Image>>, usize)> {
     let crop =
         |img: &Image| img.crop_scaled((0, img.w / 2), (img.h * 6 / 100, img.h * 84 / 100), tw);
     let mut pictures = Vec::new();
@@ -134,77 +211,53 @@ pub fn snapshot_matrix(
         }
         pictures.push(img);
     }
-    let (left, top, gap, cap) = (150usize, 120usize, 14usize, 24usize);
-    let cell_w = tw + gap;
-    let cell_h = th + gap + cap;
-    let (w, h) = (
-        left + cols.len() * cell_w + 20,
-        top + rows.len() * cell_h + 60,
-    );
-    let mut rgb = vec![255u8; w * h * 3];
-    let origin = |t: &Tile| {
-        let x = left + t.col * cell_w + gap / 2;
-        let y = top + (rows.len() - 1 - t.row) * cell_h + gap / 2;
-        (x, y)
-    };
-    for (t, img) in tiles.iter().zip(&pictures) {
-        if let Some(img) = img {
-            let (x0, y0) = origin(t);
-            for y in 0..img.h.min(th) {
-                let src = &img.rgb[y * img.w * 3..(y + 1) * img.w * 3];
-                let k = ((y0 + y) * w + x0) * 3;
-                rgb[k..k + img.w * 3].copy_from_slice(src);
-            }
-        }
+    Ok((pictures, th))
+}
+
+/// Copies `img` (at most `th` rows) into `rgb`, an image `w` wide, at `(x0, y0)`.
+fn blit(rgb: &mut [u8], w: usize, img: &Image, (x0, y0): (usize, usize), th: usize) {
+    for y in 0..img.h.min(th) {
+        let src = &img.rgb[y * img.w * 3..(y + 1) * img.w * 3];
+        let k = ((y0 + y) * w + x0) * 3;
+        rgb[k..k + img.w * 3].copy_from_slice(src);
     }
-    {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w as u32, h as u32)).into_drawing_area();
-        let font = |size: u32| ("sans-serif", size).into_font();
-        root.draw(&Text::new(title.to_string(), (20, 20), font(28)))?;
+}
+
+/// The column labels above the matrix and the row labels left of it.
+fn axis_labels(root: &Area<'_>, l: &MatrixLayout, cols: &[String], rows: &[String]) -> Result<()> {
+    for (c, label) in cols.iter().enumerate() {
         root.draw(&Text::new(
-            format!("columns: {x_label}; rows: {y_label}"),
-            (20, 60),
+            label.clone(),
+            (
+                (l.left + c * l.cell_w + l.tw / 2 - 30) as i32,
+                (l.top - 30) as i32,
+            ),
             font(18),
         ))?;
-        for (c, label) in cols.iter().enumerate() {
-            root.draw(&Text::new(
-                label.clone(),
-                ((left + c * cell_w + tw / 2 - 30) as i32, (top - 30) as i32),
-                font(18),
-            ))?;
-        }
-        for (r, label) in rows.iter().enumerate() {
-            let y = top + (rows.len() - 1 - r) * cell_h + th / 2;
-            root.draw(&Text::new(label.clone(), (12, y as i32), font(18)))?;
-        }
-        for (t, img) in tiles.iter().zip(&pictures) {
-            let (x0, y0) = origin(t);
-            let (x0, y0) = (x0 as i32, y0 as i32);
-            let (x1, y1) = (x0 + tw as i32, y0 + th as i32);
-            if img.is_none() {
-                root.draw(&Text::new("no picture", (x0 + 20, y0 + 40), font(16)))?;
-            }
-            let style = match t.frame {
-                Some(c) => c.stroke_width(5),
-                None => RGBColor(170, 170, 170).stroke_width(1),
-            };
-            root.draw(&Rectangle::new([(x0 - 2, y0 - 2), (x1 + 2, y1 + 2)], style))?;
-            root.draw(&Text::new(t.caption.clone(), (x0 + 4, y1 + 9), font(16)))?;
-        }
-        root.present()?;
     }
-    let mut bytes = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut bytes, w as u32, h as u32);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.set_compression(png::Compression::Fast);
-        let mut writer = enc.write_header().context("PNG header")?;
-        writer.write_image_data(&rgb).context("PNG data")?;
-        writer.finish().context("PNG end")?;
+    for (r, label) in rows.iter().enumerate() {
+        let y = l.top + (rows.len() - 1 - r) * l.cell_h + l.th / 2;
+        root.draw(&Text::new(label.clone(), (12, y as i32), font(18)))?;
     }
-    write_atomic_bytes(path, &bytes)?;
-    Ok(pictures.iter().filter(|p| p.is_some()).count())
+    Ok(())
+}
+
+/// A tile's frame (its verdict's colour, else thin grey), its caption, and a note when it
+/// has no picture.
+fn tile_frame(root: &Area<'_>, l: &MatrixLayout, t: &Tile, has_picture: bool) -> Result<()> {
+    let (x0, y0) = l.origin(t);
+    let (x0, y0) = (x0 as i32, y0 as i32);
+    let (x1, y1) = (x0 + l.tw as i32, y0 + l.th as i32);
+    if !has_picture {
+        root.draw(&Text::new("no picture", (x0 + 20, y0 + 40), font(16)))?;
+    }
+    let style = match t.frame {
+        Some(c) => c.stroke_width(5),
+        None => RGBColor(170, 170, 170).stroke_width(1),
+    };
+    root.draw(&Rectangle::new([(x0 - 2, y0 - 2), (x1 + 2, y1 + 2)], style))?;
+    root.draw(&Text::new(t.caption.clone(), (x0 + 4, y1 + 9), font(16)))?;
+    Ok(())
 }
 
 #[cfg(test)]

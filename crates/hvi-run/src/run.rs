@@ -12,7 +12,7 @@ use anyhow::{Context, Result};
 use hvi_engine::cloud::{
     size_distribution, step_at_tau, CloudObserver, CloudReport, CloudResult, TrackRow,
 };
-use hvi_engine::scene::{Derived, SceneSpec};
+use hvi_engine::scene::{Derived, RunSettings, SceneSpec};
 use hvi_engine::sim::{Energy, Simulation, Timing};
 use hvi_engine::EngineError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -266,11 +266,76 @@ fn timing_table(
     (ts, s)
 }
 
+/// Particle counts of a run.
+#[derive(Debug, Clone, Copy)]
+struct Counts {
+    /// All particles.
+    particles: usize,
+    /// Impactor particles.
+    impactor: usize,
+}
+
 /// Runs a scene to its end time, writing `summary.json`, `energy.csv` and the cloud files
 /// (also when it stops early on an instability: the error comes back after the files are
 /// written; the cloud is then not measured, its track is kept).
 pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     let wall0 = Instant::now();
+    let (mut sim, counts) = set_up(spec, opts)?;
+    let d = sim.derived;
+    let mut run = Gathered::start(&sim, spec, opts)?;
+    let step_wall = run.step_to_end(&mut sim, spec, opts, counts.particles)?;
+    let final_energy = final_energy_row(&mut run.rows, &mut sim, &d);
+    let momentum = momentum_summary(&sim, &d);
+    let (cloud, track, analysis_time) = run.finish_cloud(&sim);
+    run.output_time += write_tables(&opts.out_dir, &run.rows, &track, cloud.as_ref())?;
+    if opts.render && run.failure.is_none() {
+        let frames = &run.frames;
+        let n = counts.particles;
+        run.render_time += render_pictures(spec, opts, &sim, n, frames, &track, cloud.as_ref())?;
+    }
+    let total = wall0.elapsed();
+    let (timing, table) = timing_table(
+        &sim.timing,
+        analysis_time,
+        run.render_time,
+        run.output_time,
+        total,
+    );
+    let measured = Measured {
+        energy: energy_summary(&final_energy, run.e0, run.max_drift),
+        momentum,
+        timing,
+        wall: total,
+        step_wall_s: step_wall,
+        cloud: cloud.as_ref().map(|c| c.report.clone()),
+        error: run.failure.as_ref().map(|e| e.to_string()),
+    };
+    let summary = summarise(spec, &sim, counts, measured);
+    write_atomic_bytes(
+        &opts.out_dir.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    if opts.progress {
+        print_end(&summary, &sim, &table);
+    }
+    if let Some(e) = run.failure {
+        return Err(anyhow::Error::new(e).context(format!(
+            "run stopped early; what it had is in {}",
+            Path::new(&opts.out_dir).display()
+        )));
+    }
+    Ok(RunOutcome {
+        summary,
+        energy: run.rows,
+        sim,
+        track,
+        cloud,
+    })
+}
+
+/// Creates the output directory and builds the scene's simulation; with progress on, prints
+/// the derived numbers and the thread count.
+fn set_up(spec: &SceneSpec, opts: &RunOptions) -> Result<(Simulation, Counts)> {
     std::fs::create_dir_all(&opts.out_dir)
         .with_context(|| format!("cannot create output directory {}", opts.out_dir.display()))?;
     let setup = spec.build()?;
@@ -281,34 +346,27 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         .iter()
         .filter(|b| **b == hvi_engine::state::Body::Impactor)
         .count();
-    let mut sim = Simulation::new(setup)?;
-    let d = sim.derived;
+    let sim = Simulation::new(setup)?;
     if opts.progress {
-        eprintln!("{}", describe(&d, n, sim.bonds_initial));
+        eprintln!("{}", describe(&sim.derived, n, sim.bonds_initial));
         eprintln!("threads {}", rayon::current_num_threads());
     }
-    let mut output_time = Duration::ZERO;
-    let mut render_time = Duration::ZERO;
-    if let Some(path) = &opts.lammps_data {
-        let t = Instant::now();
-        write_lammps_data(path, &sim)?;
-        output_time += t.elapsed();
-    }
-    let mut rows = vec![row(&sim, &sim.energy_initial)];
-    let mut max_drift: f64 = 0.0;
-    let e0 = sim.energy_initial.total_j();
+    let counts = Counts {
+        particles: n,
+        impactor: n_imp,
+    };
+    Ok((sim, counts))
+}
 
-    // The cloud: observed only as the scene's [analysis] asks (nothing when all is off).
-    let analysis = &spec.analysis;
-    let mut observer = (analysis.cloud || analysis.track_every > 0)
-        .then(|| CloudObserver::new(&sim, analysis, spec.run.end_time_s));
-    // Render times within the run, as steps (the nearest step to each time).
+/// The render times within the run as (step, time) pairs, by step (the nearest step to each
+/// time, each step once); times beyond the end are skipped, with a note when progress is on.
+fn render_steps(spec: &SceneSpec, d: &Derived, opts: &RunOptions) -> Vec<(u64, f64)> {
     let end_tau = d.steps as f64 * d.dt_s - d.contact_time_s;
     let mut render_steps: Vec<(u64, f64)> = Vec::new();
     if opts.render {
-        for &t in &analysis.render_times_s {
+        for &t in &spec.analysis.render_times_s {
             if t <= end_tau + 0.5 * d.dt_s {
-                let s = step_at_tau(&d, t);
+                let s = step_at_tau(d, t);
                 if !render_steps.iter().any(|&(x, _)| x == s) {
                     render_steps.push((s, t));
                 }
@@ -322,23 +380,240 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         }
         render_steps.sort_by_key(|&(s, _)| s);
     }
-    let mut frames: Vec<Frame> = Vec::new();
-    let capture = |sim: &Simulation, frames: &mut Vec<Frame>| {
-        if render_steps.iter().any(|&(s, _)| s == sim.step) {
-            let t = Instant::now();
-            frames.push(Frame::capture(sim));
-            t.elapsed()
-        } else {
-            Duration::ZERO
-        }
-    };
-    if let Some(o) = observer.as_mut() {
-        o.observe(&sim);
-    }
-    render_time += capture(&sim, &mut frames);
+    render_steps
+}
 
-    let bar = if opts.progress && std::io::stderr().is_terminal() {
-        let b = ProgressBar::with_draw_target(Some(d.steps), ProgressDrawTarget::stderr());
+/// The first base step after `s` that is a multiple of `every`.
+fn next_multiple(s: u64, every: u64) -> u64 {
+    (s / every + 1).saturating_mul(every)
+}
+
+/// Whether base step `s` is a multiple of `every` (an output is due there).
+// `u64::is_multiple_of` needs Rust 1.87; the workspace's rust-version is 1.80.
+#[allow(clippy::manual_is_multiple_of)]
+fn at_multiple(s: u64, every: u64) -> bool {
+    s % every == 0
+}
+
+/// What a run gathers while it steps, besides the simulation's own state: the energy series
+/// and its drift, the cloud observer, the frames to render, the first failure, and the time
+/// spent on files and pictures.
+struct Gathered {
+    /// The energy series, `energy.csv`.
+    rows: Vec<EnergyRow>,
+    /// Ledger total at t = 0, J.
+    e0: f64,
+    /// Largest |relative drift| of the samples so far.
+    max_drift: f64,
+    /// The cloud, observed as the scene's `[analysis]` asks (None when all is off).
+    observer: Option<CloudObserver>,
+    /// Steps (and times) at which a frame of the 3-D series is captured.
+    render_steps: Vec<(u64, f64)>,
+    /// The captured frames.
+    frames: Vec<Frame>,
+    /// Ballistic cut-off bookkeeping: broken-bond counts at the energy samples, (tau, count).
+    break_history: Vec<(f64, u64)>,
+    /// The instability that stopped the run.
+    failure: Option<EngineError>,
+    /// Files and progress.
+    output_time: Duration,
+    /// Frame captures and pictures.
+    render_time: Duration,
+}
+
+impl Gathered {
+    /// The state at t = 0: the LAMMPS data file when asked for, the first energy sample, the
+    /// cloud's first observation and a frame if one is due at step 0.
+    fn start(sim: &Simulation, spec: &SceneSpec, opts: &RunOptions) -> Result<Self> {
+        let mut output_time = Duration::ZERO;
+        if let Some(path) = &opts.lammps_data {
+            let t = Instant::now();
+            write_lammps_data(path, sim)?;
+            output_time += t.elapsed();
+        }
+        let analysis = &spec.analysis;
+        let mut run = Gathered {
+            rows: vec![row(sim, &sim.energy_initial)],
+            e0: sim.energy_initial.total_j(),
+            max_drift: 0.0,
+            observer: (analysis.cloud || analysis.track_every > 0)
+                .then(|| CloudObserver::new(sim, analysis, spec.run.end_time_s)),
+            render_steps: render_steps(spec, &sim.derived, opts),
+            frames: Vec::new(),
+            break_history: Vec::new(),
+            failure: None,
+            output_time,
+            render_time: Duration::ZERO,
+        };
+        run.observe(sim);
+        Ok(run)
+    }
+
+    /// Steps `sim` to the end of the run, landing on every output time (energy samples,
+    /// dumps, cloud samples, render times), and stops at the first instability (kept in
+    /// `failure`). Returns the stepping wall time without the cloud observation and frame
+    /// captures, s: the engine's throughput.
+    fn step_to_end(
+        &mut self,
+        sim: &mut Simulation,
+        spec: &SceneSpec,
+        opts: &RunOptions,
+        n: usize,
+    ) -> Result<f64> {
+        let d = sim.derived;
+        let bar = progress_bar(opts, d.steps);
+        let thermo_every = (d.steps / 20).max(1);
+        let dump_every = opts.dump_every.unwrap_or(0);
+        let energy_every = spec.run.energy_every;
+        let step_wall0 = Instant::now();
+        if dump_every > 0 {
+            self.dump(&opts.out_dir, sim, 0)?;
+        }
+        let mut next_thermo = thermo_every;
+        while sim.step < d.steps {
+            let next = self.next_landing(sim.step, d.steps, energy_every, dump_every);
+            if let Err(e) = sim.step_until(next) {
+                self.failure = Some(e);
+                break;
+            }
+            let s = sim.step;
+            if (at_multiple(s, energy_every) || s == d.steps) && !self.sample_energy(sim) {
+                break;
+            }
+            if spec.run.ballistic_cutoff
+                && sim.coasting_since().is_none()
+                && at_multiple(s, energy_every)
+            {
+                self.consider_cutoff(sim, &spec.run, opts.progress);
+            }
+            self.observe(sim);
+            if dump_every > 0 && (at_multiple(s, dump_every) || s == d.steps) {
+                self.dump(&opts.out_dir, sim, s)?;
+            }
+            if opts.progress && (s >= next_thermo || s == d.steps) {
+                next_thermo = next_multiple(s, thermo_every);
+                self.output_time += thermo(bar.as_ref(), sim, n, d.steps, step_wall0);
+            }
+        }
+        if let Some(b) = &bar {
+            b.finish_and_clear();
+        }
+        let observed_in_loop = self.observer.as_ref().map_or(Duration::ZERO, |o| o.elapsed);
+        Ok(step_wall0
+            .elapsed()
+            .saturating_sub(observed_in_loop + self.render_time)
+            .as_secs_f64())
+    }
+
+    /// The next base step after `s` at which something is due (the end, an energy sample, a
+    /// dump, a cloud sample, a render time): an adaptive step lands on it.
+    fn next_landing(&self, s: u64, end: u64, energy_every: u64, dump_every: u64) -> u64 {
+        let mut next = end.min(next_multiple(s, energy_every));
+        if dump_every > 0 {
+            next = next.min(next_multiple(s, dump_every));
+        }
+        if let Some(due) = self.observer.as_ref().and_then(|o| o.next_due(s)) {
+            next = next.min(due);
+        }
+        if let Some(&(r, _)) = self.render_steps.iter().find(|&&(r, _)| r > s) {
+            next = next.min(r);
+        }
+        next
+    }
+
+    /// Samples the energy ledger and checks its drift; false (the failure kept) when it has
+    /// drifted beyond `run.max_energy_drift`.
+    fn sample_energy(&mut self, sim: &mut Simulation) -> bool {
+        let e = sim.energy();
+        self.rows.push(row(sim, &e));
+        match sim.check_energy(&e) {
+            Ok(drift) => {
+                self.max_drift = self.max_drift.max(drift.abs());
+                true
+            }
+            Err(err) => {
+                self.max_drift = self
+                    .max_drift
+                    .max(((e.total_j() - self.e0) / self.e0).abs());
+                self.failure = Some(err);
+                false
+            }
+        }
+    }
+
+    /// The ballistic cut-off, checked at each energy sample: after `run.cutoff_min_tau_s`,
+    /// once the broken-bond count grew by at most `run.cutoff_break_fraction` over
+    /// `run.cutoff_quiet_s` and no fragments touch or close in, the fragments move rigidly.
+    fn consider_cutoff(&mut self, sim: &mut Simulation, run: &RunSettings, progress: bool) {
+        let tau = sim.tau_s();
+        self.break_history.push((tau, sim.bonds_broken));
+        // Broken-bond count one quiet window ago.
+        let before = self
+            .break_history
+            .iter()
+            .rev()
+            .find(|h| tau - h.0 >= run.cutoff_quiet_s)
+            .map(|h| h.1);
+        let quiet = before.is_some_and(|b| {
+            (sim.bonds_broken - b) as f64 <= run.cutoff_break_fraction * sim.bonds_broken as f64
+        });
+        if tau >= run.cutoff_min_tau_s && quiet {
+            let t = Instant::now();
+            let labels = hvi_engine::cloud::label_fragments(&sim.particles);
+            if sim.fragments_separating(&labels) {
+                sim.start_coasting(&labels);
+                if progress {
+                    eprintln!(
+                        "ballistic cut-off at tau = {:.3} us: bonds broken grew by at most {} over {:.3} us and no fragments touch or close in; fragments now move rigidly",
+                        tau * 1e6,
+                        run.cutoff_break_fraction,
+                        run.cutoff_quiet_s * 1e6
+                    );
+                }
+            }
+            self.output_time += t.elapsed();
+        }
+    }
+
+    /// Observes the cloud when a sample is due and captures a frame at a render step.
+    fn observe(&mut self, sim: &Simulation) {
+        if let Some(o) = self.observer.as_mut() {
+            o.observe(sim);
+        }
+        if self.render_steps.iter().any(|&(s, _)| s == sim.step) {
+            let t = Instant::now();
+            self.frames.push(Frame::capture(sim));
+            self.render_time += t.elapsed();
+        }
+    }
+
+    /// Writes the snapshot `dump_<step>.xyz` into `dir`.
+    fn dump(&mut self, dir: &Path, sim: &Simulation, step: u64) -> Result<()> {
+        let t = Instant::now();
+        write_xyz(&dir.join(format!("dump_{step:09}.xyz")), sim)?;
+        self.output_time += t.elapsed();
+        Ok(())
+    }
+
+    /// The full cloud measurement at the analysis time (the end of a completed run), the
+    /// track, and the time the observation took in all.
+    fn finish_cloud(&mut self, sim: &Simulation) -> (Option<CloudResult>, Vec<TrackRow>, Duration) {
+        let cloud = match (self.observer.as_mut(), &self.failure) {
+            (Some(o), None) => o.finish(sim),
+            _ => None,
+        };
+        let track = self.observer.take().map(|o| (o.track, o.elapsed));
+        let analysis_time = track.as_ref().map_or(Duration::ZERO, |t| t.1);
+        let track = track.map(|t| t.0).unwrap_or_default();
+        (cloud, track, analysis_time)
+    }
+}
+
+/// The progress bar over `steps`, when progress is on and stderr is a terminal (else thermo
+/// lines go to stderr as text).
+fn progress_bar(opts: &RunOptions, steps: u64) -> Option<ProgressBar> {
+    if opts.progress && std::io::stderr().is_terminal() {
+        let b = ProgressBar::with_draw_target(Some(steps), ProgressDrawTarget::stderr());
         b.set_style(
             ProgressStyle::with_template("{bar:30} {pos}/{len} steps  {msg}  ETA {eta}")
                 .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -346,218 +621,182 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         Some(b)
     } else {
         None
-    };
-    let thermo_every = (d.steps / 20).max(1);
-    let dump_every = opts.dump_every.unwrap_or(0);
-    let energy_every = spec.run.energy_every;
-    let step_wall0 = Instant::now();
-    let mut failure: Option<EngineError> = None;
-    // Ballistic cut-off bookkeeping: broken-bond counts at the energy samples.
-    let mut break_history: Vec<(f64, u64)> = Vec::new();
-    if dump_every > 0 {
-        let t = Instant::now();
-        write_xyz(&opts.out_dir.join(format!("dump_{:09}.xyz", 0)), &sim)?;
-        output_time += t.elapsed();
     }
-    let next_multiple = |s: u64, every: u64| (s / every + 1).saturating_mul(every);
-    let mut next_thermo = thermo_every;
-    while sim.step < d.steps {
-        // The next base step at which something is due: an adaptive step lands on it.
-        let s = sim.step;
-        let mut next = d.steps.min(next_multiple(s, energy_every));
-        if dump_every > 0 {
-            next = next.min(next_multiple(s, dump_every));
+}
+
+/// One thermo line (time, throughput since `since`, bonds broken) on the progress bar when
+/// there is one, else on stderr; returns the time it took.
+fn thermo(
+    bar: Option<&ProgressBar>,
+    sim: &Simulation,
+    n: usize,
+    steps: u64,
+    since: Instant,
+) -> Duration {
+    let s = sim.step;
+    let t = Instant::now();
+    let el = since.elapsed().as_secs_f64();
+    let rate = n as f64 * sim.steps_taken as f64 / el.max(1e-9);
+    let eta = (steps - s) as f64 * el / (s as f64).max(1.0);
+    let msg = format!(
+        "tau {:7.3} us  {:6.2} M particle-steps/s  bonds broken {}  ",
+        sim.tau_s() * 1e6,
+        rate / 1e6,
+        sim.bonds_broken
+    );
+    match bar {
+        Some(b) => {
+            b.set_position(s);
+            b.set_message(msg);
         }
-        if let Some(due) = observer.as_ref().and_then(|o| o.next_due(s)) {
-            next = next.min(due);
-        }
-        if let Some(&(r, _)) = render_steps.iter().find(|&&(r, _)| r > s) {
-            next = next.min(r);
-        }
-        if let Err(e) = sim.step_until(next) {
-            failure = Some(e);
-            break;
-        }
-        let s = sim.step;
-        if s % energy_every == 0 || s == d.steps {
-            let e = sim.energy();
-            rows.push(row(&sim, &e));
-            match sim.check_energy(&e) {
-                Ok(drift) => max_drift = max_drift.max(drift.abs()),
-                Err(err) => {
-                    max_drift = max_drift.max(((e.total_j() - e0) / e0).abs());
-                    failure = Some(err);
-                    break;
-                }
-            }
-        }
-        if spec.run.ballistic_cutoff && sim.coasting_since().is_none() && s % energy_every == 0 {
-            let tau = sim.tau_s();
-            break_history.push((tau, sim.bonds_broken));
-            // Broken-bond count one quiet window ago.
-            let before = break_history
-                .iter()
-                .rev()
-                .find(|h| tau - h.0 >= spec.run.cutoff_quiet_s)
-                .map(|h| h.1);
-            let quiet = before.is_some_and(|b| {
-                (sim.bonds_broken - b) as f64
-                    <= spec.run.cutoff_break_fraction * sim.bonds_broken as f64
-            });
-            if tau >= spec.run.cutoff_min_tau_s && quiet {
-                let t = Instant::now();
-                let labels = hvi_engine::cloud::label_fragments(&sim.particles);
-                if sim.fragments_separating(&labels) {
-                    sim.start_coasting(&labels);
-                    if opts.progress {
-                        eprintln!(
-                            "ballistic cut-off at tau = {:.3} us: bonds broken grew by at most {} over {:.3} us and no fragments touch or close in; fragments now move rigidly",
-                            tau * 1e6,
-                            spec.run.cutoff_break_fraction,
-                            spec.run.cutoff_quiet_s * 1e6
-                        );
-                    }
-                }
-                output_time += t.elapsed();
-            }
-        }
-        if let Some(o) = observer.as_mut() {
-            o.observe(&sim);
-        }
-        render_time += capture(&sim, &mut frames);
-        if dump_every > 0 && (s % dump_every == 0 || s == d.steps) {
-            let t = Instant::now();
-            write_xyz(&opts.out_dir.join(format!("dump_{s:09}.xyz")), &sim)?;
-            output_time += t.elapsed();
-        }
-        if opts.progress && (s >= next_thermo || s == d.steps) {
-            next_thermo = next_multiple(s, thermo_every);
-            let t = Instant::now();
-            let el = step_wall0.elapsed().as_secs_f64();
-            let rate = n as f64 * sim.steps_taken as f64 / el.max(1e-9);
-            let eta = (d.steps - s) as f64 * el / (s as f64).max(1.0);
-            let msg = format!(
-                "tau {:7.3} us  {:6.2} M particle-steps/s  bonds broken {}  ",
-                sim.tau_s() * 1e6,
-                rate / 1e6,
-                sim.bonds_broken
-            );
-            match &bar {
-                Some(b) => {
-                    b.set_position(s);
-                    b.set_message(msg);
-                }
-                None => eprintln!("step {s:>9}/{}  {msg} ETA {eta:.0} s", d.steps),
-            }
-            output_time += t.elapsed();
-        }
+        None => eprintln!("step {s:>9}/{steps}  {msg} ETA {eta:.0} s"),
     }
-    if let Some(b) = &bar {
-        b.finish_and_clear();
-    }
-    // The engine's throughput: the loop without the cloud observation and picture captures.
-    let observed_in_loop = observer.as_ref().map_or(Duration::ZERO, |o| o.elapsed);
-    let step_wall = step_wall0
-        .elapsed()
-        .saturating_sub(observed_in_loop + render_time)
-        .as_secs_f64();
-    let final_energy = match rows.last() {
+    t.elapsed()
+}
+
+/// The energy at the end: the last sample when it was taken now, else a new one (appended).
+fn final_energy_row(rows: &mut Vec<EnergyRow>, sim: &mut Simulation, d: &Derived) -> EnergyRow {
+    match rows.last() {
         Some(r) if (r.time_s - sim.time_s()).abs() < 0.5 * d.dt_s => *r,
         _ => {
             let e = sim.energy();
-            let r = row(&sim, &e);
+            let r = row(sim, &e);
             rows.push(r);
             r
         }
-    };
+    }
+}
+
+/// The momentum block: total momentum at t = 0 and now, and the change over M v0.
+fn momentum_summary(sim: &Simulation, d: &Derived) -> MomentumSummary {
     let momentum = sim.momentum();
     let total_mass: f64 = sim.particles.mass.iter().sum();
     let scale = (total_mass * d.v0_m_s).max(f64::MIN_POSITIVE);
+    MomentumSummary {
+        initial_kg_m_s: sim.momentum_initial.to_array(),
+        final_kg_m_s: momentum.to_array(),
+        relative_change: (momentum - sim.momentum_initial).length() / scale,
+    }
+}
 
-    // The full cloud measurement at the analysis time: the end of a completed run.
-    let cloud = match (observer.as_mut(), &failure) {
-        (Some(o), None) => o.finish(&sim),
-        _ => None,
-    };
-    let track = observer.map(|o| (o.track.clone(), o.elapsed));
-    let analysis_time = track.as_ref().map_or(Duration::ZERO, |t| t.1);
-    let track = track.map(|t| t.0).unwrap_or_default();
+/// The energy block from the final sample, the initial total `e0` and the largest drift.
+fn energy_summary(last: &EnergyRow, e0: f64, max_drift: f64) -> EnergySummary {
+    EnergySummary {
+        kinetic_j: last.kinetic_j,
+        contact_j: last.contact_j,
+        bond_j: last.bond_j,
+        broken_j: last.broken_j,
+        total_initial_j: e0,
+        total_final_j: last.total_j,
+        relative_drift: (last.total_j - e0) / e0,
+        max_abs_relative_drift: max_drift,
+    }
+}
 
+/// Writes `energy.csv`, `cloud_track.csv` (when there is a track) and `fragments.csv` (when
+/// the cloud was measured) into `dir`; returns the time it took.
+fn write_tables(
+    dir: &Path,
+    rows: &[EnergyRow],
+    track: &[TrackRow],
+    cloud: Option<&CloudResult>,
+) -> Result<Duration> {
     let t = Instant::now();
-    write_csv_atomic(&opts.out_dir.join("energy.csv"), &rows)?;
+    write_csv_atomic(&dir.join("energy.csv"), rows)?;
     if !track.is_empty() {
-        write_csv_atomic(&opts.out_dir.join("cloud_track.csv"), &track)?;
+        write_csv_atomic(&dir.join("cloud_track.csv"), track)?;
     }
-    if let Some(c) = &cloud {
-        write_csv_atomic(
-            &opts.out_dir.join("fragments.csv"),
-            size_distribution(&c.fragments),
-        )?;
+    if let Some(c) = cloud {
+        write_csv_atomic(&dir.join("fragments.csv"), size_distribution(&c.fragments))?;
     }
-    output_time += t.elapsed();
+    Ok(t.elapsed())
+}
 
-    // Pictures.
-    if opts.render && failure.is_none() {
-        let t = Instant::now();
-        let info = SceneInfo::new(spec, &d, n);
-        let dir = &opts.out_dir;
-        let last = Frame::capture(&sim);
-        render::side_view(
-            &dir.join("cloud_side.png"),
-            &last,
+/// Draws the run's pictures of its `n` particles: the side view at the end, the 3-D series of
+/// `frames`, the fragment histogram and the track; returns the time it took.
+fn render_pictures(
+    spec: &SceneSpec,
+    opts: &RunOptions,
+    sim: &Simulation,
+    n: usize,
+    frames: &[Frame],
+    track: &[TrackRow],
+    cloud: Option<&CloudResult>,
+) -> Result<Duration> {
+    let t = Instant::now();
+    let info = SceneInfo::new(spec, &sim.derived, n);
+    let dir = &opts.out_dir;
+    let last = Frame::capture(sim);
+    render::side_view(
+        &dir.join("cloud_side.png"),
+        &last,
+        &info,
+        cloud.map(|c| &c.report.measurement),
+    )
+    .context("rendering cloud_side.png")?;
+    if !frames.is_empty() {
+        render::series(&dir.join("cloud_series.png"), frames, &info)
+            .context("rendering cloud_series.png")?;
+    }
+    if let Some(c) = cloud {
+        render::fragment_histogram(
+            &dir.join("fragments.png"),
+            &c.fragments,
+            &c.report.measurement,
             &info,
-            cloud.as_ref().map(|c| &c.report.measurement),
         )
-        .context("rendering cloud_side.png")?;
-        if !frames.is_empty() {
-            render::series(&dir.join("cloud_series.png"), &frames, &info)
-                .context("rendering cloud_series.png")?;
-        }
-        if let Some(c) = &cloud {
-            render::fragment_histogram(
-                &dir.join("fragments.png"),
-                &c.fragments,
-                &c.report.measurement,
-                &info,
-            )
-            .context("rendering fragments.png")?;
-        }
-        if !track.is_empty() {
-            render::track_plot(
-                &dir.join("cloud_track.png"),
-                &track,
-                cloud
-                    .as_ref()
-                    .map_or([None, None], |c| c.report.front_velocity_times_s),
-                cloud.as_ref().and_then(|c| c.report.front_velocity_ratio),
-                &info,
-            )
-            .context("rendering cloud_track.png")?;
-        }
-        render_time += t.elapsed();
-        if opts.progress {
-            eprintln!(
-                "pictures: {:.2} s for {} particles ({} series frames)",
-                t.elapsed().as_secs_f64(),
-                n,
-                frames.len()
-            );
-        }
+        .context("rendering fragments.png")?;
     }
+    if !track.is_empty() {
+        render::track_plot(
+            &dir.join("cloud_track.png"),
+            track,
+            cloud.map_or([None, None], |c| c.report.front_velocity_times_s),
+            cloud.and_then(|c| c.report.front_velocity_ratio),
+            &info,
+        )
+        .context("rendering cloud_track.png")?;
+    }
+    let took = t.elapsed();
+    if opts.progress {
+        eprintln!(
+            "pictures: {:.2} s for {} particles ({} series frames)",
+            took.as_secs_f64(),
+            n,
+            frames.len()
+        );
+    }
+    Ok(took)
+}
 
-    let total = wall0.elapsed();
-    let (timing, table) = timing_table(&sim.timing, analysis_time, render_time, output_time, total);
-    let summary = Summary {
-        status: if failure.is_some() {
+/// What the summary is assembled from besides the scene and the simulation.
+struct Measured {
+    energy: EnergySummary,
+    momentum: MomentumSummary,
+    timing: TimingSummary,
+    /// Wall time of the whole run.
+    wall: Duration,
+    /// Stepping wall time without observation and captures, s.
+    step_wall_s: f64,
+    cloud: Option<CloudReport>,
+    error: Option<String>,
+}
+
+/// `summary.json` of the run.
+fn summarise(spec: &SceneSpec, sim: &Simulation, counts: Counts, m: Measured) -> Summary {
+    let d = sim.derived;
+    let n = counts.particles;
+    Summary {
+        status: if m.error.is_some() {
             "unstable".into()
         } else {
             "completed".into()
         },
-        error: failure.as_ref().map(|e| e.to_string()),
+        error: m.error,
         engine_version: env!("CARGO_PKG_VERSION").into(),
         particles: n,
-        particles_impactor: n_imp,
-        particles_target: n - n_imp,
+        particles_impactor: counts.impactor,
+        particles_target: n - counts.impactor,
         bonds_initial: sim.bonds_initial,
         bonds_broken: sim.bonds_broken,
         steps: sim.steps_taken,
@@ -567,73 +806,46 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         time_s: sim.time_s(),
         tau_s: sim.tau_s(),
         sigma_m: d.sigma_m,
-        wall_seconds: total.as_secs_f64(),
-        particle_steps_per_second: n as f64 * sim.steps_taken as f64 / step_wall.max(1e-12),
+        wall_seconds: m.wall.as_secs_f64(),
+        particle_steps_per_second: n as f64 * sim.steps_taken as f64 / m.step_wall_s.max(1e-12),
         threads: rayon::current_num_threads(),
         neighbour_builds: sim.neighbour_builds(),
         stride_limits: sim.stride_limits,
         ballistic_cutoff_tau_s: sim
             .coasting_since()
             .map(|step| step as f64 * d.dt_s - d.contact_time_s),
-        energy: EnergySummary {
-            kinetic_j: final_energy.kinetic_j,
-            contact_j: final_energy.contact_j,
-            bond_j: final_energy.bond_j,
-            broken_j: final_energy.broken_j,
-            total_initial_j: e0,
-            total_final_j: final_energy.total_j,
-            relative_drift: (final_energy.total_j - e0) / e0,
-            max_abs_relative_drift: max_drift,
-        },
-        momentum: MomentumSummary {
-            initial_kg_m_s: sim.momentum_initial.to_array(),
-            final_kg_m_s: momentum.to_array(),
-            relative_change: (momentum - sim.momentum_initial).length() / scale,
-        },
+        energy: m.energy,
+        momentum: m.momentum,
         derived: d,
-        timing,
-        cloud: cloud.as_ref().map(|c| c.report.clone()),
+        timing: m.timing,
+        cloud: m.cloud,
         scene: spec.clone(),
-    };
-    write_atomic_bytes(
-        &opts.out_dir.join("summary.json"),
-        serde_json::to_string_pretty(&summary)?.as_bytes(),
-    )?;
-    if opts.progress {
-        let mut err = std::io::stderr().lock();
-        let _ = writeln!(
-            err,
-            "{} steps ({} of {:.3e} s, largest {:.3e} s), {} particles in {:.2} s: {:.3e} particle-steps/s; bonds broken {} of {}; energy drift {:.2e}; {} neighbour builds",
-            sim.steps_taken,
-            sim.step,
-            d.dt_s,
-            summary.dt_largest_s,
-            n,
-            summary.wall_seconds,
-            summary.particle_steps_per_second,
-            sim.bonds_broken,
-            sim.bonds_initial,
-            summary.energy.relative_drift,
-            summary.neighbour_builds
-        );
-        if let Some(c) = &summary.cloud {
-            let _ = writeln!(err, "{}", describe_cloud(c));
-        }
-        let _ = write!(err, "{table}");
     }
-    if let Some(e) = failure {
-        return Err(anyhow::Error::new(e).context(format!(
-            "run stopped early; what it had is in {}",
-            Path::new(&opts.out_dir).display()
-        )));
+}
+
+/// The run's last lines on stderr: steps, throughput, bonds, drift, the cloud, the timing
+/// table.
+fn print_end(summary: &Summary, sim: &Simulation, table: &str) {
+    let mut err = std::io::stderr().lock();
+    let _ = writeln!(
+        err,
+        "{} steps ({} of {:.3e} s, largest {:.3e} s), {} particles in {:.2} s: {:.3e} particle-steps/s; bonds broken {} of {}; energy drift {:.2e}; {} neighbour builds",
+        sim.steps_taken,
+        sim.step,
+        summary.dt_s,
+        summary.dt_largest_s,
+        summary.particles,
+        summary.wall_seconds,
+        summary.particle_steps_per_second,
+        sim.bonds_broken,
+        sim.bonds_initial,
+        summary.energy.relative_drift,
+        summary.neighbour_builds
+    );
+    if let Some(c) = &summary.cloud {
+        let _ = writeln!(err, "{}", describe_cloud(c));
     }
-    Ok(RunOutcome {
-        summary,
-        energy: rows,
-        sim,
-        track,
-        cloud,
-    })
+    let _ = write!(err, "{table}");
 }
 
 /// The lines a run prints about its debris cloud.
