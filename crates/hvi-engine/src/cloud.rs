@@ -45,7 +45,7 @@
 
 use std::time::{Duration, Instant};
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::scene::{Analysis, Derived};
 use crate::sim::Simulation;
@@ -250,7 +250,7 @@ pub fn find_cloud(p: &Particles, reference: &CloudReference) -> CloudMembers {
 
 /// The cloud's extent at one instant: front, La, Lr, R by the quantile and by the maximum.
 /// Lengths are `None` while the cloud is empty; ratios while Lr is 0.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Extent {
     /// Cloud particles, N_part.
     pub n_part: usize,
@@ -313,7 +313,7 @@ pub fn front_velocity(t1_s: f64, front1_m: f64, t2_s: f64, front2_m: f64) -> Opt
 }
 
 /// One fragment of the cloud (its cloud part, see the module's definitions).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Fragment {
     /// Label: the smallest particle id in the fragment.
     pub label: u32,
@@ -332,7 +332,7 @@ pub struct Fragment {
 }
 
 /// The full measurement of the cloud at one instant.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CloudMeasurement {
     /// Simulated time of the measurement, s.
     pub time_s: f64,
@@ -539,7 +539,7 @@ pub fn measure(
 }
 
 /// One class of the size distribution: all fragments with the same number of particles.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SizeClass {
     /// Particles per fragment.
     pub particles: usize,
@@ -602,7 +602,7 @@ pub fn size_distribution(fragments: &[Fragment]) -> Vec<SizeClass> {
 }
 
 /// One sample of the cloud track (written as `cloud_track.csv`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TrackRow {
     /// Step number.
     pub step: u64,
@@ -632,7 +632,7 @@ pub struct TrackRow {
 }
 
 /// The front located at one of the two front times.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct FrontSample {
     /// Time since first contact, s (the step nearest the requested time).
     pub tau_s: f64,
@@ -642,7 +642,7 @@ pub struct FrontSample {
 
 /// The cloud part of `summary.json`: the full measurement at the analysis time, va and the
 /// largest fragments.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CloudReport {
     /// The measurement at the analysis time (the end of the run).
     #[serde(flatten)]

@@ -55,7 +55,7 @@ impl ContactForm {
 /// let stretch = 1.5 - ia.r_eq_m;
 /// assert!((ia.break_energy_at_rcut() - 5.0 * stretch * stretch).abs() < 1e-12);
 /// ```
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Interaction {
     /// Particle diameter sigma, m.
     pub sigma_m: f64,

@@ -33,7 +33,7 @@ pub const LEDGER_DRIFT_BOUND: f64 = 1e-3;
 const BLOCK_BONDS: usize = 192;
 
 /// The energy ledger (MODEL.md section 3): kinetic + contact + bond + broken is conserved.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Energy {
     /// Kinetic energy, J.
     pub kinetic_j: f64,
@@ -53,7 +53,7 @@ impl Energy {
 }
 
 /// Wall time spent per phase, like LAMMPS's breakdown.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 pub struct Timing {
     /// Contact repulsion over the neighbour list.
     pub contact: Duration,

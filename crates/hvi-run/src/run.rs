@@ -16,9 +16,10 @@ use hvi_engine::scene::{Derived, RunSettings, SceneSpec};
 use hvi_engine::sim::{Energy, Simulation, Timing};
 use hvi_engine::EngineError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::output::{write_atomic_bytes, write_csv_atomic, write_lammps_data, write_xyz};
+use hvi_analysis::observable::{Observable, Observables};
 use hvi_plot::render::{self, Frame, SceneInfo};
 
 /// How to run and what to write besides the summary.
@@ -60,40 +61,64 @@ pub struct EnergyRow {
     pub dt_s: f64,
 }
 
+/// A number of `summary.json` read back: JSON writes a non-finite number as `null` (a run that
+/// blew up), which reads back as NaN.
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<f64, D::Error> {
+    Option::<f64>::deserialize(d).map(|v| v.unwrap_or(f64::NAN))
+}
+
+/// A vector of `summary.json` read back, each `null` component as NaN.
+fn nan_if_null_3<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<[f64; 3], D::Error> {
+    <[Option<f64>; 3]>::deserialize(d).map(|v| v.map(|x| x.unwrap_or(f64::NAN)))
+}
+
 /// The energy block of `summary.json`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct EnergySummary {
     /// Final kinetic energy, J.
+    #[serde(deserialize_with = "nan_if_null")]
     pub kinetic_j: f64,
     /// Final contact energy, J.
+    #[serde(deserialize_with = "nan_if_null")]
     pub contact_j: f64,
     /// Final bond energy, J.
+    #[serde(deserialize_with = "nan_if_null")]
     pub bond_j: f64,
     /// Final broken-bond energy, J.
+    #[serde(deserialize_with = "nan_if_null")]
     pub broken_j: f64,
     /// Ledger total at t = 0, J.
+    #[serde(deserialize_with = "nan_if_null")]
     pub total_initial_j: f64,
     /// Ledger total at the end, J.
+    #[serde(deserialize_with = "nan_if_null")]
     pub total_final_j: f64,
     /// (final - initial) / initial.
+    #[serde(deserialize_with = "nan_if_null")]
     pub relative_drift: f64,
     /// Largest |drift| over all samples.
+    #[serde(deserialize_with = "nan_if_null")]
     pub max_abs_relative_drift: f64,
 }
 
 /// The momentum block of `summary.json`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MomentumSummary {
     /// Total momentum at t = 0, kg m/s.
+    #[serde(deserialize_with = "nan_if_null_3")]
     pub initial_kg_m_s: [f64; 3],
     /// Total momentum at the end, kg m/s.
+    #[serde(deserialize_with = "nan_if_null_3")]
     pub final_kg_m_s: [f64; 3],
     /// |final - initial| / (M v0), the round-off measure.
+    #[serde(deserialize_with = "nan_if_null")]
     pub relative_change: f64,
 }
 
 /// Seconds per phase.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TimingSummary {
     /// Contact repulsion.
     pub contact_s: f64,
@@ -116,7 +141,7 @@ pub struct TimingSummary {
 }
 
 /// `summary.json`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
     /// "completed" or "unstable".
     pub status: String,
@@ -141,16 +166,21 @@ pub struct Summary {
     /// Base time step, s (the step of the impact; the adaptive step takes multiples of it).
     pub dt_s: f64,
     /// Largest step taken, s.
+    #[serde(deserialize_with = "nan_if_null")]
     pub dt_largest_s: f64,
     /// Simulated time reached, s.
+    #[serde(deserialize_with = "nan_if_null")]
     pub time_s: f64,
     /// Time since first contact reached, s.
+    #[serde(deserialize_with = "nan_if_null")]
     pub tau_s: f64,
     /// Particle diameter, m.
     pub sigma_m: f64,
     /// Wall time of the whole run, s.
+    #[serde(deserialize_with = "nan_if_null")]
     pub wall_seconds: f64,
     /// Particles times steps over the stepping wall time.
+    #[serde(deserialize_with = "nan_if_null")]
     pub particle_steps_per_second: f64,
     /// Threads used.
     pub threads: usize,
@@ -174,6 +204,43 @@ pub struct Summary {
     pub cloud: Option<CloudReport>,
     /// The scene as run (after overrides).
     pub scene: SceneSpec,
+}
+
+impl Summary {
+    /// The run's observables: the debris cloud's (from `cloud`, `None` without one) and the
+    /// run's health numbers. One arm per observable, so a new one cannot be forgotten.
+    pub fn observables(&self) -> Observables {
+        let cloud = self.cloud.as_ref();
+        let m = cloud.map(|c| &c.measurement);
+        let count = |n: usize| n as f64;
+        let mut o = Observables::default();
+        for k in Observable::ALL {
+            let value = match k {
+                Observable::Particles => Some(count(self.particles)),
+                Observable::Fragmentation => m.and_then(|m| m.fragmentation),
+                Observable::NPart => m.map(|m| count(m.n_part)),
+                Observable::NFrag => m.map(|m| count(m.n_frag)),
+                Observable::LengthAxial => m.and_then(|m| m.length_axial_m),
+                Observable::LengthRadial => m.and_then(|m| m.length_radial_m),
+                Observable::LengthRatio => m.and_then(|m| m.length_ratio),
+                Observable::FrontVelocity => cloud.and_then(|c| c.front_velocity_m_s),
+                Observable::FrontVelocityRatio => cloud.and_then(|c| c.front_velocity_ratio),
+                Observable::LargestFragmentMassFraction => {
+                    m.and_then(|m| m.largest_fragment_mass_fraction)
+                }
+                Observable::LargestFragmentDiameter => {
+                    m.and_then(|m| m.largest_fragment_diameter_m)
+                }
+                Observable::MeanFragmentDiameter => m.and_then(|m| m.mean_fragment_diameter_m),
+                Observable::Tau => m.map(|m| m.tau_s),
+                Observable::BondsBrokenFraction => (self.bonds_initial > 0)
+                    .then(|| self.bonds_broken as f64 / self.bonds_initial as f64),
+                Observable::EnergyRelativeDrift => Some(self.energy.relative_drift),
+            };
+            o.set(k, value);
+        }
+        o
+    }
 }
 
 /// What a run returns: its summary, and the error if it stopped early.

@@ -25,13 +25,13 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
-use hvi_analysis::observable::{Observable, Observables};
+use hvi_analysis::observable::Observables;
 use hvi_engine::scene::SceneSpec;
 use serde::{Deserialize, Serialize};
 
 use crate::output::write_atomic_bytes;
 use crate::plan::{DIR_DIGITS, ENGINE_VERSION, STUDY_FORMAT_VERSION};
-use crate::run::{run_scene, RunOptions};
+use crate::run::{run_scene, RunOptions, Summary};
 
 /// How a run ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -43,41 +43,9 @@ pub enum RunStatus {
     Failed,
 }
 
-/// Reads the observables out of a `summary.json` document: the debris cloud's (its fields
-/// are looked up by name in `cloud`, flattened, or in `cloud.measurement`, so this reads every
-/// summary layout the run module has written) and the run's health numbers.
-pub fn observables_of_summary(s: &serde_json::Value) -> Observables {
-    let num = |v: Option<&serde_json::Value>| v.and_then(serde_json::Value::as_f64);
-    let cloud = s.get("cloud").filter(|c| c.is_object());
-    let c = |name: &str| {
-        cloud.and_then(|c| {
-            num(c.get(name)).or_else(|| num(c.get("measurement").and_then(|m| m.get(name))))
-        })
-    };
-    let bonds0 = num(s.get("bonds_initial"));
-    let broken = num(s.get("bonds_broken"));
-    let mut o = Observables::default();
-    for k in Observable::ALL {
-        let value = match k {
-            Observable::Particles => num(s.get("particles")),
-            Observable::BondsBrokenFraction => match (broken, bonds0) {
-                (Some(b), Some(b0)) if b0 > 0.0 => Some(b / b0),
-                _ => None,
-            },
-            Observable::EnergyRelativeDrift => {
-                num(s.get("energy").and_then(|e| e.get("relative_drift")))
-            }
-            // The cloud's observables carry their `summary.json` names.
-            cloud_observable => c(cloud_observable.name()),
-        };
-        o.set(k, value);
-    }
-    o
-}
-
-/// A run directory's `summary.json` (`hvi_run::run::run_scene`), if it has a readable one.
-/// Numbers are read from it by JSON pointer, e.g. `.pointer("/energy/max_abs_relative_drift")`.
-pub fn read_summary(run_dir: &Path) -> Option<serde_json::Value> {
+/// A run directory's `summary.json` ([`crate::run::run_scene`]), if it has one this version
+/// reads.
+pub fn read_summary(run_dir: &Path) -> Option<Summary> {
     let text = fs::read_to_string(run_dir.join("summary.json")).ok()?;
     serde_json::from_str(&text).ok()
 }
@@ -348,7 +316,7 @@ impl Store {
         let summary = read_summary(&tmp);
         let observables = summary
             .as_ref()
-            .map(observables_of_summary)
+            .map(Summary::observables)
             .unwrap_or_default();
         let record = Record {
             format: STUDY_FORMAT_VERSION,
@@ -440,28 +408,35 @@ mod tests {
     }
 
     #[test]
-    fn observables_read_flat_and_nested_cloud_blocks() {
-        let flat = serde_json::json!({
-            "particles": 2000, "bonds_initial": 100, "bonds_broken": 25,
-            "energy": {"relative_drift": 1e-6},
-            "cloud": {"fragmentation": 0.5, "n_part": 10, "length_ratio": 1.2,
-                      "front_velocity_ratio": 1.01}
-        });
-        let o = observables_of_summary(&flat);
-        assert_eq!(o.get(Observable::Fragmentation), Some(0.5));
-        assert_eq!(o.get(Observable::NPart), Some(10.0));
-        assert_eq!(o.get(Observable::BondsBrokenFraction), Some(0.25));
-        assert_eq!(o.get(Observable::EnergyRelativeDrift), Some(1e-6));
-        assert_eq!(o.get(Observable::FrontVelocityRatio), Some(1.01));
-        let nested = serde_json::json!({"cloud": {"measurement": {"fragmentation": 0.7},
-                                                  "front_velocity_ratio": 0.9}});
-        let o = observables_of_summary(&nested);
-        assert_eq!(o.get(Observable::Fragmentation), Some(0.7));
-        assert_eq!(o.get(Observable::FrontVelocityRatio), Some(0.9));
-        let none = observables_of_summary(&serde_json::json!({"cloud": null}));
-        assert_eq!(none.get(Observable::Fragmentation), None);
-        for (name, value) in none.iter() {
-            assert_eq!(value, None, "{name}");
-        }
+    fn a_summary_reads_back_typed_with_its_observables() {
+        use hvi_analysis::observable::Observable;
+        let dir = std::env::temp_dir().join(format!("hvi-store-summary-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        let mut spec = hvi_engine::scene::SceneSpec::calibration(1500.0, 2e-6);
+        spec.analysis.track_every = 0;
+        let opts = RunOptions {
+            out_dir: dir.clone(),
+            ..RunOptions::default()
+        };
+        run_scene(&spec, &opts).expect("runs");
+        let summary = read_summary(&dir).expect("typed summary");
+        let json: serde_json::Value =
+            serde_json::from_str(&fs::read_to_string(dir.join("summary.json")).expect("file"))
+                .expect("json");
+        let o = summary.observables();
+        assert_eq!(o.get(Observable::Particles), json["particles"].as_f64());
+        assert_eq!(
+            o.get(Observable::Fragmentation),
+            json["cloud"]["fragmentation"].as_f64()
+        );
+        assert_eq!(
+            o.get(Observable::FrontVelocityRatio),
+            json["cloud"]["front_velocity_ratio"].as_f64()
+        );
+        let broken =
+            json["bonds_broken"].as_f64().expect("n") / json["bonds_initial"].as_f64().expect("n");
+        assert_eq!(o.get(Observable::BondsBrokenFraction), Some(broken));
+        assert!(o.get(Observable::Tau).is_some());
+        let _ = fs::remove_dir_all(&dir);
     }
 }

@@ -348,16 +348,20 @@ fn measured(store: &Store, fp: &str, cached: bool) -> Result<Measured> {
         .lookup(fp)?
         .ok_or_else(|| anyhow!("run {} vanished from the store", &fp[..16]))?;
     let summary = read_summary(&store.dir(fp));
-    let num = |pointer: &str| summary.as_ref()?.pointer(pointer)?.as_f64();
+    let s = summary.as_ref();
     Ok(Measured {
         status: rec.status,
         error: rec.error.clone(),
         obs: rec.observables,
-        dt_s: num("/dt_s"),
-        steps: num("/steps").map(|s| s as u64),
-        wall_s: num("/wall_seconds"),
-        rate: num("/particle_steps_per_second"),
-        max_drift: num("/energy/max_abs_relative_drift"),
+        dt_s: s.map(|s| s.dt_s).filter(|v| v.is_finite()),
+        steps: s.map(|s| s.steps),
+        wall_s: s.map(|s| s.wall_seconds).filter(|v| v.is_finite()),
+        rate: s
+            .map(|s| s.particle_steps_per_second)
+            .filter(|v| v.is_finite()),
+        max_drift: s
+            .map(|s| s.energy.max_abs_relative_drift)
+            .filter(|v| v.is_finite()),
         cached,
     })
 }

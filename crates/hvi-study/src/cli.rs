@@ -382,10 +382,10 @@ pub struct AccuracyArgs {
     /// Worker threads per run (default: every core).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Report directory (default: reports/accuracy/<scene file stem>).
+    /// Report directory (default: `reports/accuracy/<scene file stem>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Run store (default: runs/accuracy/<scene file stem>).
+    /// Run store (default: `runs/accuracy/<scene file stem>`).
     #[arg(long)]
     pub store: Option<PathBuf>,
     /// Noise-floor runs: other seeds at the paper's step (0 to 8). With 0 the tolerance

@@ -5,7 +5,7 @@
 //! lattice (`layout`), give each body's particles their mass (eq. 20), check the run settings,
 //! choose the time step against the stability bound, and place the impactor at its standoff.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::layout::{lay_out, rim_ids, Layout};
 use super::spec::{Geometry, Material, Resolution, SceneSpec};
@@ -18,7 +18,7 @@ use crate::state::{Body, Particles};
 use crate::step::stability_bound_s;
 
 /// Numbers derived from a scene that every run prints (and the summary records).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Derived {
     /// Particle diameter sigma at this resolution, m.
     pub sigma_m: f64,

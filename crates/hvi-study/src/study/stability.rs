@@ -180,9 +180,9 @@ fn cells_of(plan: &Plan, records: &[Record], store: &Store) -> Vec<Cell> {
         .zip(records)
         .map(|(run, rec)| {
             let summary = read_summary(&store.dir(&run.fingerprint));
-            let num = |pointer: &str| summary.as_ref()?.pointer(pointer)?.as_f64();
-            let dt = num("/dt_s");
-            let bound = num("/derived/dt_max_s");
+            let s = summary.as_ref();
+            let dt = s.map(|s| s.dt_s).filter(|v| v.is_finite());
+            let bound = s.map(|s| s.derived.dt_max_s).filter(|v| v.is_finite());
             Cell {
                 slice: plan.study.clone(),
                 x_key: plan.axes[0].key.clone(),
@@ -195,7 +195,9 @@ fn cells_of(plan: &Plan, records: &[Record], store: &Store) -> Vec<Cell> {
                     "stopped"
                 }
                 .into(),
-                max_drift: num("/energy/max_abs_relative_drift"),
+                max_drift: s
+                    .map(|s| s.energy.max_abs_relative_drift)
+                    .filter(|v| v.is_finite()),
                 dt_s: dt,
                 dt_over_bound: dt.zip(bound).map(|(a, b)| a / b),
                 broken_fraction: rec.observables.get(Observable::BondsBrokenFraction),

@@ -15,7 +15,7 @@ use hvi_run::output::write_atomic;
 use hvi_run::plan::Plan;
 use hvi_run::store::{read_summary, Record, RunStatus};
 
-use super::{execute, summary_number, Ctx};
+use super::{execute, Ctx};
 use crate::reproduce::report::{fmt_num, short, Figure, StageTiming, Value, Verdict};
 
 /// Paper text of Fig. 5.
@@ -280,7 +280,7 @@ fn fig11_numbers(f11: &mut Figure, rec: &Record, run_dir: &Path, targets: &Targe
     );
     f11.number(
         "time step (s)",
-        Value::num(summary_number(summary.as_ref(), "/dt_s")),
+        Value::num(summary.as_ref().map(|s| s.dt_s)),
         format!(
             "the paper's {} s at \u{3c3}_ref, scaled with \u{3c3} (or as set)",
             short(paper::TIME_STEP_S)
@@ -288,7 +288,7 @@ fn fig11_numbers(f11: &mut Figure, rec: &Record, run_dir: &Path, targets: &Targe
     );
     f11.number(
         "steps",
-        Value::num(summary_number(summary.as_ref(), "/steps")),
+        Value::num(summary.as_ref().map(|s| s.steps as f64)),
         "",
     );
     f11.number(
@@ -317,10 +317,12 @@ fn fig11_numbers(f11: &mut Figure, rec: &Record, run_dir: &Path, targets: &Targe
     );
     f11.timing(
         "particle-steps/s",
-        Value::num(summary_number(
-            summary.as_ref(),
-            "/particle_steps_per_second",
-        )),
+        Value::num(
+            summary
+                .as_ref()
+                .map(|s| s.particle_steps_per_second)
+                .filter(|v| v.is_finite()),
+        ),
         format!(
             "the paper's run: {} on one processor",
             fmt_num(paper_particle_steps_per_second())

@@ -15,7 +15,7 @@ use hvi_run::plan::Plan;
 use hvi_run::store::{read_summary, Record};
 
 use super::Ctx;
-use super::{axis, completed_runs, index_of, join_or, mean, plan_records, summary_number, timing};
+use super::{axis, completed_runs, index_of, join_or, mean, plan_records, timing};
 use crate::cli::CalibrateArgs;
 use crate::reproduce::report::{fmt_num, short, Figure, StageTiming, Value, Verdict};
 use crate::study::calibrate::calibrate;
@@ -180,7 +180,7 @@ impl Grid {
             sigma_m: plan
                 .runs
                 .first()
-                .and_then(|r| summary_number(read_summary(&dir.join(&r.dir)).as_ref(), "/sigma_m")),
+                .and_then(|r| read_summary(&dir.join(&r.dir)).map(|s| s.sigma_m)),
         })
     }
 }

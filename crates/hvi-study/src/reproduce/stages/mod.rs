@@ -27,7 +27,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{anyhow, Context, Result};
-use serde_json::Value as Json;
 
 use super::report::StageTiming;
 use crate::cli::StudyArgs;
@@ -170,12 +169,6 @@ fn timing(
             .count(),
         wall_seconds: t0.elapsed().as_secs_f64(),
     }
-}
-
-/// A number of a run's `summary.json` (read with [`hvi_run::store::read_summary`]) by JSON
-/// pointer, e.g. `/dt_s`.
-fn summary_number(summary: Option<&Json>, pointer: &str) -> Option<f64> {
-    summary?.pointer(pointer).and_then(Json::as_f64)
 }
 
 /// The index of `v` in sorted axis values (relative tolerance 1e-9).
