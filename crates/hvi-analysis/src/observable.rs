@@ -55,6 +55,24 @@ pub enum Observable {
     BondsBrokenFraction,
     /// Relative drift of the energy ledger at the end.
     EnergyRelativeDrift,
+    /// La of the shadowgraph's silhouette.
+    LengthAxialSilhouette,
+    /// Lr of the shadowgraph's silhouette.
+    LengthRadialSilhouette,
+    /// R of the shadowgraph's silhouette.
+    LengthRatioSilhouette,
+    /// va / v0 from the silhouette's front at the two image times.
+    FrontVelocityRatioSilhouette,
+    /// Craters on the witness plate.
+    CraterCount,
+    /// Median crater diameter on the witness plate.
+    CraterDiameterMedian,
+    /// Largest crater diameter on the witness plate.
+    CraterDiameterMax,
+    /// Largest crater within the impactor's radius of the axis.
+    CentralCraterDiameter,
+    /// 1 when the central crater is large (at least 5 times the median), else 0.
+    LargeCentralCrater,
 }
 
 /// What names and explains an observable.
@@ -89,7 +107,7 @@ const fn def(
 }
 
 /// Every observable, in table order (a plain table: the one place an observable is named).
-pub const DEFINITIONS: [Definition; 15] = {
+pub const DEFINITIONS: [Definition; 24] = {
     use Observable::*;
     [
         def(Particles, "particles", "N", "1", "particles in the run"),
@@ -190,6 +208,69 @@ pub const DEFINITIONS: [Definition; 15] = {
             "drift",
             "1",
             "relative drift of the energy ledger at the end",
+        ),
+        def(
+            LengthAxialSilhouette,
+            "length_axial_silhouette_m",
+            "La (silhouette)",
+            "m",
+            "axial length of the shadowgraph's silhouette",
+        ),
+        def(
+            LengthRadialSilhouette,
+            "length_radial_silhouette_m",
+            "Lr (silhouette)",
+            "m",
+            "full width of the shadowgraph's silhouette",
+        ),
+        def(
+            LengthRatioSilhouette,
+            "length_ratio_silhouette",
+            "R (silhouette)",
+            "1",
+            "La / Lr of the shadowgraph's silhouette",
+        ),
+        def(
+            FrontVelocityRatioSilhouette,
+            "front_velocity_ratio_silhouette",
+            "va/v0 (silhouette)",
+            "1",
+            "front velocity of the silhouette between the two image times, over v0",
+        ),
+        def(
+            CraterCount,
+            "crater_count",
+            "craters",
+            "1",
+            "craters on the witness plate",
+        ),
+        def(
+            CraterDiameterMedian,
+            "crater_diameter_median_m",
+            "median crater",
+            "m",
+            "median crater diameter on the witness plate",
+        ),
+        def(
+            CraterDiameterMax,
+            "crater_diameter_max_m",
+            "largest crater",
+            "m",
+            "largest crater diameter on the witness plate",
+        ),
+        def(
+            CentralCraterDiameter,
+            "central_crater_diameter_m",
+            "central crater",
+            "m",
+            "largest crater within the impactor's radius of the axis",
+        ),
+        def(
+            LargeCentralCrater,
+            "large_central_crater",
+            "large central crater",
+            "1",
+            "1 if the central crater is at least 5 times the median, else 0",
         ),
     ]
 };

@@ -45,11 +45,14 @@
 
 use std::time::{Duration, Instant};
 
+use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::scene::{Analysis, Derived};
+use crate::shadowgraph::{Shadowgraph, ShadowgraphSettings};
 use crate::sim::Simulation;
 use crate::state::{Body, Particles};
+use crate::witness::{self, Crater, WitnessPlate, WitnessSummary};
 
 // The analysis defaults live with the settings that use them (`scene::Analysis`); also here,
 // where they were defined before.
@@ -638,6 +641,52 @@ pub struct FrontSample {
     pub tau_s: f64,
     /// Front z_f, m (`None` if the cloud was empty).
     pub front_z_m: Option<f64>,
+    /// The silhouette's front, m (`None` if no shadowgraph pixel was dark).
+    pub front_z_silhouette_m: Option<f64>,
+}
+
+/// The cloud as the side-on camera sees it ([`crate::shadowgraph`]): La, Lr and R of the
+/// silhouette at the analysis time, and va from the silhouette's front at the two front times.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct SilhouetteReport {
+    /// Pixel size of the shadowgraph, m.
+    pub pixel_m: f64,
+    /// Optical depth at which a pixel is dark.
+    pub optical_depth: f64,
+    /// Dark pixels at the analysis time.
+    pub dark_pixels: usize,
+    /// The silhouette's front, m.
+    pub front_z_m: Option<f64>,
+    /// La of the silhouette, m.
+    pub length_axial_m: Option<f64>,
+    /// Lr of the silhouette, m.
+    pub length_radial_m: Option<f64>,
+    /// R of the silhouette.
+    pub length_ratio: Option<f64>,
+    /// The silhouette's front at the two front times, m.
+    pub front_positions_m: [Option<f64>; 2],
+    /// va from the silhouette's front at the two front times, m/s.
+    pub front_velocity_m_s: Option<f64>,
+    /// That va over v0.
+    pub front_velocity_ratio: Option<f64>,
+}
+
+/// The shadowgraph of the particles marked `in_cloud`, taken in id order (`order` maps ids to
+/// storage indices), each particle an opaque grain of its volume-equivalent diameter.
+pub fn cloud_shadowgraph(
+    p: &Particles,
+    in_cloud: &[bool],
+    order: &[u32],
+    density_kg_m3: f64,
+    settings: &ShadowgraphSettings,
+) -> Option<Shadowgraph> {
+    let grains: Vec<(DVec3, f64)> = order
+        .iter()
+        .map(|&i| i as usize)
+        .filter(|&i| in_cloud[i])
+        .map(|i| (p.pos[i], equivalent_diameter_m(p.mass[i], density_kg_m3)))
+        .collect();
+    Shadowgraph::of_grains(&grains, settings)
 }
 
 /// The cloud part of `summary.json`: the full measurement at the analysis time, va and the
@@ -655,6 +704,12 @@ pub struct CloudReport {
     pub front_velocity_times_s: [Option<f64>; 2],
     /// The front positions z_f at those times, m.
     pub front_positions_m: [Option<f64>; 2],
+    /// The cloud as the side-on camera sees it (absent in summaries of earlier versions).
+    #[serde(default)]
+    pub silhouette: Option<SilhouetteReport>,
+    /// What the witness plate shows (absent in summaries of earlier versions).
+    #[serde(default)]
+    pub witness_plate: Option<WitnessSummary>,
     /// The largest fragments, largest first.
     pub largest_fragments: Vec<Fragment>,
 }
@@ -708,6 +763,8 @@ pub struct CloudObserver {
     pub track: Vec<TrackRow>,
     /// The front at the two front times, once reached.
     pub front: [Option<FrontSample>; 2],
+    shadowgraph: ShadowgraphSettings,
+    witness_plate: WitnessPlate,
     /// Wall time spent observing (labelling, quantiles, the final measurement).
     pub elapsed: Duration,
 }
@@ -727,6 +784,8 @@ impl CloudObserver {
             finder: CloudFinder::default(),
             track: Vec::new(),
             front: [None, None],
+            shadowgraph: analysis.shadowgraph(),
+            witness_plate: analysis.witness_plate(),
             elapsed: Duration::ZERO,
         }
     }
@@ -805,16 +864,82 @@ impl CloudObserver {
             });
         }
         if front {
+            let silhouette = cloud_shadowgraph(
+                &sim.particles,
+                &members.in_cloud,
+                &sim.particles.index_of_id(),
+                self.reference.density_kg_m3,
+                &self.shadowgraph,
+            )
+            .and_then(|s| s.measure(self.reference.plate_rear_z_m));
             for k in 0..2 {
                 if self.front_steps[k] == step {
                     self.front[k] = Some(FrontSample {
                         tau_s: tau,
                         front_z_m: ext.front_z_m,
+                        front_z_silhouette_m: silhouette.map(|m| m.front_z_m),
                     });
                 }
             }
         }
         self.elapsed += t0.elapsed();
+    }
+
+    /// The silhouette's numbers now, with va from its front at the two front times.
+    fn silhouette(
+        reference: &CloudReference,
+        settings: &ShadowgraphSettings,
+        front: &[Option<FrontSample>; 2],
+        sim: &Simulation,
+        in_cloud: &[bool],
+    ) -> SilhouetteReport {
+        let m = cloud_shadowgraph(
+            &sim.particles,
+            in_cloud,
+            &sim.particles.index_of_id(),
+            reference.density_kg_m3,
+            settings,
+        )
+        .and_then(|s| s.measure(reference.plate_rear_z_m));
+        let fronts = front.map(|f| f.and_then(|f| Some((f.tau_s, f.front_z_silhouette_m?))));
+        let va = match fronts {
+            [Some((t1, z1)), Some((t2, z2))] => front_velocity(t1, z1, t2, z2),
+            _ => None,
+        };
+        let v0 = reference.v0_m_s;
+        SilhouetteReport {
+            pixel_m: settings.pixel_m,
+            optical_depth: settings.optical_depth,
+            dark_pixels: m.map_or(0, |m| m.dark_pixels),
+            front_z_m: m.map(|m| m.front_z_m),
+            length_axial_m: m.map(|m| m.length_axial_m),
+            length_radial_m: m.map(|m| m.length_radial_m),
+            length_ratio: m.map(|m| m.length_ratio),
+            front_positions_m: front.map(|f| f.and_then(|f| f.front_z_silhouette_m)),
+            front_velocity_m_s: va,
+            front_velocity_ratio: va.filter(|_| v0 > 0.0).map(|v| v / v0),
+        }
+    }
+
+    /// The craters of the cloud's fragments on the witness plate.
+    fn craters(
+        plate: &WitnessPlate,
+        reference: &CloudReference,
+        fragments: &[Fragment],
+    ) -> Vec<Crater> {
+        fragments
+            .iter()
+            .filter_map(|f| {
+                witness::crater(
+                    plate,
+                    f.centroid_m,
+                    f.velocity_m_s,
+                    f.diameter_m,
+                    reference.density_kg_m3,
+                    reference.plate_rear_z_m,
+                )
+            })
+            .collect()
     }
 
     /// The full measurement of the cloud now (the analysis time), with va from the front
@@ -839,21 +964,41 @@ impl CloudObserver {
                 Some(FrontSample {
                     tau_s: t1,
                     front_z_m: Some(z1),
+                    ..
                 }),
                 Some(FrontSample {
                     tau_s: t2,
                     front_z_m: Some(z2),
+                    ..
                 }),
             ) => front_velocity(t1, z1, t2, z2),
             _ => None,
         };
         let v0 = self.reference.v0_m_s;
+        let silhouette = Self::silhouette(
+            &self.reference,
+            &self.shadowgraph,
+            &self.front,
+            sim,
+            &members.in_cloud,
+        );
+        let craters = Self::craters(&self.witness_plate, &self.reference, &analysis.fragments);
+        let witness = witness::summarise(
+            &craters,
+            self.witness_plate.standoff_m,
+            equivalent_diameter_m(
+                self.reference.impactor_mass_kg,
+                self.reference.density_kg_m3,
+            ),
+        );
         let report = CloudReport {
             measurement: analysis.measurement.clone(),
             front_velocity_m_s: va,
             front_velocity_ratio: va.filter(|_| v0 > 0.0).map(|v| v / v0),
             front_velocity_times_s: [a.map(|s| s.tau_s), b.map(|s| s.tau_s)],
             front_positions_m: [a.and_then(|s| s.front_z_m), b.and_then(|s| s.front_z_m)],
+            silhouette: Some(silhouette),
+            witness_plate: Some(witness),
             largest_fragments: analysis
                 .fragments
                 .iter()
@@ -865,6 +1010,7 @@ impl CloudObserver {
         Some(CloudResult {
             report,
             fragments: analysis.fragments,
+            craters,
             labels_by_id: {
                 let mut by_id = vec![0u32; sim.particles.len()];
                 for (i, &l) in members.labels.iter().enumerate() {
@@ -885,6 +1031,8 @@ pub struct CloudResult {
     pub fragments: Vec<Fragment>,
     /// The fragment label of every particle, indexed by id.
     pub labels_by_id: Vec<u32>,
+    /// The craters the fragments leave on the witness plate, in fragment order.
+    pub craters: Vec<Crater>,
 }
 
 #[cfg(test)]

@@ -39,5 +39,6 @@ pub mod shadowgraph;
 pub mod sim;
 pub mod state;
 pub mod step;
+pub mod witness;
 
 pub use error::{EngineError, Result};

@@ -97,6 +97,16 @@ impl Shadowgraph {
         particle_diameter_m: f64,
         settings: &ShadowgraphSettings,
     ) -> Option<Shadowgraph> {
+        let grains: Vec<(DVec3, f64)> = pos.iter().map(|&p| (p, particle_diameter_m)).collect();
+        Shadowgraph::of_grains(&grains, settings)
+    }
+
+    /// Images grains given as (position, diameter), in id order; see [`Shadowgraph::of`].
+    pub fn of_grains(
+        grains: &[(DVec3, f64)],
+        settings: &ShadowgraphSettings,
+    ) -> Option<Shadowgraph> {
+        let pos: Vec<DVec3> = grains.iter().map(|g| g.0).collect();
         let h = settings.pixel_m;
         let positive = |v: f64| v.is_finite() && v > 0.0;
         if pos.is_empty() || !positive(h) || !positive(settings.optical_depth) {
@@ -120,9 +130,9 @@ impl Shadowgraph {
             settings: *settings,
             tau: vec![0.0; nx * nz],
         };
-        let per_particle = std::f64::consts::PI * particle_diameter_m.powi(2) / 4.0 / (h * h);
-        for p in pos {
-            s.deposit(p.x, p.z, per_particle);
+        let per_area = std::f64::consts::PI / 4.0 / (h * h);
+        for &(p, d) in grains {
+            s.deposit(p.x, p.z, per_area * d * d);
         }
         Some(s)
     }
