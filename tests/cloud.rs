@@ -627,6 +627,30 @@ fn small_impact_cloud_is_consistent_plausible_and_thread_independent() {
     assert!(r > 0.3 && r < 3.0, "R = {r}");
     let share = m.largest_fragment_mass_fraction.expect("largest");
     assert!(share > 0.0 && share <= 1.0);
+
+    // The camera sees the cloud: a silhouette at least as long as the quantile's La (it ends at
+    // the farthest dark pixel), with a front speed of the same order.
+    let sil = a.report.silhouette.expect("silhouette measured");
+    let la = sil.length_axial_m.expect("silhouette La");
+    assert!(la > 0.5 * m.length_axial_m.expect("La"), "{sil:?}");
+    let r_sil = sil.length_ratio.expect("silhouette R");
+    assert!(r_sil > 0.3 && r_sil < 3.0, "R (silhouette) = {r_sil}");
+    let va_sil = sil.front_velocity_ratio.expect("silhouette va");
+    assert!(
+        va_sil > 0.8 && va_sil < 2.0,
+        "va/v0 (silhouette) = {va_sil}"
+    );
+    // Every fragment moving downstream leaves one crater on the witness plate.
+    let wit = a.report.witness_plate.expect("witness plate");
+    let downstream = a
+        .fragments
+        .iter()
+        .filter(|f| f.velocity_m_s[2] > 0.0)
+        .count();
+    assert_eq!(wit.crater_count, downstream);
+    assert_eq!(a.craters.len(), downstream);
+    let median = wit.crater_diameter_median_m.expect("craters");
+    assert!(median > 0.0 && median <= wit.crater_diameter_max_m.expect("largest"));
 }
 
 #[test]
@@ -759,6 +783,23 @@ fn run_with_render_writes_cloud_files_and_pictures() {
         })
         .sum();
     assert_eq!(counted as u64, cloud["n_part"].as_u64().expect("n_part"));
+    for key in [
+        "length_axial_m",
+        "length_radial_m",
+        "length_ratio",
+        "front_velocity_ratio",
+    ] {
+        let v = &cloud["silhouette"][key];
+        assert!(v.is_number(), "cloud.silhouette.{key} = {v}");
+    }
+    let craters = std::fs::read_to_string(out.join("craters.csv")).expect("craters");
+    assert!(craters.starts_with("x_m,y_m,diameter_m,depth_m,fragment_diameter_m,velocity_m_s"));
+    assert_eq!(
+        craters.lines().count() as u64 - 1,
+        cloud["witness_plate"]["crater_count"]
+            .as_u64()
+            .expect("count")
+    );
     for name in [
         "cloud_side.png",
         "cloud_series.png",

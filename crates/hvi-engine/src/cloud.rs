@@ -892,22 +892,24 @@ impl CloudObserver {
         front: &[Option<FrontSample>; 2],
         sim: &Simulation,
         in_cloud: &[bool],
-    ) -> SilhouetteReport {
-        let m = cloud_shadowgraph(
+    ) -> (SilhouetteReport, Option<Shadowgraph>) {
+        let image = cloud_shadowgraph(
             &sim.particles,
             in_cloud,
             &sim.particles.index_of_id(),
             reference.density_kg_m3,
             settings,
-        )
-        .and_then(|s| s.measure(reference.plate_rear_z_m));
+        );
+        let m = image
+            .as_ref()
+            .and_then(|s| s.measure(reference.plate_rear_z_m));
         let fronts = front.map(|f| f.and_then(|f| Some((f.tau_s, f.front_z_silhouette_m?))));
         let va = match fronts {
             [Some((t1, z1)), Some((t2, z2))] => front_velocity(t1, z1, t2, z2),
             _ => None,
         };
         let v0 = reference.v0_m_s;
-        SilhouetteReport {
+        let report = SilhouetteReport {
             pixel_m: settings.pixel_m,
             optical_depth: settings.optical_depth,
             dark_pixels: m.map_or(0, |m| m.dark_pixels),
@@ -918,7 +920,8 @@ impl CloudObserver {
             front_positions_m: front.map(|f| f.and_then(|f| f.front_z_silhouette_m)),
             front_velocity_m_s: va,
             front_velocity_ratio: va.filter(|_| v0 > 0.0).map(|v| v / v0),
-        }
+        };
+        (report, image)
     }
 
     /// The craters of the cloud's fragments on the witness plate.
@@ -975,7 +978,7 @@ impl CloudObserver {
             _ => None,
         };
         let v0 = self.reference.v0_m_s;
-        let silhouette = Self::silhouette(
+        let (silhouette, shadowgraph) = Self::silhouette(
             &self.reference,
             &self.shadowgraph,
             &self.front,
@@ -1011,6 +1014,7 @@ impl CloudObserver {
             report,
             fragments: analysis.fragments,
             craters,
+            shadowgraph,
             labels_by_id: {
                 let mut by_id = vec![0u32; sim.particles.len()];
                 for (i, &l) in members.labels.iter().enumerate() {
@@ -1033,6 +1037,8 @@ pub struct CloudResult {
     pub labels_by_id: Vec<u32>,
     /// The craters the fragments leave on the witness plate, in fragment order.
     pub craters: Vec<Crater>,
+    /// The shadowgraph at the analysis time (`None` for an empty cloud).
+    pub shadowgraph: Option<Shadowgraph>,
 }
 
 #[cfg(test)]

@@ -1,7 +1,7 @@
 //! One run of one scene: the engine stepped to the end time, with the energy ledger sampled,
 //! the debris cloud observed (`hvi_engine::cloud`: the track, the two front times, the full
 //! measurement at the end), optional snapshots and pictures, progress, and `summary.json`,
-//! `energy.csv`, `cloud_track.csv`, `fragments.csv` written atomically.
+//! `energy.csv`, `cloud_track.csv`, `fragments.csv`, `craters.csv` written atomically.
 
 use std::fmt::Write as _;
 use std::io::{IsTerminal, Write as _};
@@ -212,6 +212,8 @@ impl Summary {
     pub fn observables(&self) -> Observables {
         let cloud = self.cloud.as_ref();
         let m = cloud.map(|c| &c.measurement);
+        let sil = cloud.and_then(|c| c.silhouette.as_ref());
+        let wit = cloud.and_then(|c| c.witness_plate.as_ref());
         let count = |n: usize| n as f64;
         let mut o = Observables::default();
         for k in Observable::ALL {
@@ -236,6 +238,19 @@ impl Summary {
                 Observable::BondsBrokenFraction => (self.bonds_initial > 0)
                     .then(|| self.bonds_broken as f64 / self.bonds_initial as f64),
                 Observable::EnergyRelativeDrift => Some(self.energy.relative_drift),
+                Observable::LengthAxialSilhouette => sil.and_then(|s| s.length_axial_m),
+                Observable::LengthRadialSilhouette => sil.and_then(|s| s.length_radial_m),
+                Observable::LengthRatioSilhouette => sil.and_then(|s| s.length_ratio),
+                Observable::FrontVelocityRatioSilhouette => {
+                    sil.and_then(|s| s.front_velocity_ratio)
+                }
+                Observable::CraterCount => wit.map(|w| count(w.crater_count)),
+                Observable::CraterDiameterMedian => wit.and_then(|w| w.crater_diameter_median_m),
+                Observable::CraterDiameterMax => wit.and_then(|w| w.crater_diameter_max_m),
+                Observable::CentralCraterDiameter => wit.and_then(|w| w.central_crater_diameter_m),
+                Observable::LargeCentralCrater => {
+                    wit.map(|w| if w.large_central_crater { 1.0 } else { 0.0 })
+                }
             };
             o.set(k, value);
         }
@@ -760,8 +775,8 @@ fn energy_summary(last: &EnergyRow, e0: f64, max_drift: f64) -> EnergySummary {
     }
 }
 
-/// Writes `energy.csv`, `cloud_track.csv` (when there is a track) and `fragments.csv` (when
-/// the cloud was measured) into `dir`; returns the time it took.
+/// Writes `energy.csv`, `cloud_track.csv` (when there is a track), and `fragments.csv` and
+/// `craters.csv` (when the cloud was measured) into `dir`; returns the time it took.
 fn write_tables(
     dir: &Path,
     rows: &[EnergyRow],
@@ -775,6 +790,7 @@ fn write_tables(
     }
     if let Some(c) = cloud {
         write_csv_atomic(&dir.join("fragments.csv"), size_distribution(&c.fragments))?;
+        write_csv_atomic(&dir.join("craters.csv"), &c.craters)?;
     }
     Ok(t.elapsed())
 }
