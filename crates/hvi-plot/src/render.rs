@@ -9,9 +9,9 @@
 //! - [`track_plot`]: La, Lr and the front velocity over time.
 //!
 //! Particles are rasterised straight into the bitmap as small squares through a depth buffer
-//! (nearest wins, darker with depth), never as one plotters element per particle: 2.7e5
-//! particles take a fraction of a second. plotters draws axes, text and overlays. Every number
-//! shown comes from `hvi_engine::cloud`; nothing here re-derives a definition.
+//! (nearest wins, darker with depth), never as one plotters element per particle (the paper's
+//! runs have 2.7e5 of them). plotters draws axes, text and overlays. Every number shown comes
+//! from `hvi_engine::cloud`; nothing here re-derives a definition.
 
 use std::ops::Range;
 use std::path::Path;
