@@ -3,7 +3,7 @@
 //! reproduce.json is complete, running again simulates nothing and reports no change against
 //! the first report, and bad input stops with a clear message before anything runs. The
 //! deciding numbers themselves are unit-tested on synthetic input in
-//! `crates/hvi-study/src/reproduce/decide.rs`.
+//! `hvi_analysis::decide`.
 
 use std::path::{Path, PathBuf};
 use std::process::Output;

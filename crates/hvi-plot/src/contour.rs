@@ -1,7 +1,7 @@
 //! Contour plots of study fields (Figs. 9, 10, 16b and the objective map), as PNG and SVG.
 //!
 //! The filled background is the field's bilinear interpolation between the runs (each grid cell
-//! drawn as small tiles), iso-lines come from [`super::contour`], the runs are black dots. A
+//! drawn as small tiles), iso-lines come from [`hvi_analysis::contour`], the runs are black dots. A
 //! highlighted level (a target or the validity cut-off) is drawn in red. Log axes are drawn in
 //! log10 coordinates with the tick labels in the physical value. Shows numbers, derives none.
 

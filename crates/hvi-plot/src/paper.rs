@@ -2,7 +2,8 @@
 //! and without sizing), Fig. 5 (F against particle count) and Fig. 13 (va/v0 against t/D).
 //! They draw numbers computed elsewhere: the laws come from `hvi_engine::potential`, the
 //! curves and observables from the runs. The contour maps and snapshot matrices (Figs. 7, 9,
-//! 10, 16, 17) and the cloud pictures (Figs. 11, 12) are drawn by `study` and `render`.
+//! 10, 16, 17) and the cloud pictures (Figs. 11, 12) are drawn by [`crate::contour`],
+//! [`crate::snapshots`] and [`crate::render`].
 
 use std::path::Path;
 

@@ -97,9 +97,8 @@ pub struct Phase {
 }
 
 /// A run goes alone on every thread when it costs more than this times its share of what is
-/// left (1/(runs at once)). Above 1, because a run on T threads goes at less than T times
-/// its speed on one (0.75-0.9 of it on 2 threads): on 2 threads, alone wins from about 0.55
-/// to 0.6 of what is left.
+/// left (1/(runs at once)). Above 1, because a run on T threads goes at less than T times its
+/// speed on one: going alone pays only for a run clearly larger than its share.
 pub const ALONE_ABOVE_SHARE: f64 = 1.2;
 
 /// The order and thread split of runs costing `costs`: first, alone on every thread, each
@@ -158,63 +157,10 @@ pub fn execute(
     opts: &ExecOptions,
 ) -> Result<ExecReport> {
     let t0 = Instant::now();
-    let mut records: Vec<Option<Record>> = Vec::with_capacity(jobs.len());
-    let mut pending: Vec<usize> = Vec::new();
-    for (i, job) in jobs.iter().enumerate() {
-        match store.lookup(&job.fingerprint)? {
-            Some(r) if r.status == RunStatus::Completed => records.push(Some(r)),
-            _ => {
-                records.push(None);
-                // The same fingerprint twice in one execution (e.g. a refinement point that
-                // repeats) runs once.
-                if !pending
-                    .iter()
-                    .any(|&p| jobs[p].fingerprint == job.fingerprint)
-                {
-                    pending.push(i);
-                }
-            }
-        }
-    }
+    let (records, pending) = look_up(store, jobs)?;
     let cached = records.iter().filter(|r| r.is_some()).count();
-    // Largest first, the dominant ones alone (see the module's doc). Costing builds each
-    // scene once, in parallel: seconds against the runs' minutes; a single run needs no order.
-    let costs: Vec<f64> = if pending.len() > 1 {
-        pending
-            .par_iter()
-            // A scene that does not build costs nothing here; its run fails with the reason.
-            .map(|&i| run_cost(&jobs[i].scene).map_or(0.0, |c| c.1))
-            .collect()
-    } else {
-        vec![0.0; pending.len()]
-    };
-    let phases: Vec<Phase> = schedule(opts.threads, opts.jobs, &costs)
-        .into_iter()
-        .map(|p| Phase {
-            runs: p.runs.iter().map(|&k| pending[k]).collect(),
-            ..p
-        })
-        .collect();
-
-    let bar = if opts.progress && !pending.is_empty() {
-        let target = if std::io::stderr().is_terminal() {
-            ProgressDrawTarget::stderr()
-        } else {
-            ProgressDrawTarget::hidden()
-        };
-        let b = ProgressBar::with_draw_target(Some(pending.len() as u64), target);
-        b.set_style(
-            ProgressStyle::with_template(
-                "{bar:30} {pos}/{len} runs  {msg}  elapsed {elapsed}  ETA {eta}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        b.set_message(format!("cached {cached}, failed 0"));
-        b.enable_steady_tick(Duration::from_millis(500));
-        Some(b)
-    } else {
-        None
-    };
+    let phases = order_runs(jobs, &pending, opts);
+    let bar = progress_bar(opts, pending.len(), cached);
     let say = |line: String| {
         if opts.progress {
             match &bar {
@@ -224,83 +170,17 @@ pub fn execute(
         }
     };
     if opts.progress {
-        let solo: Vec<&Phase> = phases.iter().take_while(|p| p.at_once == 1).collect();
-        let mut parts: Vec<String> = Vec::new();
-        if phases.len() > 1 && !solo.is_empty() {
-            parts.push(format!(
-                "{} one at a time on {} threads",
-                solo.len(),
-                solo[0].per_run
-            ));
-        }
-        let shared = if phases.len() > 1 {
-            &phases[solo.len()..]
-        } else {
-            &phases[..]
-        };
-        for p in shared {
-            parts.push(format!(
-                "{} at once, {} thread{} each",
-                p.at_once,
-                p.per_run,
-                if p.per_run == 1 { "" } else { "s" }
-            ));
-        }
-        say(format!(
-            "{} runs: {} cached, {} to run ({}{})",
-            jobs.len(),
-            cached,
-            pending.len(),
-            if pending.is_empty() {
-                "0 at once".to_string()
-            } else {
-                parts.join(", then ")
-            },
-            if phases.len() > 1 {
-                "; largest first"
-            } else {
-                ""
-            }
-        ));
+        say(opening_line(jobs.len(), cached, pending.len(), &phases));
     }
-
     let done = AtomicUsize::new(0);
     let failed_now = AtomicUsize::new(0);
     let run_one = |i: usize, per_run: usize| -> Result<Record> {
         let r = store.execute(&jobs[i], per_run);
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-        let line = match &r {
-            Ok(rec) if rec.status == RunStatus::Completed => {
-                let o = &rec.observables;
-                let f = |x: Option<f64>| x.map_or("n/a".into(), |v| format!("{v:.3}"));
-                format!(
-                    "[{n}/{}] run {} ({}): completed in {:.1} s; F = {}, R = {}, va/v0 = {}",
-                    pending.len(),
-                    i,
-                    describe(i),
-                    rec.wall_seconds,
-                    f(o.get(Observable::Fragmentation)),
-                    f(o.get(Observable::LengthRatio)),
-                    f(o.get(Observable::FrontVelocityRatio))
-                )
-            }
-            Ok(rec) => {
-                failed_now.fetch_add(1, Ordering::Relaxed);
-                format!(
-                    "[{n}/{}] run {} ({}): FAILED after {:.1} s: {}",
-                    pending.len(),
-                    i,
-                    describe(i),
-                    rec.wall_seconds,
-                    rec.error.as_deref().unwrap_or("")
-                )
-            }
-            Err(e) => {
-                failed_now.fetch_add(1, Ordering::Relaxed);
-                format!("[{n}/{}] run {i}: store error: {e:#}", pending.len())
-            }
-        };
-        say(line);
+        if !matches!(&r, Ok(rec) if rec.status == RunStatus::Completed) {
+            failed_now.fetch_add(1, Ordering::Relaxed);
+        }
+        say(finished_line(n, pending.len(), i, &r, describe));
         if let Some(b) = &bar {
             b.inc(1);
             b.set_message(format!(
@@ -310,11 +190,180 @@ pub fn execute(
         }
         r
     };
-    // Per phase, one plain OS thread per concurrent run, each taking the phase's next run; the
-    // run itself goes to its own rayon pool. (Outer rayon workers would, while waiting for a
-    // run's pool, steal further runs onto their stacks and start every run at once.)
+    let results = run_phases(&phases, &run_one);
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let ran = results.len();
+    let records = gather_records(store, jobs, records, results)?;
+    let failed = records
+        .iter()
+        .filter(|r| r.status == RunStatus::Failed)
+        .count();
+    Ok(ExecReport {
+        records,
+        ran,
+        cached,
+        failed,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// Each job's completed record from the store (None where there is none), and the jobs to
+/// run: those missing or failed, each fingerprint once (a refinement point that repeats, say,
+/// runs once).
+fn look_up(store: &Store, jobs: &[Job]) -> Result<(Vec<Option<Record>>, Vec<usize>)> {
+    let mut records: Vec<Option<Record>> = Vec::with_capacity(jobs.len());
+    let mut pending: Vec<usize> = Vec::new();
+    for (i, job) in jobs.iter().enumerate() {
+        match store.lookup(&job.fingerprint)? {
+            Some(r) if r.status == RunStatus::Completed => records.push(Some(r)),
+            _ => {
+                records.push(None);
+                if !pending
+                    .iter()
+                    .any(|&p| jobs[p].fingerprint == job.fingerprint)
+                {
+                    pending.push(i);
+                }
+            }
+        }
+    }
+    Ok((records, pending))
+}
+
+/// The phases of the `pending` jobs (indices into `jobs`): largest first, the dominant ones
+/// alone (see the module's doc). Costing builds each scene once, in parallel, which is cheap
+/// against the runs; a single run needs no order.
+fn order_runs(jobs: &[Job], pending: &[usize], opts: &ExecOptions) -> Vec<Phase> {
+    let costs: Vec<f64> = if pending.len() > 1 {
+        pending
+            .par_iter()
+            // A scene that does not build costs nothing here; its run fails with the reason.
+            .map(|&i| run_cost(&jobs[i].scene).map_or(0.0, |c| c.1))
+            .collect()
+    } else {
+        vec![0.0; pending.len()]
+    };
+    schedule(opts.threads, opts.jobs, &costs)
+        .into_iter()
+        .map(|p| Phase {
+            runs: p.runs.iter().map(|&k| pending[k]).collect(),
+            ..p
+        })
+        .collect()
+}
+
+/// The progress bar over the `pending` runs (drawn only on a terminal), when progress is on
+/// and there is something to run.
+fn progress_bar(opts: &ExecOptions, pending: usize, cached: usize) -> Option<ProgressBar> {
+    if !(opts.progress && pending > 0) {
+        return None;
+    }
+    let target = if std::io::stderr().is_terminal() {
+        ProgressDrawTarget::stderr()
+    } else {
+        ProgressDrawTarget::hidden()
+    };
+    let b = ProgressBar::with_draw_target(Some(pending as u64), target);
+    b.set_style(
+        ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} runs  {msg}  elapsed {elapsed}  ETA {eta}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    b.set_message(format!("cached {cached}, failed 0"));
+    b.enable_steady_tick(Duration::from_millis(500));
+    Some(b)
+}
+
+/// The line that opens an execution: runs, cached, to run, and how they go over the threads,
+/// e.g. `12 runs: 4 cached, 8 to run (2 at once, 1 thread each)`.
+fn opening_line(jobs: usize, cached: usize, pending: usize, phases: &[Phase]) -> String {
+    let solo: Vec<&Phase> = phases.iter().take_while(|p| p.at_once == 1).collect();
+    let mut parts: Vec<String> = Vec::new();
+    if phases.len() > 1 && !solo.is_empty() {
+        parts.push(format!(
+            "{} one at a time on {} threads",
+            solo.len(),
+            solo[0].per_run
+        ));
+    }
+    let shared = if phases.len() > 1 {
+        &phases[solo.len()..]
+    } else {
+        phases
+    };
+    for p in shared {
+        parts.push(format!(
+            "{} at once, {} thread{} each",
+            p.at_once,
+            p.per_run,
+            if p.per_run == 1 { "" } else { "s" }
+        ));
+    }
+    format!(
+        "{} runs: {} cached, {} to run ({}{})",
+        jobs,
+        cached,
+        pending,
+        if pending == 0 {
+            "0 at once".to_string()
+        } else {
+            parts.join(", then ")
+        },
+        if phases.len() > 1 {
+            "; largest first"
+        } else {
+            ""
+        }
+    )
+}
+
+/// The line for the `n`-th of `total` finished runs, job `i`: its observables, or why it
+/// failed.
+fn finished_line(
+    n: usize,
+    total: usize,
+    i: usize,
+    r: &Result<Record>,
+    describe: &dyn Fn(usize) -> String,
+) -> String {
+    match r {
+        Ok(rec) if rec.status == RunStatus::Completed => {
+            let o = &rec.observables;
+            let f = |x: Option<f64>| x.map_or("n/a".into(), |v| format!("{v:.3}"));
+            format!(
+                "[{n}/{total}] run {} ({}): completed in {:.1} s; F = {}, R = {}, va/v0 = {}",
+                i,
+                describe(i),
+                rec.wall_seconds,
+                f(o.get(Observable::Fragmentation)),
+                f(o.get(Observable::LengthRatio)),
+                f(o.get(Observable::FrontVelocityRatio))
+            )
+        }
+        Ok(rec) => format!(
+            "[{n}/{total}] run {} ({}): FAILED after {:.1} s: {}",
+            i,
+            describe(i),
+            rec.wall_seconds,
+            rec.error.as_deref().unwrap_or("")
+        ),
+        Err(e) => format!("[{n}/{total}] run {i}: store error: {e:#}"),
+    }
+}
+
+/// Runs the phases in order and returns every run's result with its job index. Per phase, one
+/// plain OS thread per concurrent run, each taking the phase's next run; the run itself goes
+/// to its own rayon pool. (Outer rayon workers would, while waiting for a run's pool, steal
+/// further runs onto their stacks and start every run at once.)
+fn run_phases(
+    phases: &[Phase],
+    run_one: &(dyn Fn(usize, usize) -> Result<Record> + Sync),
+) -> Vec<(usize, Result<Record>)> {
     let mut results: Vec<(usize, Result<Record>)> = Vec::new();
-    for phase in &phases {
+    for phase in phases {
         let next = AtomicUsize::new(0);
         let done_phase: Vec<(usize, Result<Record>)> = std::thread::scope(|scope| {
             let workers: Vec<_> = (0..phase.at_once)
@@ -340,10 +389,18 @@ pub fn execute(
         });
         results.extend(done_phase);
     }
-    if let Some(b) = &bar {
-        b.finish_and_clear();
-    }
-    let ran = results.len();
+    results
+}
+
+/// Every job's record: the ones just run into `records`, then the rest from the store
+/// (duplicates of a pending fingerprint take the record of the one that ran). The first
+/// store error of a run comes back instead.
+fn gather_records(
+    store: &Store,
+    jobs: &[Job],
+    mut records: Vec<Option<Record>>,
+    results: Vec<(usize, Result<Record>)>,
+) -> Result<Vec<Record>> {
     let mut first_error = None;
     for (i, r) in results {
         match r {
@@ -356,28 +413,16 @@ pub fn execute(
     if let Some(e) = first_error {
         return Err(e);
     }
-    // Duplicates of a pending fingerprint take the record of the one that ran.
     for i in 0..jobs.len() {
         if records[i].is_none() {
             records[i] = store.lookup(&jobs[i].fingerprint)?;
         }
     }
-    let records: Vec<Record> = records
+    records
         .into_iter()
         .enumerate()
         .map(|(i, r)| r.with_context(|| format!("run {i} has no record after execution")))
-        .collect::<Result<_>>()?;
-    let failed = records
-        .iter()
-        .filter(|r| r.status == RunStatus::Failed)
-        .count();
-    Ok(ExecReport {
-        records,
-        ran,
-        cached,
-        failed,
-        wall_seconds: t0.elapsed().as_secs_f64(),
-    })
+        .collect()
 }
 
 #[cfg(test)]

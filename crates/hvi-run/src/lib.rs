@@ -4,7 +4,7 @@
 //! ([`scene_file`]), one run and its files ([`run`], [`output`]), study files and their
 //! validated plans ([`spec`], [`plan`]), the run store that keeps each result once
 //! ([`store`]), parallel execution ([`exec`]), results tables ([`table`]), Slurm job arrays
-//! ([`slurm`]) and the engine benchmark ([`bench`]).
+//! ([`slurm`]) and the engine benchmark ([`mod@bench`]).
 
 pub mod bench;
 pub mod exec;

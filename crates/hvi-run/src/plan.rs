@@ -16,7 +16,7 @@ use sha2::{Digest, Sha256};
 
 use crate::output::write_atomic_bytes;
 use crate::scene_file::parse_scene;
-use crate::spec::{json_to_override, override_key, Axis, Study};
+use crate::spec::{json_to_override, override_key, Axis, Study, Tier};
 
 /// Version of the plan and run-record formats, and of what the fingerprint covers. Bump it
 /// when either changes meaning, so old results are not mistaken for new ones.
@@ -153,12 +153,18 @@ pub fn describe_values(axes: &[Axis], values: &[serde_json::Value]) -> String {
 }
 
 /// Parses the base scene with overrides and checks every value with the engine (which lays
-/// out the particles: at the quick tier this takes milliseconds, at the paper's 2.7e5
-/// particles about a second per run, spread over the cores).
+/// out the particles, so a check costs about a run's set-up).
 pub fn validated_scene(study: &Study, set: &[String]) -> Result<SceneSpec> {
     let spec = parse_scene(&study.scene_text, set)?;
     spec.build()?;
     Ok(spec)
+}
+
+/// One run of the grid before its scene is checked: coordinates, axis values, overrides.
+struct Draft {
+    coords: Vec<usize>,
+    values: Vec<serde_json::Value>,
+    set: Vec<String>,
 }
 
 /// Expands a study at a tier into a validated plan. Every run's scene is built and checked
@@ -166,80 +172,17 @@ pub fn validated_scene(study: &Study, set: &[String]) -> Result<SceneSpec> {
 /// each naming the key and the run.
 pub fn build_plan(study: &Study, req: &PlanRequest) -> Result<Plan> {
     let tier = study.tier(req.tier.as_deref())?;
-    let mut common: Vec<String> = study.set.clone();
-    common.extend(tier.set.iter().cloned());
-    for s in &req.set {
-        let k = override_key(s);
-        if study.axes.iter().any(|a| a.key == k) {
-            bail!("--set `{s}`: `{k}` is an axis of this study (allowed: keys that are not axes)");
-        }
-        common.push(s.clone());
-    }
-    if let Some(n) = req.particles {
-        if !(n.is_finite() && n >= 8.0) {
-            bail!("invalid value for `--particles`: {n} (allowed: a number >= 8)");
-        }
-        if study.axes.iter().any(|a| a.key == "resolution.particles") {
-            bail!("--particles: `resolution.particles` is an axis of this study");
-        }
-        common.push(format!("resolution.particles={n}"));
-    }
-
-    // The grid, last axis fastest.
-    let n_runs = study.grid_len();
-    let mut drafts: Vec<(Vec<usize>, Vec<serde_json::Value>, Vec<String>)> = Vec::new();
-    for index in 0..n_runs {
-        let mut coords = vec![0; study.axes.len()];
-        let mut rest = index;
-        for (k, a) in study.axes.iter().enumerate().rev() {
-            coords[k] = rest % a.values.len();
-            rest /= a.values.len();
-        }
-        let mut set = common.clone();
-        let mut values = Vec::new();
-        for (a, &c) in study.axes.iter().zip(&coords) {
-            let v = &a.values[c];
-            set.push(format!("{}={}", a.key, json_to_override(v)?));
-            values.push(v.clone());
-        }
-        drafts.push((coords, values, set));
-    }
-
-    // Validate every run's scene (in parallel: at high tiers each build lays out the lattice).
-    let checked: Vec<Result<SceneSpec>> = drafts
-        .par_iter()
-        .map(|(_, _, set)| validated_scene(study, set))
-        .collect();
-    let mut errors: Vec<String> = Vec::new();
-    let mut n_bad = 0;
-    for (i, r) in checked.iter().enumerate() {
-        if let Err(e) = r {
-            n_bad += 1;
-            let msg = format!("{e:#}");
-            if errors.len() < 5 && !errors.iter().any(|m| m.ends_with(&msg)) {
-                let what = describe_values(&study.axes, &drafts[i].1);
-                errors.push(format!("run {i} ({what}): {msg}"));
-            }
-        }
-    }
-    if n_bad > 0 {
-        bail!(
-            "study `{}` at tier `{}`: {n_bad} of {n_runs} runs have invalid scenes; nothing was run:\n  {}",
-            study.name,
-            tier.name,
-            errors.join("\n  ")
-        );
-    }
-
-    let mut runs = Vec::with_capacity(n_runs);
-    for (index, ((coords, values, set), scene)) in drafts.into_iter().zip(checked).enumerate() {
-        let scene = scene?;
+    let common = common_overrides(study, tier, req)?;
+    let drafts = grid(study, &common)?;
+    let scenes = checked_scenes(study, tier, &drafts)?;
+    let mut runs = Vec::with_capacity(drafts.len());
+    for (index, (draft, scene)) in drafts.into_iter().zip(scenes).enumerate() {
         let fp = fingerprint(&scene, &tier.name)?;
         runs.push(PlannedRun {
             index,
-            coords,
-            values,
-            set,
+            coords: draft.coords,
+            values: draft.values,
+            set: draft.set,
             dir: run_dir_name(&fp),
             fingerprint: fp,
             scene,
@@ -258,6 +201,88 @@ pub fn build_plan(study: &Study, req: &PlanRequest) -> Result<Plan> {
         engine_version: ENGINE_VERSION.to_string(),
         runs,
     })
+}
+
+/// The overrides every run gets, in order: the study's, the tier's, the command line's
+/// `--set` and `--particles` (neither may name an axis).
+fn common_overrides(study: &Study, tier: &Tier, req: &PlanRequest) -> Result<Vec<String>> {
+    let mut common: Vec<String> = study.set.clone();
+    common.extend(tier.set.iter().cloned());
+    for s in &req.set {
+        let k = override_key(s);
+        if study.axes.iter().any(|a| a.key == k) {
+            bail!("--set `{s}`: `{k}` is an axis of this study (allowed: keys that are not axes)");
+        }
+        common.push(s.clone());
+    }
+    if let Some(n) = req.particles {
+        if !(n.is_finite() && n >= 8.0) {
+            bail!("invalid value for `--particles`: {n} (allowed: a number >= 8)");
+        }
+        if study.axes.iter().any(|a| a.key == "resolution.particles") {
+            bail!("--particles: `resolution.particles` is an axis of this study");
+        }
+        common.push(format!("resolution.particles={n}"));
+    }
+    Ok(common)
+}
+
+/// The grid's runs, the last axis fastest: each run's coordinates, its axis values, and the
+/// `common` overrides followed by its axis values.
+fn grid(study: &Study, common: &[String]) -> Result<Vec<Draft>> {
+    let mut drafts = Vec::new();
+    for index in 0..study.grid_len() {
+        let mut coords = vec![0; study.axes.len()];
+        let mut rest = index;
+        for (k, a) in study.axes.iter().enumerate().rev() {
+            coords[k] = rest % a.values.len();
+            rest /= a.values.len();
+        }
+        let mut set = common.to_vec();
+        let mut values = Vec::new();
+        for (a, &c) in study.axes.iter().zip(&coords) {
+            let v = &a.values[c];
+            set.push(format!("{}={}", a.key, json_to_override(v)?));
+            values.push(v.clone());
+        }
+        drafts.push(Draft {
+            coords,
+            values,
+            set,
+        });
+    }
+    Ok(drafts)
+}
+
+/// Every draft's scene, built and checked by the engine (in parallel: at high tiers each build
+/// lays out the lattice). Any invalid scene fails the plan, with up to five distinct errors.
+fn checked_scenes(study: &Study, tier: &Tier, drafts: &[Draft]) -> Result<Vec<SceneSpec>> {
+    let checked: Vec<Result<SceneSpec>> = drafts
+        .par_iter()
+        .map(|d| validated_scene(study, &d.set))
+        .collect();
+    let mut errors: Vec<String> = Vec::new();
+    let mut n_bad = 0;
+    for (i, r) in checked.iter().enumerate() {
+        if let Err(e) = r {
+            n_bad += 1;
+            let msg = format!("{e:#}");
+            if errors.len() < 5 && !errors.iter().any(|m| m.ends_with(&msg)) {
+                let what = describe_values(&study.axes, &drafts[i].values);
+                errors.push(format!("run {i} ({what}): {msg}"));
+            }
+        }
+    }
+    if n_bad > 0 {
+        bail!(
+            "study `{}` at tier `{}`: {n_bad} of {} runs have invalid scenes; nothing was run:\n  {}",
+            study.name,
+            tier.name,
+            drafts.len(),
+            errors.join("\n  ")
+        );
+    }
+    checked.into_iter().collect()
 }
 
 fn absolute(p: &Path) -> PathBuf {

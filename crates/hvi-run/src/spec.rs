@@ -235,32 +235,122 @@ fn expand_range(key: &str, r: &RangeFile) -> Result<Vec<serde_json::Value>> {
     Ok(values)
 }
 
+/// The study file's TOML in its shape; a shape error names the key.
+fn study_file(text: &str) -> Result<StudyFile> {
+    let doc: toml::Value = toml::from_str(text).context("study file is not valid TOML")?;
+    serde_path_to_error::deserialize(doc).map_err(|e| {
+        let p = e.path().to_string();
+        let msg = e.into_inner().message().trim().to_string();
+        if p.is_empty() || p == "." {
+            anyhow!("study: {msg}")
+        } else {
+            anyhow!("study key `{p}`: {msg}")
+        }
+    })
+}
+
+/// Checks that a study's name can name its directory.
+fn check_name(name: &str) -> Result<()> {
+    if name.trim().is_empty()
+        || !name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    {
+        bail!(
+            "study key `study.name`: {name:?} (allowed: letters, digits, '-' and '_'; it names a directory)"
+        );
+    }
+    Ok(())
+}
+
+/// The axes, in order: each key valid and in one axis only, each with distinct finite values.
+fn parse_axes(files: &[AxisFile]) -> Result<Vec<Axis>> {
+    let mut axes: Vec<Axis> = Vec::new();
+    for (i, a) in files.iter().enumerate() {
+        let key = a.key.trim().to_string();
+        check_key(&key, &format!("study key `axes[{i}].key`"))?;
+        if axes.iter().any(|b| b.key == key) {
+            bail!("axis `{key}` appears twice (allowed: each key in one axis)");
+        }
+        let values = axis_values(&key, a)?;
+        axes.push(Axis {
+            label: a.label.clone().unwrap_or_else(|| key.clone()),
+            key,
+            values,
+        });
+    }
+    Ok(axes)
+}
+
+/// An axis's values, listed or expanded from its range; distinct, and finite where numbers.
+fn axis_values(key: &str, a: &AxisFile) -> Result<Vec<serde_json::Value>> {
+    let values = match (&a.values, &a.range) {
+        (Some(v), None) => {
+            if v.is_empty() {
+                bail!("axis `{key}`: values = [] (allowed: at least one value)");
+            }
+            v.iter()
+                .map(toml_to_json)
+                .collect::<Result<Vec<_>>>()
+                .with_context(|| format!("axis `{key}`"))?
+        }
+        (None, Some(r)) => expand_range(key, r)?,
+        (Some(_), Some(_)) => {
+            bail!("axis `{key}`: give either values or range, not both")
+        }
+        (None, None) => bail!("axis `{key}`: give values = [...] or range = {{...}}"),
+    };
+    for (j, v) in values.iter().enumerate() {
+        if values[..j].contains(v) {
+            bail!("axis `{key}`: value {v} appears twice");
+        }
+        if let Some(x) = v.as_f64() {
+            if !x.is_finite() {
+                bail!("axis `{key}`: value {v} is not finite");
+            }
+        }
+    }
+    Ok(values)
+}
+
+/// The tiers by name, each override key valid and not an axis; at least one tier.
+fn parse_tiers(
+    files: &BTreeMap<String, TierFile>,
+    axes: &[Axis],
+) -> Result<BTreeMap<String, Tier>> {
+    let mut tiers = BTreeMap::new();
+    for (name, t) in files {
+        for s in &t.set {
+            let k = override_key(s);
+            check_key(k, &format!("study key `tiers.{name}.set`"))?;
+            if axes.iter().any(|a| a.key == k) {
+                bail!(
+                    "key `{k}` is both an axis and in `tiers.{name}.set` (allowed: one of the two)"
+                );
+            }
+        }
+        tiers.insert(
+            name.clone(),
+            Tier {
+                name: name.clone(),
+                description: t.description.clone(),
+                set: t.set.clone(),
+            },
+        );
+    }
+    if tiers.is_empty() {
+        bail!("study has no tiers: add at least [tiers.{DEFAULT_TIER}] with its resolution");
+    }
+    Ok(tiers)
+}
+
 impl Study {
     /// Parses study text; `path` is where it came from (relative paths resolve against its
     /// directory).
     pub fn parse(text: &str, path: &Path) -> Result<Study> {
-        let doc: toml::Value = toml::from_str(text).context("study file is not valid TOML")?;
-        let file: StudyFile = serde_path_to_error::deserialize(doc).map_err(|e| {
-            let p = e.path().to_string();
-            let msg = e.into_inner().message().trim().to_string();
-            if p.is_empty() || p == "." {
-                anyhow!("study: {msg}")
-            } else {
-                anyhow!("study key `{p}`: {msg}")
-            }
-        })?;
+        let file = study_file(text)?;
         let h = file.study;
-        if h.name.trim().is_empty()
-            || !h
-                .name
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-        {
-            bail!(
-                "study key `study.name`: {:?} (allowed: letters, digits, '-' and '_'; it names a directory)",
-                h.name
-            );
-        }
+        check_name(&h.name)?;
         for s in &h.set {
             check_key(override_key(s), "study key `study.set`")?;
         }
@@ -272,76 +362,14 @@ impl Study {
                 scene_path.display()
             )
         })?;
-
-        let mut axes: Vec<Axis> = Vec::new();
-        for (i, a) in file.axes.iter().enumerate() {
-            let key = a.key.trim().to_string();
-            check_key(&key, &format!("study key `axes[{i}].key`"))?;
-            if axes.iter().any(|b| b.key == key) {
-                bail!("axis `{key}` appears twice (allowed: each key in one axis)");
-            }
-            let values = match (&a.values, &a.range) {
-                (Some(v), None) => {
-                    if v.is_empty() {
-                        bail!("axis `{key}`: values = [] (allowed: at least one value)");
-                    }
-                    v.iter()
-                        .map(toml_to_json)
-                        .collect::<Result<Vec<_>>>()
-                        .with_context(|| format!("axis `{key}`"))?
-                }
-                (None, Some(r)) => expand_range(&key, r)?,
-                (Some(_), Some(_)) => {
-                    bail!("axis `{key}`: give either values or range, not both")
-                }
-                (None, None) => bail!("axis `{key}`: give values = [...] or range = {{...}}"),
-            };
-            for (j, v) in values.iter().enumerate() {
-                if values[..j].contains(v) {
-                    bail!("axis `{key}`: value {v} appears twice");
-                }
-                if let Some(x) = v.as_f64() {
-                    if !x.is_finite() {
-                        bail!("axis `{key}`: value {v} is not finite");
-                    }
-                }
-            }
-            axes.push(Axis {
-                label: a.label.clone().unwrap_or_else(|| key.clone()),
-                key,
-                values,
-            });
-        }
+        let axes = parse_axes(&file.axes)?;
         for s in &h.set {
             let k = override_key(s);
             if axes.iter().any(|a| a.key == k) {
                 bail!("key `{k}` is both an axis and in `study.set` (allowed: one of the two)");
             }
         }
-
-        let mut tiers = BTreeMap::new();
-        for (name, t) in &file.tiers {
-            for s in &t.set {
-                let k = override_key(s);
-                check_key(k, &format!("study key `tiers.{name}.set`"))?;
-                if axes.iter().any(|a| a.key == k) {
-                    bail!(
-                        "key `{k}` is both an axis and in `tiers.{name}.set` (allowed: one of the two)"
-                    );
-                }
-            }
-            tiers.insert(
-                name.clone(),
-                Tier {
-                    name: name.clone(),
-                    description: t.description.clone(),
-                    set: t.set.clone(),
-                },
-            );
-        }
-        if tiers.is_empty() {
-            bail!("study has no tiers: add at least [tiers.{DEFAULT_TIER}] with its resolution");
-        }
+        let tiers = parse_tiers(&file.tiers, &axes)?;
         let default_tier = h.default_tier.unwrap_or_else(|| DEFAULT_TIER.to_string());
         if !tiers.contains_key(&default_tier) {
             bail!(

@@ -2,7 +2,7 @@
 //! decades, with and without geometric sizing (eqs. 5-20). With sizing the kinetic and
 //! potential energy curves coincide; without it they do not.
 //!
-//! One scene, used by the physics test (`tests/physics.rs`) and by `hvi-study reproduce`;
+//! One scene, used by the sizing test (`tests/sizing.rs`) and by `hvi-study reproduce`;
 //! [`hvi_analysis::decide::curve_deviation`] is their common measure of "coincide".
 
 use std::path::Path;

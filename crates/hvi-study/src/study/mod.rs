@@ -2,6 +2,7 @@
 //! the calibration maps ([`figures`]), `validity-map` and `stability`.
 
 pub mod calibrate;
+pub mod calibration;
 pub mod collect;
 pub mod figures;
 pub mod stability;

@@ -1,6 +1,6 @@
 //! The stages of the reproduction. Each runs its study through the study runner and its
 //! store (finished runs are reused), draws or collects its figures into the report directory,
-//! and turns the runs' numbers into [`Figure`]s: the paper's result (from `hvi_engine::paper`),
+//! and turns the runs' numbers into [`Figure`](crate::reproduce::report::Figure)s: the paper's result (from `hvi_engine::paper`),
 //! ours, the deciding numbers ([`hvi_analysis::decide`]) and a verdict.
 //!
 //! Every stage reads the same way: run (or collect) the study, gather the fields it needs,

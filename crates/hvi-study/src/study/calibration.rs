@@ -1,0 +1,60 @@
+//! The result of a calibration, as `calibration.json` holds it: every evaluated point and the
+//! best one. `calibrate` fills it; the maps and the reproduction read it.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use hvi_analysis::score::Score;
+use serde::{Deserialize, Serialize};
+
+/// One evaluated point: a grid run or a refinement step.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Evaluation {
+    /// `grid`, `refine` or `paper`.
+    pub stage: String,
+    /// Sequence number within the stage.
+    pub step: usize,
+    /// Parameter values by key.
+    pub params: BTreeMap<String, f64>,
+    /// The score (None for a point that was not run).
+    pub score: Option<Score>,
+    /// The objective (OUTSIDE_COST for a point outside the box or invalid).
+    pub objective: f64,
+    /// Run status, or why it was not run.
+    pub status: String,
+    /// Whether the run was found in the store.
+    pub cached: bool,
+    /// The run's directory, relative to the study directory.
+    pub dir: Option<String>,
+}
+
+/// What `calibrate` writes into calibration.json.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CalibrationResult {
+    /// The study.
+    pub study: String,
+    /// The tier.
+    pub tier: String,
+    /// Particles of the runs (from the best run).
+    pub particles: Option<f64>,
+    /// The target file.
+    pub targets_file: PathBuf,
+    /// The targets' names, kinds, values, tolerances and weights.
+    pub targets: Vec<hvi_analysis::score::Target>,
+    /// The documented gaps (not scored).
+    pub gaps: Vec<hvi_analysis::score::Gap>,
+    /// The best point over grid and refinement.
+    pub best: Evaluation,
+    /// The best grid point.
+    pub best_grid: Evaluation,
+    /// The paper's best fit, scored at this tier.
+    pub paper: Evaluation,
+    /// Best over paper for each refined parameter.
+    pub ratio_to_paper: BTreeMap<String, f64>,
+    /// Why the refinement stopped (or that it was skipped).
+    pub termination: String,
+    /// Refinement runs made (not counting cache hits).
+    pub refinement_runs: usize,
+    /// Every refinement evaluation in order.
+    pub refinement: Vec<Evaluation>,
+}
