@@ -651,6 +651,10 @@ pub struct FrontSample {
 pub struct SilhouetteReport {
     /// Pixel size of the shadowgraph, m.
     pub pixel_m: f64,
+    /// Its blur (standard deviation), m.
+    pub blur_m: f64,
+    /// The debris grain diameter its optical depth refers to, m.
+    pub grain_m: f64,
     /// Optical depth at which a pixel is dark.
     pub optical_depth: f64,
     /// Dark pixels at the analysis time.
@@ -672,7 +676,7 @@ pub struct SilhouetteReport {
 }
 
 /// The shadowgraph of the particles marked `in_cloud`, taken in id order (`order` maps ids to
-/// storage indices), each particle an opaque grain of its volume-equivalent diameter.
+/// storage indices).
 pub fn cloud_shadowgraph(
     p: &Particles,
     in_cloud: &[bool],
@@ -680,13 +684,13 @@ pub fn cloud_shadowgraph(
     density_kg_m3: f64,
     settings: &ShadowgraphSettings,
 ) -> Option<Shadowgraph> {
-    let grains: Vec<(DVec3, f64)> = order
+    let particles: Vec<(DVec3, f64)> = order
         .iter()
         .map(|&i| i as usize)
         .filter(|&i| in_cloud[i])
-        .map(|i| (p.pos[i], equivalent_diameter_m(p.mass[i], density_kg_m3)))
+        .map(|i| (p.pos[i], p.mass[i]))
         .collect();
-    Shadowgraph::of_grains(&grains, settings)
+    Shadowgraph::of_masses(&particles, density_kg_m3, settings)
 }
 
 /// The cloud part of `summary.json`: the full measurement at the analysis time, va and the
@@ -911,6 +915,8 @@ impl CloudObserver {
         let v0 = reference.v0_m_s;
         let report = SilhouetteReport {
             pixel_m: settings.pixel_m,
+            blur_m: settings.blur_m,
+            grain_m: settings.grain_m,
             optical_depth: settings.optical_depth,
             dark_pixels: m.map_or(0, |m| m.dark_pixels),
             front_z_m: m.map(|m| m.front_z_m),

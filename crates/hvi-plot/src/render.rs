@@ -18,6 +18,7 @@
 
 mod charts;
 mod perspective;
+mod shadowgraph;
 mod side;
 
 use std::ops::Range;
@@ -35,6 +36,7 @@ use crate::theme::{text_style, Area};
 
 pub use charts::{diameter_bins, fragment_histogram, track_plot, DiameterBin};
 pub use perspective::series;
+pub use shadowgraph::shadowgraph;
 pub use side::side_view;
 
 /// The font and PNG writer, where callers of this module have always found them.

@@ -829,6 +829,16 @@ fn render_pictures(
             &info,
         )
         .context("rendering fragments.png")?;
+        if let (Some(image), Some(sil)) = (&c.shadowgraph, &c.report.silhouette) {
+            render::shadowgraph(
+                &dir.join("shadowgraph.png"),
+                image,
+                sil,
+                &info,
+                c.report.measurement.tau_s,
+            )
+            .context("rendering shadowgraph.png")?;
+        }
     }
     if !track.is_empty() {
         render::track_plot(

@@ -43,6 +43,13 @@ pub struct Analysis {
     /// in (0, 0.01].
     #[serde(skip_serializing_if = "is_default_pixel")]
     pub shadowgraph_pixel_m: f64,
+    /// Standard deviation of the shadowgraph's blur, m, in [0, 0.05].
+    #[serde(skip_serializing_if = "is_default_blur")]
+    pub shadowgraph_blur_m: f64,
+    /// Grain diameter of the debris the shadowgraph sees, m, in (0, 0.01]: the optical depth
+    /// of an areal density Sigma is (3/2) Sigma / (rho d).
+    #[serde(skip_serializing_if = "is_default_grain")]
+    pub shadowgraph_grain_m: f64,
     /// Optical depth at which a shadowgraph pixel counts as dark (1: transmission 1/e), in
     /// (0, 100].
     #[serde(skip_serializing_if = "is_default_optical_depth")]
@@ -62,6 +69,12 @@ pub const DEFAULT_WITNESS_STANDOFF_M: f64 = 0.1;
 fn is_default_pixel(v: &f64) -> bool {
     *v == crate::shadowgraph::DEFAULT_PIXEL_M
 }
+fn is_default_blur(v: &f64) -> bool {
+    *v == crate::shadowgraph::DEFAULT_BLUR_M
+}
+fn is_default_grain(v: &f64) -> bool {
+    *v == crate::shadowgraph::DEFAULT_GRAIN_M
+}
 fn is_default_optical_depth(v: &f64) -> bool {
     *v == crate::shadowgraph::DEFAULT_OPTICAL_DEPTH
 }
@@ -78,6 +91,8 @@ impl Default for Analysis {
             track_every: 100,
             render_times_s: paper::FIG12_TIMES_S.to_vec(),
             shadowgraph_pixel_m: crate::shadowgraph::DEFAULT_PIXEL_M,
+            shadowgraph_blur_m: crate::shadowgraph::DEFAULT_BLUR_M,
+            shadowgraph_grain_m: crate::shadowgraph::DEFAULT_GRAIN_M,
             shadowgraph_optical_depth: crate::shadowgraph::DEFAULT_OPTICAL_DEPTH,
             witness_standoff_m: DEFAULT_WITNESS_STANDOFF_M,
         }
@@ -108,6 +123,22 @@ impl Analysis {
         check_range(
             "analysis.shadowgraph_pixel_m",
             self.shadowgraph_pixel_m,
+            0.0,
+            true,
+            0.01,
+            false,
+        )?;
+        check_range(
+            "analysis.shadowgraph_blur_m",
+            self.shadowgraph_blur_m,
+            0.0,
+            false,
+            0.05,
+            false,
+        )?;
+        check_range(
+            "analysis.shadowgraph_grain_m",
+            self.shadowgraph_grain_m,
             0.0,
             true,
             0.01,
@@ -159,6 +190,8 @@ impl Analysis {
     pub fn shadowgraph(&self) -> crate::shadowgraph::ShadowgraphSettings {
         crate::shadowgraph::ShadowgraphSettings {
             pixel_m: self.shadowgraph_pixel_m,
+            blur_m: self.shadowgraph_blur_m,
+            grain_m: self.shadowgraph_grain_m,
             optical_depth: self.shadowgraph_optical_depth,
         }
     }
