@@ -21,6 +21,13 @@ pub const CONVERGENCE_COUNT_FACTOR: f64 = 2.0;
 /// paper's plateau and peak differ by 0.07).
 pub const LENGTH_RATIO_TOLERANCE: f64 = 0.05;
 
+/// Fig. 9: R's grid points apart from the peak form a plateau when their relative spread,
+/// (max - min) / mean, is at most this. Decision (the paper gives no number): at R = 1.47 it
+/// lets the points span about 0.15, twice the paper's rise from its plateau to its peak (0.07),
+/// so scatter between neighbouring runs passes, while a map that changes by tens of per cent
+/// across the grid is no plateau.
+pub const PLATEAU_RELATIVE_SPREAD: f64 = 0.1;
+
 /// One sample of an energy curve (Fig. 4).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EnergySample {
@@ -64,10 +71,30 @@ pub fn non_decreasing(values: &[f64], tolerance: f64) -> Option<bool> {
     largest_drop(values).map(|d| d <= tolerance)
 }
 
+/// The largest rise of a series above any earlier value of it (0 for a non-increasing series);
+/// None with fewer than two finite values. NaNs are skipped.
+pub fn largest_rise(values: &[f64]) -> Option<f64> {
+    let neg: Vec<f64> = values.iter().map(|v| -v).collect();
+    largest_drop(&neg)
+}
+
 /// Whether a series never rises by more than `tolerance` above an earlier value.
 pub fn non_increasing(values: &[f64], tolerance: f64) -> Option<bool> {
-    let neg: Vec<f64> = values.iter().map(|v| -v).collect();
-    non_decreasing(&neg, tolerance)
+    largest_rise(values).map(|r| r <= tolerance)
+}
+
+/// The last finite value minus the first (None with fewer than two finite values).
+pub fn net_change(values: &[f64]) -> Option<f64> {
+    let v = finite(values);
+    (v.len() >= 2).then(|| v[v.len() - 1].1 - v[0].1)
+}
+
+/// Whether a series falls: it never rises by more than `tolerance` above an earlier value and
+/// ends more than `tolerance` below where it starts (a level series does not fall). None with
+/// fewer than two finite values. NaNs are skipped.
+pub fn falls(values: &[f64], tolerance: f64) -> Option<bool> {
+    let steady = non_increasing(values, tolerance)?;
+    Some(steady && net_change(values)? < -tolerance)
 }
 
 /// Relative change of each step of a series, `|v[k+1] - v[k]| / |v[k]|` (NaN where either
@@ -145,6 +172,69 @@ pub fn spread(values: &[f64]) -> Option<f64> {
     let lo = v.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
     let hi = v.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
     Some(hi - lo)
+}
+
+/// (max - min) / mean of the finite values: how far from level they are (None when there is
+/// none or their mean is 0).
+pub fn relative_spread(values: &[f64]) -> Option<f64> {
+    let v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    let s = spread(&v)?;
+    (mean != 0.0).then(|| s / mean.abs())
+}
+
+/// A set of values that should be level, and how level they are.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plateau {
+    /// Finite values in it.
+    pub points: usize,
+    /// Their mean.
+    pub mean: f64,
+    /// Their smallest.
+    pub min: f64,
+    /// Their largest.
+    pub max: f64,
+    /// (max - min) / mean.
+    pub relative_spread: f64,
+}
+
+impl Plateau {
+    /// The plateau of the finite `values` (None for fewer than two, or a zero mean).
+    pub fn of(values: &[f64]) -> Option<Plateau> {
+        let v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+        if v.len() < 2 {
+            return None;
+        }
+        Some(Plateau {
+            points: v.len(),
+            mean: v.iter().sum::<f64>() / v.len() as f64,
+            min: v.iter().copied().fold(f64::INFINITY, f64::min),
+            max: v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            relative_spread: relative_spread(&v)?,
+        })
+    }
+
+    /// Fig. 9's plateau: every finite value of the grid except its largest (the peak). The
+    /// paper names a plateau and one peak above it ("the other points in the plateau"), so
+    /// every other point belongs to the plateau.
+    pub fn apart_from_peak(values: &[f64]) -> Option<Plateau> {
+        let peak = argmax(values)?;
+        let rest: Vec<f64> = values
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != peak)
+            .map(|(_, v)| *v)
+            .collect();
+        Plateau::of(&rest)
+    }
+
+    /// Whether its relative spread is at most `tolerance` ([`PLATEAU_RELATIVE_SPREAD`]).
+    pub fn is_flat(&self, tolerance: f64) -> bool {
+        self.relative_spread <= tolerance
+    }
 }
 
 /// Whether `z[row][col]` is larger than each of its finite grid neighbours (up, down, left,
@@ -286,6 +376,61 @@ mod tests {
         assert_eq!(non_decreasing(&[NAN, 0.3], 0.0), None);
         assert_eq!(non_increasing(&[1.2, 1.1, 1.0], 0.0), Some(true));
         assert_eq!(non_increasing(&[1.0, 1.1], 0.05), Some(false));
+        assert_eq!(largest_rise(&[1.0, 0.8, 1.1]), Some(0.30000000000000004));
+    }
+
+    #[test]
+    fn a_series_falls_only_when_it_never_rises_and_ends_lower() {
+        // Fig. 10 along eps: falling, rising, level, a dip that recovers, with gaps.
+        assert_eq!(falls(&[1.10, 1.05, 1.00], 0.01), Some(true));
+        assert_eq!(falls(&[1.02, 1.04, 1.15], 0.01), Some(false));
+        assert_eq!(
+            falls(&[1.00, 1.00, 1.00], 0.01),
+            Some(false),
+            "level is not falling"
+        );
+        assert_eq!(
+            falls(&[1.16, 0.99, 1.01], 0.01),
+            Some(false),
+            "rises after the dip"
+        );
+        assert_eq!(
+            falls(&[1.10, 1.105, 1.00], 0.01),
+            Some(true),
+            "within the tolerance"
+        );
+        assert_eq!(falls(&[1.10, NAN, 1.00], 0.01), Some(true));
+        assert_eq!(falls(&[NAN, 1.00], 0.01), None);
+        assert_eq!(net_change(&[1.02, NAN, 1.15, NAN]), Some(1.15 - 1.02));
+    }
+
+    #[test]
+    fn a_flat_grid_is_a_plateau_and_a_rising_one_is_not() {
+        // The paper's Fig. 9 as it describes it: 1.47 everywhere (within 0.03) but one peak.
+        let flat = [
+            1.46, 1.47, 1.48, 1.45, 1.49, 1.54, 1.47, 1.48, 1.46, 1.47, 1.47, 1.48,
+        ];
+        let p = Plateau::apart_from_peak(&flat).expect("plateau");
+        assert_eq!((p.points, p.min, p.max), (11, 1.45, 1.49));
+        assert!((p.mean - 1.4709).abs() < 1e-3, "{}", p.mean);
+        assert!(p.is_flat(PLATEAU_RELATIVE_SPREAD), "{}", p.relative_spread);
+        // R rising steadily with eps (the paper tier's map: 1.11 to 1.98): its median is
+        // near 1.47, but it is no plateau.
+        let rising = [
+            1.11, 1.11, 1.15, 1.17, 1.44, 1.45, 1.42, 1.38, 1.98, 1.94, 1.87, 1.74,
+        ];
+        let r = Plateau::apart_from_peak(&rising).expect("plateau");
+        assert!(median(&rising).is_some_and(|m| (m - 1.43).abs() < 0.01));
+        assert!(!r.is_flat(PLATEAU_RELATIVE_SPREAD), "{}", r.relative_spread);
+        assert!((r.relative_spread - (1.94 - 1.11) / r.mean).abs() < 1e-12);
+        // Missing runs are skipped; too few points make no plateau.
+        assert_eq!(
+            Plateau::apart_from_peak(&[1.5, NAN, 1.4, 1.4]).map(|p| p.points),
+            Some(2)
+        );
+        assert_eq!(Plateau::apart_from_peak(&[1.5, 1.4]), None);
+        assert_eq!(relative_spread(&[1.0, 3.0]), Some(1.0));
+        assert_eq!(relative_spread(&[NAN]), None);
     }
 
     #[test]

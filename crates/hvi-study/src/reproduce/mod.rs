@@ -388,6 +388,7 @@ fn run_stage(stage: Stage, s: &StageInputs) -> Result<(Vec<Figure>, StageTiming)
             &plans.validity_study,
             &s.tier.validity,
             &plans.validity,
+            &s.targets.targets,
         ),
     }
 }

@@ -47,6 +47,64 @@ impl Verdict {
             Verdict::Not
         }
     }
+
+    /// From a figure's claims: "not reproduced" when any check of its main claim fails
+    /// (whatever the secondary checks say), "reproduced" when every check holds, "partly" when
+    /// the main claim holds and a secondary check does not.
+    pub fn of_claims(main: &[Check], secondary: &[Check]) -> Verdict {
+        if !main.iter().all(|c| c.held) {
+            Verdict::Not
+        } else if secondary.iter().all(|c| c.held) {
+            Verdict::Reproduced
+        } else {
+            Verdict::Partly
+        }
+    }
+}
+
+/// One check of a figure against the paper: whether it holds, and what was found, with its
+/// numbers (worded for either outcome).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Check {
+    /// Whether it holds.
+    pub held: bool,
+    /// What was found, as the reason says it.
+    pub found: String,
+}
+
+impl Check {
+    /// A check and what was found.
+    pub fn new(held: bool, found: impl Into<String>) -> Check {
+        Check {
+            held,
+            found: found.into(),
+        }
+    }
+}
+
+/// A figure's verdict from its main and secondary checks ([`Verdict::of_claims`]) and the
+/// reason that says each: `Main claim holds: ...; ... Secondary: ...; ...`.
+pub fn judge(main: &[Check], secondary: &[Check]) -> (Verdict, String) {
+    let say = |checks: &[Check]| {
+        checks
+            .iter()
+            .map(|c| c.found.as_str())
+            .collect::<Vec<_>>()
+            .join("; ")
+    };
+    let mut reason = format!(
+        "Main claim {}: {}.",
+        if main.iter().all(|c| c.held) {
+            "holds"
+        } else {
+            "fails"
+        },
+        say(main)
+    );
+    if !secondary.is_empty() {
+        let _ = write!(reason, " Secondary: {}.", say(secondary));
+    }
+    (Verdict::of_claims(main, secondary), reason)
 }
 
 /// A deciding number's value.
@@ -647,6 +705,30 @@ mod tests {
         assert_eq!(fmt_duration(30.0), "30 s");
         assert_eq!(fmt_duration(7200.0), "2.0 h");
         assert_eq!(fmt_duration(3.0 * 86400.0), "3.0 days");
+    }
+
+    #[test]
+    fn a_failed_main_claim_is_not_reproduced_whatever_the_secondary_checks_say() {
+        let yes = || Check::new(true, "it varies little");
+        let no = || Check::new(false, "it rises");
+        assert_eq!(Verdict::of_claims(&[yes()], &[yes()]), Verdict::Reproduced);
+        assert_eq!(Verdict::of_claims(&[yes()], &[no()]), Verdict::Partly);
+        assert_eq!(Verdict::of_claims(&[yes()], &[]), Verdict::Reproduced);
+        // Fig. 10's case: the trend fails, the secondary check holds.
+        assert_eq!(Verdict::of_claims(&[no()], &[yes()]), Verdict::Not);
+        assert_eq!(Verdict::of_claims(&[yes(), no()], &[]), Verdict::Not);
+        let (v, reason) = judge(&[no()], &[yes()]);
+        assert_eq!(v, Verdict::Not);
+        assert_eq!(
+            reason,
+            "Main claim fails: it rises. Secondary: it varies little."
+        );
+        let (v, reason) = judge(&[yes(), yes()], &[]);
+        assert_eq!(v, Verdict::Reproduced);
+        assert_eq!(
+            reason,
+            "Main claim holds: it varies little; it varies little."
+        );
     }
 
     #[test]

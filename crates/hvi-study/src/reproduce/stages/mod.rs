@@ -27,6 +27,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{anyhow, Context, Result};
+use hvi_analysis::observable::Observable;
+use hvi_analysis::score::Target;
 
 use super::report::StageTiming;
 use crate::cli::StudyArgs;
@@ -187,17 +189,25 @@ fn axis(plan: &Plan, key: &str) -> Result<usize> {
     })
 }
 
+/// The largest-fragment fraction above which a run keeps "a large central fragment": the
+/// calibration shot's `at_most` bound on the largest fragment (experiments_data; None when its
+/// targets have none). Figs. 7 and 16 both judge fragments by it.
+fn largest_fragment_bound(targets: &[Target]) -> Option<f64> {
+    targets
+        .iter()
+        .find(|t| t.observable == Observable::LargestFragmentMassFraction)
+        .map(|t| t.value)
+}
+
+/// Whether a run's largest fragment (fraction of the impactor mass) is a large central
+/// fragment: above `bound`, as the calibration target scores it; a missing value counts as
+/// large (nothing shows it is not).
+fn keeps_large_fragment(largest: f64, bound: f64) -> bool {
+    largest.is_nan() || largest > bound
+}
+
 /// The mean of the finite values, None when there is none.
 fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
     let v: Vec<f64> = v.filter(|x| x.is_finite()).collect();
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-}
-
-/// `items` joined by `sep`, or `none` when there are none.
-fn join_or(items: &[&str], sep: &str, none: &str) -> String {
-    if items.is_empty() {
-        none.into()
-    } else {
-        items.join(sep)
-    }
 }
