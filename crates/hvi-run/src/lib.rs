@@ -1,10 +1,10 @@
 //! # hvi-run
 //!
 //! Runs scenes and studies and keeps their results: scene files with `--set` overrides
-//! ([`scene_file`]), one run and its files ([`run`], [`output`]), study files and their
-//! validated plans ([`spec`], [`plan`]), the run store that keeps each result once
-//! ([`store`]), the cloud's kept state for re-analysis ([`state`]), parallel execution ([`exec`]), results tables ([`table`]), Slurm job arrays
-//! ([`slurm`]) and the engine benchmark ([`bench`]).
+//! ([`scene_file`]), one run and its files ([`run`], [`output`]), the cloud's kept state for
+//! re-analysis ([`state`]), study files and their validated plans ([`spec`], [`plan`]), the
+//! run store that keeps each result once ([`store`]), parallel execution ([`exec`]), results
+//! tables ([`table`]), Slurm job arrays ([`slurm`]) and the engine benchmark ([`bench`]).
 
 pub mod bench;
 pub mod exec;

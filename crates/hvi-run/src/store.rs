@@ -7,6 +7,7 @@
 //!     record.json      the run's record: fingerprint, status, error, observables (written last)
 //!     summary.json     the engine run's summary (hvi_run::run::run_scene)
 //!     energy.csv, cloud_track.csv, fragments.csv, cloud_side.png and the other pictures
+//!     state.bin        the cloud's kept state (hvi_run::state), for `hvi-study reanalyse`
 //! runs/.tmp-<digits>-<pid>-<n>-<host>/   a run in progress
 //! ```
 //!
