@@ -42,6 +42,14 @@
 //! (`analysis.track_every` steps), at the two front times, and once for the full measurement at
 //! the end of the run ([`CloudObserver`]). Sums are taken in particle-id order, so every result
 //! is bit-identical at any thread count and any storage order.
+//!
+//! # Measuring again
+//!
+//! A run keeps the cloud's state at the two front times and at the analysis time
+//! ([`CloudState`], `analysis.keep_state`): every particle's position, velocity, mass, body,
+//! fragment label and membership. [`remeasure`] measures the cloud from them with another
+//! quantile, camera or witness plate through the same functions the run uses, without
+//! re-simulating.
 
 use std::time::{Duration, Instant};
 
@@ -731,6 +739,8 @@ pub fn step_at_tau(derived: &Derived, tau_s: f64) -> u64 {
 /// Watches a run: samples the cloud track every `analysis.track_every` steps, locates the front
 /// at the two front times, and measures the cloud at the end. Call [`CloudObserver::observe`]
 /// at step 0 and after every step; it does nothing (two comparisons) unless a sample is due.
+/// With `analysis.keep_state` it also keeps the cloud's state at the front times and at the end
+/// ([`CloudResult::kept`]), from which [`remeasure`] measures it again.
 ///
 /// ```
 /// use hvi_engine::cloud::CloudObserver;
@@ -757,8 +767,9 @@ pub fn step_at_tau(derived: &Derived, tau_s: f64) -> u64 {
 #[derive(Debug, Clone)]
 pub struct CloudObserver {
     reference: CloudReference,
-    quantile: f64,
+    settings: Settings,
     measure_cloud: bool,
+    keep_state: bool,
     track_every: u64,
     last_step: u64,
     front_steps: [u64; 2],
@@ -767,10 +778,29 @@ pub struct CloudObserver {
     pub track: Vec<TrackRow>,
     /// The front at the two front times, once reached.
     pub front: [Option<FrontSample>; 2],
-    shadowgraph: ShadowgraphSettings,
-    witness_plate: WitnessPlate,
+    /// The cloud's state at the two front times, once reached (with `analysis.keep_state`).
+    front_states: [Option<CloudState>; 2],
     /// Wall time spent observing (labelling, quantiles, the final measurement).
     pub elapsed: Duration,
+}
+
+/// What a measurement depends on besides the particles: the quantile, the camera and the
+/// witness plate of `[analysis]`.
+#[derive(Debug, Clone, Copy)]
+struct Settings {
+    quantile: f64,
+    shadowgraph: ShadowgraphSettings,
+    witness_plate: WitnessPlate,
+}
+
+impl Settings {
+    fn of(analysis: &Analysis) -> Self {
+        Settings {
+            quantile: analysis.quantile,
+            shadowgraph: analysis.shadowgraph(),
+            witness_plate: analysis.witness_plate(),
+        }
+    }
 }
 
 impl CloudObserver {
@@ -780,16 +810,16 @@ impl CloudObserver {
         let [t1, t2] = analysis.front_times_s(end_time_s);
         CloudObserver {
             reference: CloudReference::of(sim),
-            quantile: analysis.quantile,
+            settings: Settings::of(analysis),
             measure_cloud: analysis.cloud,
+            keep_state: analysis.cloud && analysis.keep_state,
             track_every: analysis.track_every,
             last_step: sim.derived.steps,
             front_steps: [step_at_tau(&sim.derived, t1), step_at_tau(&sim.derived, t2)],
             finder: CloudFinder::default(),
             track: Vec::new(),
             front: [None, None],
-            shadowgraph: analysis.shadowgraph(),
-            witness_plate: analysis.witness_plate(),
+            front_states: [None, None],
             elapsed: Duration::ZERO,
         }
     }
@@ -841,7 +871,7 @@ impl CloudObserver {
             &sim.particles,
             &members.in_cloud,
             self.reference.plate_rear_z_m,
-            self.quantile,
+            self.settings.quantile,
         );
         let tau = sim.tau_s();
         if track {
@@ -868,87 +898,25 @@ impl CloudObserver {
             });
         }
         if front {
-            let silhouette = cloud_shadowgraph(
+            let sample = front_sample(
                 &sim.particles,
                 &members.in_cloud,
-                &sim.particles.index_of_id(),
-                self.reference.density_kg_m3,
-                &self.shadowgraph,
-            )
-            .and_then(|s| s.measure(self.reference.plate_rear_z_m));
+                ext.front_z_m,
+                &self.reference,
+                &self.settings.shadowgraph,
+                tau,
+            );
             for k in 0..2 {
                 if self.front_steps[k] == step {
-                    self.front[k] = Some(FrontSample {
-                        tau_s: tau,
-                        front_z_m: ext.front_z_m,
-                        front_z_silhouette_m: silhouette.map(|m| m.front_z_m),
-                    });
+                    self.front[k] = Some(sample);
+                    if self.keep_state {
+                        self.front_states[k] =
+                            Some(CloudState::capture(sim, members, &self.reference));
+                    }
                 }
             }
         }
         self.elapsed += t0.elapsed();
-    }
-
-    /// The silhouette's numbers now, with va from its front at the two front times.
-    fn silhouette(
-        reference: &CloudReference,
-        settings: &ShadowgraphSettings,
-        front: &[Option<FrontSample>; 2],
-        sim: &Simulation,
-        in_cloud: &[bool],
-    ) -> (SilhouetteReport, Option<Shadowgraph>) {
-        let image = cloud_shadowgraph(
-            &sim.particles,
-            in_cloud,
-            &sim.particles.index_of_id(),
-            reference.density_kg_m3,
-            settings,
-        );
-        let m = image
-            .as_ref()
-            .and_then(|s| s.measure(reference.plate_rear_z_m));
-        let fronts = front.map(|f| f.and_then(|f| Some((f.tau_s, f.front_z_silhouette_m?))));
-        let va = match fronts {
-            [Some((t1, z1)), Some((t2, z2))] => front_velocity(t1, z1, t2, z2),
-            _ => None,
-        };
-        let v0 = reference.v0_m_s;
-        let report = SilhouetteReport {
-            pixel_m: settings.pixel_m,
-            blur_m: settings.blur_m,
-            grain_m: settings.grain_m,
-            optical_depth: settings.optical_depth,
-            dark_pixels: m.map_or(0, |m| m.dark_pixels),
-            front_z_m: m.map(|m| m.front_z_m),
-            length_axial_m: m.map(|m| m.length_axial_m),
-            length_radial_m: m.map(|m| m.length_radial_m),
-            length_ratio: m.map(|m| m.length_ratio),
-            front_positions_m: front.map(|f| f.and_then(|f| f.front_z_silhouette_m)),
-            front_velocity_m_s: va,
-            front_velocity_ratio: va.filter(|_| v0 > 0.0).map(|v| v / v0),
-        };
-        (report, image)
-    }
-
-    /// The craters of the cloud's fragments on the witness plate.
-    fn craters(
-        plate: &WitnessPlate,
-        reference: &CloudReference,
-        fragments: &[Fragment],
-    ) -> Vec<Crater> {
-        fragments
-            .iter()
-            .filter_map(|f| {
-                witness::crater(
-                    plate,
-                    f.centroid_m,
-                    f.velocity_m_s,
-                    f.diameter_m,
-                    reference.density_kg_m3,
-                    reference.plate_rear_z_m,
-                )
-            })
-            .collect()
     }
 
     /// The full measurement of the cloud now (the analysis time), with va from the front
@@ -959,80 +927,186 @@ impl CloudObserver {
         }
         let t0 = Instant::now();
         let members = self.finder.find(&sim.particles, &self.reference);
-        let analysis = measure(
+        let mut result = cloud_result(
             &sim.particles,
             members,
             &self.reference,
-            self.quantile,
+            &self.settings,
+            &self.front,
             sim.time_s(),
             sim.tau_s(),
         );
-        let [a, b] = self.front;
-        let va = match (a, b) {
-            (
-                Some(FrontSample {
-                    tau_s: t1,
-                    front_z_m: Some(z1),
-                    ..
-                }),
-                Some(FrontSample {
-                    tau_s: t2,
-                    front_z_m: Some(z2),
-                    ..
-                }),
-            ) => front_velocity(t1, z1, t2, z2),
-            _ => None,
-        };
-        let v0 = self.reference.v0_m_s;
-        let (silhouette, shadowgraph) = Self::silhouette(
-            &self.reference,
-            &self.shadowgraph,
-            &self.front,
-            sim,
-            &members.in_cloud,
-        );
-        let craters = Self::craters(&self.witness_plate, &self.reference, &analysis.fragments);
-        let witness = witness::summarise(
-            &craters,
-            self.witness_plate.standoff_m,
-            equivalent_diameter_m(
-                self.reference.impactor_mass_kg,
-                self.reference.density_kg_m3,
-            ),
-        );
-        let report = CloudReport {
-            measurement: analysis.measurement.clone(),
-            front_velocity_m_s: va,
-            front_velocity_ratio: va.filter(|_| v0 > 0.0).map(|v| v / v0),
-            front_velocity_times_s: [a.map(|s| s.tau_s), b.map(|s| s.tau_s)],
-            front_positions_m: [a.and_then(|s| s.front_z_m), b.and_then(|s| s.front_z_m)],
-            silhouette: Some(silhouette),
-            witness_plate: Some(witness),
-            largest_fragments: analysis
-                .fragments
-                .iter()
-                .take(LARGEST_FRAGMENTS_LISTED)
-                .cloned()
-                .collect(),
-        };
+        if self.keep_state {
+            result.kept = Some(KeptStates {
+                end: CloudState::capture(sim, members, &self.reference),
+                front: std::mem::take(&mut self.front_states),
+            });
+        }
         self.elapsed += t0.elapsed();
-        Some(CloudResult {
-            report,
-            fragments: analysis.fragments,
-            craters,
-            shadowgraph,
-            labels_by_id: {
-                let mut by_id = vec![0u32; sim.particles.len()];
-                for (i, &l) in members.labels.iter().enumerate() {
-                    by_id[sim.particles.id[i] as usize] = l;
-                }
-                by_id
-            },
-        })
+        Some(result)
     }
 }
 
-/// What [`CloudObserver::finish`] returns.
+/// The front at one of the two front times: z_f by the quantile (`front_z_m`, from the extent
+/// already taken) and the silhouette's front.
+fn front_sample(
+    p: &Particles,
+    in_cloud: &[bool],
+    front_z_m: Option<f64>,
+    reference: &CloudReference,
+    shadowgraph: &ShadowgraphSettings,
+    tau_s: f64,
+) -> FrontSample {
+    let silhouette = cloud_shadowgraph(
+        p,
+        in_cloud,
+        &p.index_of_id(),
+        reference.density_kg_m3,
+        shadowgraph,
+    )
+    .and_then(|s| s.measure(reference.plate_rear_z_m));
+    FrontSample {
+        tau_s,
+        front_z_m,
+        front_z_silhouette_m: silhouette.map(|m| m.front_z_m),
+    }
+}
+
+/// The silhouette's numbers now, with va from its front at the two front times.
+fn silhouette(
+    p: &Particles,
+    in_cloud: &[bool],
+    reference: &CloudReference,
+    settings: &ShadowgraphSettings,
+    front: &[Option<FrontSample>; 2],
+) -> (SilhouetteReport, Option<Shadowgraph>) {
+    let image = cloud_shadowgraph(
+        p,
+        in_cloud,
+        &p.index_of_id(),
+        reference.density_kg_m3,
+        settings,
+    );
+    let m = image
+        .as_ref()
+        .and_then(|s| s.measure(reference.plate_rear_z_m));
+    let fronts = front.map(|f| f.and_then(|f| Some((f.tau_s, f.front_z_silhouette_m?))));
+    let va = match fronts {
+        [Some((t1, z1)), Some((t2, z2))] => front_velocity(t1, z1, t2, z2),
+        _ => None,
+    };
+    let v0 = reference.v0_m_s;
+    let report = SilhouetteReport {
+        pixel_m: settings.pixel_m,
+        blur_m: settings.blur_m,
+        grain_m: settings.grain_m,
+        optical_depth: settings.optical_depth,
+        dark_pixels: m.map_or(0, |m| m.dark_pixels),
+        front_z_m: m.map(|m| m.front_z_m),
+        length_axial_m: m.map(|m| m.length_axial_m),
+        length_radial_m: m.map(|m| m.length_radial_m),
+        length_ratio: m.map(|m| m.length_ratio),
+        front_positions_m: front.map(|f| f.and_then(|f| f.front_z_silhouette_m)),
+        front_velocity_m_s: va,
+        front_velocity_ratio: va.filter(|_| v0 > 0.0).map(|v| v / v0),
+    };
+    (report, image)
+}
+
+/// The craters of the cloud's fragments on the witness plate.
+fn craters(
+    plate: &WitnessPlate,
+    reference: &CloudReference,
+    fragments: &[Fragment],
+) -> Vec<Crater> {
+    fragments
+        .iter()
+        .filter_map(|f| {
+            witness::crater(
+                plate,
+                f.centroid_m,
+                f.velocity_m_s,
+                f.diameter_m,
+                reference.density_kg_m3,
+                reference.plate_rear_z_m,
+            )
+        })
+        .collect()
+}
+
+/// The full measurement of the cloud marked in `members` at the analysis time, with va from
+/// the two front samples: what [`CloudObserver::finish`] and [`remeasure`] return (without
+/// kept states).
+fn cloud_result(
+    p: &Particles,
+    members: &CloudMembers,
+    reference: &CloudReference,
+    settings: &Settings,
+    front: &[Option<FrontSample>; 2],
+    time_s: f64,
+    tau_s: f64,
+) -> CloudResult {
+    let analysis = measure(p, members, reference, settings.quantile, time_s, tau_s);
+    let [a, b] = *front;
+    let va = match (a, b) {
+        (
+            Some(FrontSample {
+                tau_s: t1,
+                front_z_m: Some(z1),
+                ..
+            }),
+            Some(FrontSample {
+                tau_s: t2,
+                front_z_m: Some(z2),
+                ..
+            }),
+        ) => front_velocity(t1, z1, t2, z2),
+        _ => None,
+    };
+    let v0 = reference.v0_m_s;
+    let (silhouette, shadowgraph) = silhouette(
+        p,
+        &members.in_cloud,
+        reference,
+        &settings.shadowgraph,
+        front,
+    );
+    let craters = craters(&settings.witness_plate, reference, &analysis.fragments);
+    let witness = witness::summarise(
+        &craters,
+        settings.witness_plate.standoff_m,
+        equivalent_diameter_m(reference.impactor_mass_kg, reference.density_kg_m3),
+    );
+    let report = CloudReport {
+        measurement: analysis.measurement.clone(),
+        front_velocity_m_s: va,
+        front_velocity_ratio: va.filter(|_| v0 > 0.0).map(|v| v / v0),
+        front_velocity_times_s: [a.map(|s| s.tau_s), b.map(|s| s.tau_s)],
+        front_positions_m: [a.and_then(|s| s.front_z_m), b.and_then(|s| s.front_z_m)],
+        silhouette: Some(silhouette),
+        witness_plate: Some(witness),
+        largest_fragments: analysis
+            .fragments
+            .iter()
+            .take(LARGEST_FRAGMENTS_LISTED)
+            .cloned()
+            .collect(),
+    };
+    let mut labels_by_id = vec![0u32; p.len()];
+    for (i, &l) in members.labels.iter().enumerate() {
+        labels_by_id[p.id[i] as usize] = l;
+    }
+    CloudResult {
+        report,
+        fragments: analysis.fragments,
+        craters,
+        shadowgraph,
+        labels_by_id,
+        kept: None,
+    }
+}
+
+/// What [`CloudObserver::finish`] and [`remeasure`] return.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CloudResult {
     /// The `cloud` object of `summary.json`.
@@ -1045,6 +1119,162 @@ pub struct CloudResult {
     pub craters: Vec<Crater>,
     /// The shadowgraph at the analysis time (`None` for an empty cloud).
     pub shadowgraph: Option<Shadowgraph>,
+    /// The cloud's state at the analysis time and the front times, when the scene keeps it
+    /// (`analysis.keep_state`; `None` from [`remeasure`]).
+    pub kept: Option<KeptStates>,
+}
+
+/// The cloud at one of its sample times as a run keeps it (`state.bin`, written by
+/// `hvi_run::state`): every particle in id order with its position, velocity, mass, body and
+/// the cloud labelling of that instant, and the reference numbers it is measured against.
+/// Enough to measure the cloud again, with other settings, without re-simulating
+/// ([`remeasure`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CloudState {
+    /// Base step of the sample.
+    pub step: u64,
+    /// Simulated time, s.
+    pub time_s: f64,
+    /// Time since first contact, s.
+    pub tau_s: f64,
+    /// z of the target plate's original rear face, m.
+    pub plate_rear_z_m: f64,
+    /// Density of the material, kg/m^3.
+    pub density_kg_m3: f64,
+    /// The impactor's total mass, kg.
+    pub impactor_mass_kg: f64,
+    /// Impact velocity, m/s.
+    pub v0_m_s: f64,
+    /// Positions by id, m.
+    pub pos: Vec<DVec3>,
+    /// Velocities by id, m/s.
+    pub vel: Vec<DVec3>,
+    /// Masses by id, kg.
+    pub mass: Vec<f64>,
+    /// Bodies by id.
+    pub body: Vec<Body>,
+    /// Fragment labels by id (the smallest id in each fragment).
+    pub labels: Vec<u32>,
+    /// Whether each particle (by id) is in the residual plate.
+    pub in_residual_plate: Vec<bool>,
+    /// Whether each particle (by id) is in the debris cloud.
+    pub in_cloud: Vec<bool>,
+}
+
+impl CloudState {
+    /// The state of `sim` now, with the labelling `members` (by current index, as
+    /// [`CloudFinder::find`] gives it) found against `reference`.
+    pub fn capture(sim: &Simulation, members: &CloudMembers, reference: &CloudReference) -> Self {
+        let p = &sim.particles;
+        let order: Vec<usize> = ids_in_order(p).collect();
+        CloudState {
+            step: sim.step,
+            time_s: sim.time_s(),
+            tau_s: sim.tau_s(),
+            plate_rear_z_m: reference.plate_rear_z_m,
+            density_kg_m3: reference.density_kg_m3,
+            impactor_mass_kg: reference.impactor_mass_kg,
+            v0_m_s: reference.v0_m_s,
+            pos: order.iter().map(|&i| p.pos[i]).collect(),
+            vel: order.iter().map(|&i| p.vel[i]).collect(),
+            mass: order.iter().map(|&i| p.mass[i]).collect(),
+            body: order.iter().map(|&i| p.body[i]).collect(),
+            labels: order.iter().map(|&i| members.labels[i]).collect(),
+            in_residual_plate: order
+                .iter()
+                .map(|&i| members.in_residual_plate[i])
+                .collect(),
+            in_cloud: order.iter().map(|&i| members.in_cloud[i]).collect(),
+        }
+    }
+
+    /// Particles.
+    pub fn len(&self) -> usize {
+        self.pos.len()
+    }
+
+    /// True when there are no particles.
+    pub fn is_empty(&self) -> bool {
+        self.pos.is_empty()
+    }
+
+    /// The reference of the state: its numbers, without the rim (the residual plate is
+    /// already marked).
+    pub fn reference(&self) -> CloudReference {
+        CloudReference {
+            plate_rear_z_m: self.plate_rear_z_m,
+            density_kg_m3: self.density_kg_m3,
+            impactor_mass_kg: self.impactor_mass_kg,
+            v0_m_s: self.v0_m_s,
+            rim_by_id: Vec::new(),
+        }
+    }
+
+    /// The particles, in id order (no bonds: the labels hold the fragments).
+    pub fn particles(&self) -> Particles {
+        let n = self.len();
+        Particles::new(
+            self.pos.clone(),
+            self.vel.clone(),
+            self.mass.clone(),
+            self.body.clone(),
+            vec![crate::state::NO_BOND; n * crate::state::BONDS_PER_PARTICLE],
+        )
+    }
+
+    /// The labelling, by the index of [`CloudState::particles`].
+    pub fn members(&self) -> CloudMembers {
+        CloudMembers {
+            labels: self.labels.clone(),
+            in_residual_plate: self.in_residual_plate.clone(),
+            in_cloud: self.in_cloud.clone(),
+        }
+    }
+}
+
+/// The states a run keeps: at the analysis time (the end), and at the two front times when
+/// they were reached.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KeptStates {
+    /// At the analysis time.
+    pub end: CloudState,
+    /// At the two front times.
+    pub front: [Option<CloudState>; 2],
+}
+
+/// The cloud measured again from kept states with `analysis`'s quantile, camera and witness
+/// plate: what [`CloudObserver::finish`] returns for a run observed with these settings (the
+/// front times are those of the kept states; nothing else of `analysis` matters). The cloud is
+/// the one the run found (its labels and members are kept), and every definition is the one
+/// the run uses, so for the run's own settings and unrounded states the result is
+/// bit-identical to the run's.
+pub fn remeasure(kept: &KeptStates, analysis: &Analysis) -> CloudResult {
+    let settings = Settings::of(analysis);
+    let front = kept.front.each_ref().map(|state| {
+        state.as_ref().map(|s| {
+            let p = s.particles();
+            let reference = s.reference();
+            let ext = extent(&p, &s.in_cloud, s.plate_rear_z_m, settings.quantile);
+            front_sample(
+                &p,
+                &s.in_cloud,
+                ext.front_z_m,
+                &reference,
+                &settings.shadowgraph,
+                s.tau_s,
+            )
+        })
+    });
+    let end = &kept.end;
+    cloud_result(
+        &end.particles(),
+        &end.members(),
+        &end.reference(),
+        &settings,
+        &front,
+        end.time_s,
+        end.tau_s,
+    )
 }
 
 #[cfg(test)]

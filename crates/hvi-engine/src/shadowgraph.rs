@@ -280,15 +280,13 @@ impl Shadowgraph {
             j_lo = j_lo.min(j);
             j_hi = j_hi.max(j);
         }
-        (dark > 0).then(|| {
-            (
-                self.x0_m + (i_lo as f64 - 0.5) * h,
-                self.x0_m + (i_hi as f64 + 0.5) * h,
-                self.z0_m + (j_lo as f64 - 0.5) * h,
-                self.z0_m + (j_hi as f64 + 0.5) * h,
-                dark,
-            )
-        })
+        (dark > 0).then_some((
+            self.x0_m + (i_lo as f64 - 0.5) * h,
+            self.x0_m + (i_hi as f64 + 0.5) * h,
+            self.z0_m + (j_lo as f64 - 0.5) * h,
+            self.z0_m + (j_hi as f64 + 0.5) * h,
+            dark,
+        ))
     }
 
     /// The optical depth at (x, z), m: that of the pixel holding it (0 outside the image).

@@ -1,7 +1,8 @@
 //! One run of one scene: the engine stepped to the end time, with the energy ledger sampled,
 //! the debris cloud observed (`hvi_engine::cloud`: the track, the two front times, the full
 //! measurement at the end), optional snapshots and pictures, progress, and `summary.json`,
-//! `energy.csv`, `cloud_track.csv`, `fragments.csv`, `craters.csv` written atomically.
+//! `energy.csv`, `cloud_track.csv`, `fragments.csv`, `craters.csv` and the cloud's kept state
+//! `state.bin` ([`crate::state`]) written atomically.
 
 use std::fmt::Write as _;
 use std::io::{IsTerminal, Write as _};
@@ -775,8 +776,9 @@ fn energy_summary(last: &EnergyRow, e0: f64, max_drift: f64) -> EnergySummary {
     }
 }
 
-/// Writes `energy.csv`, `cloud_track.csv` (when there is a track), and `fragments.csv` and
-/// `craters.csv` (when the cloud was measured) into `dir`; returns the time it took.
+/// Writes `energy.csv`, `cloud_track.csv` (when there is a track), `fragments.csv` and
+/// `craters.csv` (when the cloud was measured) and `state.bin` (when its state was kept) into
+/// `dir`; returns the time it took.
 fn write_tables(
     dir: &Path,
     rows: &[EnergyRow],
@@ -791,6 +793,9 @@ fn write_tables(
     if let Some(c) = cloud {
         write_csv_atomic(&dir.join("fragments.csv"), size_distribution(&c.fragments))?;
         write_csv_atomic(&dir.join("craters.csv"), &c.craters)?;
+        if let Some(kept) = &c.kept {
+            crate::state::write_state(&dir.join(crate::state::STATE_FILE), kept)?;
+        }
     }
     Ok(t.elapsed())
 }

@@ -7,6 +7,7 @@
 //!     record.json      the run's record: fingerprint, status, error, observables (written last)
 //!     summary.json     the engine run's summary (hvi_run::run::run_scene)
 //!     energy.csv, cloud_track.csv, fragments.csv, cloud_side.png and the other pictures
+//!     state.bin        the cloud's kept state (hvi_run::state), for `hvi-study reanalyse`
 //! runs/.tmp-<digits>-<pid>-<n>-<host>/   a run in progress
 //! ```
 //!
@@ -195,6 +196,38 @@ impl Store {
         let store = Store { runs };
         store.sweep_stale()?;
         Ok(store)
+    }
+
+    /// The store of `study_dir` as it is, for reading: neither created nor swept (an error
+    /// when `study_dir/runs` is not a directory).
+    pub fn existing(study_dir: &Path) -> Result<Store> {
+        let runs = study_dir.join("runs");
+        if !runs.is_dir() {
+            bail!(
+                "{} has no run store (no runs/ directory)",
+                study_dir.display()
+            );
+        }
+        Ok(Store { runs })
+    }
+
+    /// The directories of finished runs (named by [`DIR_DIGITS`] hex digits and holding a
+    /// `record.json`), by name; runs in progress are left out.
+    pub fn run_dirs(&self) -> Result<Vec<PathBuf>> {
+        let mut v = Vec::new();
+        for entry in fs::read_dir(&self.runs)
+            .with_context(|| format!("cannot list {}", self.runs.display()))?
+        {
+            let path = entry?.path();
+            let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+            let digits = name
+                .is_some_and(|n| n.len() == DIR_DIGITS && n.chars().all(|c| c.is_ascii_hexdigit()));
+            if digits && path.join("record.json").is_file() {
+                v.push(path);
+            }
+        }
+        v.sort();
+        Ok(v)
     }
 
     /// Removes temporary directories whose process is gone (on this host: another host's

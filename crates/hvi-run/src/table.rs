@@ -9,8 +9,9 @@ use serde_json::Value;
 
 use crate::output::write_atomic;
 use crate::plan::Plan;
+use crate::spec::Axis;
 use crate::store::{Record, RunStatus};
-use hvi_analysis::observable::Observable;
+use hvi_analysis::observable::{Observable, Observables};
 
 /// A table: named columns, rows of JSON values (null where there is nothing).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -74,46 +75,90 @@ fn cell(v: &Value) -> String {
     }
 }
 
-fn num(x: Option<f64>) -> Value {
+/// A number as a JSON value: null when absent or not finite.
+pub fn num(x: Option<f64>) -> Value {
     x.filter(|v| v.is_finite())
         .map_or(Value::Null, |v| serde_json::json!(v))
 }
 
-/// The table of a plan's runs with their records (a missing record gives status `missing`).
-pub fn results_table(plan: &Plan, records: &[Option<Record>]) -> Table {
+/// The columns of a results table over `axes`: `index`, one per axis, `status`,
+/// `fingerprint`, `dir`, one per observable, `wall_seconds`, `error`.
+pub fn result_columns(axes: &[Axis]) -> Vec<String> {
     let mut columns = vec!["index".to_string()];
-    columns.extend(plan.axes.iter().map(|a| a.key.clone()));
+    columns.extend(axes.iter().map(|a| a.key.clone()));
     columns.extend(["status", "fingerprint", "dir"].map(String::from));
     columns.extend(Observable::names().map(String::from));
     columns.extend(["wall_seconds", "error"].map(String::from));
+    columns
+}
+
+/// One run's row of a results table ([`result_columns`]).
+#[derive(Debug, Clone, Copy)]
+pub struct ResultRow<'a> {
+    /// Its index in the plan (`None` for a run of the store the plan does not list).
+    pub index: Option<usize>,
+    /// Its axis values, one per axis.
+    pub values: &'a [Value],
+    /// `completed`, `failed`, `missing` or another word for how it stands.
+    pub status: &'a str,
+    /// Its fingerprint.
+    pub fingerprint: &'a str,
+    /// Its directory, relative to the study directory.
+    pub dir: &'a str,
+    /// Its observables (`None`: every observable empty).
+    pub observables: Option<&'a Observables>,
+    /// Its wall time, s.
+    pub wall_seconds: Option<f64>,
+    /// Its error.
+    pub error: Option<&'a str>,
+}
+
+impl ResultRow<'_> {
+    /// The row's cells, in the order of [`result_columns`].
+    pub fn cells(&self) -> Vec<Value> {
+        let mut row = vec![self.index.map_or(Value::Null, |i| serde_json::json!(i))];
+        row.extend(self.values.iter().cloned());
+        row.push(Value::String(self.status.into()));
+        row.push(Value::String(self.fingerprint.into()));
+        row.push(Value::String(self.dir.into()));
+        for o in Observable::ALL {
+            row.push(num(self.observables.and_then(|obs| obs.get(o))));
+        }
+        row.push(num(self.wall_seconds));
+        row.push(self.error.map_or(Value::Null, |e| Value::String(e.into())));
+        row
+    }
+}
+
+/// The table of a plan's runs with their records (a missing record gives status `missing`).
+pub fn results_table(plan: &Plan, records: &[Option<Record>]) -> Table {
     let rows = plan
         .runs
         .iter()
         .zip(records)
         .map(|(run, rec)| {
-            let mut row = vec![serde_json::json!(run.index)];
-            row.extend(run.values.iter().cloned());
             let status = match rec {
                 Some(r) if r.status == RunStatus::Completed => "completed",
                 Some(_) => "failed",
                 None => "missing",
             };
-            row.push(Value::String(status.into()));
-            row.push(Value::String(run.fingerprint.clone()));
-            row.push(Value::String(run.dir.clone()));
-            for o in Observable::ALL {
-                row.push(num(rec.as_ref().and_then(|r| r.observables.get(o))));
+            ResultRow {
+                index: Some(run.index),
+                values: &run.values,
+                status,
+                fingerprint: &run.fingerprint,
+                dir: &run.dir,
+                observables: rec.as_ref().map(|r| &r.observables),
+                wall_seconds: rec.as_ref().map(|r| r.wall_seconds),
+                error: rec.as_ref().and_then(|r| r.error.as_deref()),
             }
-            row.push(num(rec.as_ref().map(|r| r.wall_seconds)));
-            row.push(
-                rec.as_ref()
-                    .and_then(|r| r.error.clone())
-                    .map_or(Value::Null, Value::String),
-            );
-            row
+            .cells()
         })
         .collect();
-    Table { columns, rows }
+    Table {
+        columns: result_columns(&plan.axes),
+        rows,
+    }
 }
 
 #[cfg(test)]

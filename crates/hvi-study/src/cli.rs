@@ -52,6 +52,10 @@ pub enum Command {
     Status(StatusArgs),
     /// Write a study's tables (and figures) from its run store, running nothing.
     Collect(CollectArgs),
+    /// Measure the debris cloud of a study's stored runs again from the state each run kept
+    /// (state.bin), with other analysis settings, running no simulation; writes
+    /// reanalysis.csv/json into the study directory.
+    Reanalyse(ReanalyseArgs),
     /// Engine throughput: run a scene at several thread counts and print particle-steps/s.
     ///
     /// Defaults to the paper's calibration scene (2.7e5 particles) through the first 1 us of
@@ -200,6 +204,24 @@ pub struct CollectArgs {
     /// The validity cut-off (with `--as validity-map`; default: the study's, else 0.3).
     #[arg(long)]
     pub cutoff: Option<f64>,
+}
+
+/// `hvi-study reanalyse` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct ReanalyseArgs {
+    /// The study directory (the --out of a sweep: plan.json and runs/), or its plan.json.
+    pub study_dir: PathBuf,
+    /// Measure with another analysis setting, analysis.KEY=VALUE with KEY one of quantile,
+    /// shadowgraph_pixel_m, shadowgraph_blur_m, shadowgraph_grain_m, shadowgraph_optical_depth, witness_standoff_m (default: each
+    /// run's own).
+    #[arg(long = "set", value_name = "analysis.KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// The table's name in the study directory: NAME.csv and NAME.json.
+    #[arg(long, value_name = "NAME", default_value = "reanalysis")]
+    pub table: String,
+    /// No progress output (runs that cannot be measured are still listed).
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 /// `hvi-study stability` arguments.

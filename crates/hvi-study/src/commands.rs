@@ -32,6 +32,7 @@ pub fn dispatch(command: Command) -> Result<()> {
         Command::Submit(args) => submit(&args),
         Command::Status(args) => crate::study::collect::status(&args),
         Command::Collect(args) => crate::study::collect::collect(&args),
+        Command::Reanalyse(args) => crate::study::reanalyse::reanalyse(&args),
         Command::Reproduce(args) => crate::reproduce::reproduce(&args).map(|_| ()),
         Command::RunUnit(args) => run_unit(&args),
     }

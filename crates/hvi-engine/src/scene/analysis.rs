@@ -58,6 +58,12 @@ pub struct Analysis {
     /// (`crate::witness`), m, in (0, 10].
     #[serde(skip_serializing_if = "is_default_witness_standoff")]
     pub witness_standoff_m: f64,
+    /// Keep the cloud's compact state at the analysis time and at the two front times (every
+    /// particle's position, velocity, body, fragment label and membership; `state.bin` in the
+    /// run's directory), so that the cloud can be measured again with other settings without
+    /// re-simulating ([`crate::cloud::remeasure`], `hvi-study reanalyse`).
+    #[serde(skip_serializing_if = "is_true")]
+    pub keep_state: bool,
 }
 
 /// Default standoff of the witness plate behind the target, m (the paper does not give the
@@ -81,6 +87,9 @@ fn is_default_optical_depth(v: &f64) -> bool {
 fn is_default_witness_standoff(v: &f64) -> bool {
     *v == DEFAULT_WITNESS_STANDOFF_M
 }
+fn is_true(v: &bool) -> bool {
+    *v
+}
 
 impl Default for Analysis {
     fn default() -> Self {
@@ -95,6 +104,7 @@ impl Default for Analysis {
             shadowgraph_grain_m: crate::shadowgraph::DEFAULT_GRAIN_M,
             shadowgraph_optical_depth: crate::shadowgraph::DEFAULT_OPTICAL_DEPTH,
             witness_standoff_m: DEFAULT_WITNESS_STANDOFF_M,
+            keep_state: true,
         }
     }
 }

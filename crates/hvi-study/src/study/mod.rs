@@ -1,10 +1,11 @@
 //! The study workflows: plan, sweep and run-unit ([`sweep`]), `calibrate`, `collect` and `status`,
-//! the calibration maps ([`figures`]), `validity-map` and `stability`.
+//! the calibration maps ([`figures`]), `validity-map`, `stability` and `reanalyse`.
 
 pub mod calibrate;
 pub mod calibration;
 pub mod collect;
 pub mod figures;
+pub mod reanalyse;
 pub mod stability;
 pub mod sweep;
 pub mod validity;
