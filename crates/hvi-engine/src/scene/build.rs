@@ -314,14 +314,14 @@ fn particle_masses_kg(geometry: &Geometry, layout: &Layout, density: f64) -> [f6
 fn place_impactor(layout: &mut Layout, standoff: f64, r_eq: f64) -> Result<()> {
     if standoff < 0.0 {
         // Check the actual closest distance: a negative standoff overlaps the bodies.
-        layout.shift_impactor(-standoff);
+        layout.shift_impactor(standoff);
         let d = layout.closest_impactor_target_distance();
         return Err(EngineError::Overlap {
             distance_m: d,
             r_eq_m: r_eq,
         });
     }
-    layout.shift_impactor(-standoff);
+    layout.shift_impactor(standoff);
     let closest = layout.closest_impactor_target_distance();
     if closest < r_eq * (1.0 - 1e-9) {
         return Err(EngineError::Overlap {
@@ -330,4 +330,29 @@ fn place_impactor(layout: &mut Layout, standoff: f64, r_eq: f64) -> Result<()> {
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::scene::{Geometry, SceneSpec};
+    use crate::EngineError;
+
+    /// Regression: a positive standoff moved the impactor towards the plate and was refused
+    /// as an overlap; it moves it back, and first contact comes standoff / v0 later.
+    #[test]
+    fn a_standoff_moves_the_impactor_back() {
+        let with = |s: f64| {
+            let mut spec = SceneSpec::calibration(2000.0, 1e-6);
+            if let Geometry::SphereOnPlate { standoff_m, .. } = &mut spec.scene {
+                *standoff_m = s;
+            }
+            spec.build()
+        };
+        let at0 = with(0.0).expect("touching start");
+        let back = with(1e-3).expect("a positive standoff is valid");
+        let v0 = 6700.0;
+        assert!((back.derived.contact_time_s - 1e-3 / v0).abs() < 1e-18);
+        assert!(back.derived.steps > at0.derived.steps);
+        assert!(matches!(with(-1e-3), Err(EngineError::Overlap { .. })));
+    }
 }
