@@ -32,7 +32,7 @@ use hvi_engine::state::Body;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::theme::{text_style, Area};
+use crate::theme::{text_style, Area, Chart2d, ThemedAxes, AXIS_TEXT};
 
 pub use charts::{diameter_bins, fragment_histogram, track_plot, DiameterBin};
 pub use perspective::series;
@@ -191,6 +191,28 @@ impl PixelRect {
     fn height(&self) -> f64 {
         (self.y1 - self.y0) as f64
     }
+}
+
+/// Ranges (mm) with equal scale on both axes, covering `z` and `x` inside `rect`.
+fn equal_aspect(z: (f64, f64), x: (f64, f64), rect: PixelRect) -> (Range<f64>, Range<f64>, f64) {
+    let scale = (rect.width() / (z.1 - z.0)).min(rect.height() / (x.1 - x.0));
+    let (zc, xc) = (0.5 * (z.0 + z.1), 0.5 * (x.0 + x.1));
+    let (hz, hx) = (0.5 * rect.width() / scale, 0.5 * rect.height() / scale);
+    ((zc - hz)..(zc + hz), (xc - hx)..(xc + hx), scale)
+}
+
+/// The axes of a side-on picture: z (the impact direction) across, x up, both in mm.
+fn z_x_mesh(chart: &mut Chart2d<'_, '_>) -> Result<()> {
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("z (mm), impact direction \u{2192}")
+        .y_desc("x (mm)")
+        .axis_text(AXIS_TEXT)
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .draw()?;
+    Ok(())
 }
 
 /// Squares of `size` pixels at (x, y) with depth d into `rgb` (an image `width` wide), inside

@@ -129,47 +129,48 @@ impl Analysis {
 
     /// Checks every value against its allowed range, naming the key.
     pub fn validate(&self, end_time_s: f64) -> Result<()> {
-        check_range("analysis.quantile", self.quantile, 0.5, false, 1.0, false)?;
-        check_range(
-            "analysis.shadowgraph_pixel_m",
-            self.shadowgraph_pixel_m,
-            0.0,
-            true,
-            0.01,
-            false,
-        )?;
-        check_range(
-            "analysis.shadowgraph_blur_m",
-            self.shadowgraph_blur_m,
-            0.0,
-            false,
-            0.05,
-            false,
-        )?;
-        check_range(
-            "analysis.shadowgraph_grain_m",
-            self.shadowgraph_grain_m,
-            0.0,
-            true,
-            0.01,
-            false,
-        )?;
-        check_range(
-            "analysis.shadowgraph_optical_depth",
-            self.shadowgraph_optical_depth,
-            0.0,
-            true,
-            100.0,
-            false,
-        )?;
-        check_range(
-            "analysis.witness_standoff_m",
-            self.witness_standoff_m,
-            0.0,
-            true,
-            10.0,
-            false,
-        )?;
+        // (key, value, lower bound, lower bound open, upper bound); every upper bound closed.
+        let ranges = [
+            ("analysis.quantile", self.quantile, 0.5, false, 1.0),
+            (
+                "analysis.shadowgraph_pixel_m",
+                self.shadowgraph_pixel_m,
+                0.0,
+                true,
+                0.01,
+            ),
+            (
+                "analysis.shadowgraph_blur_m",
+                self.shadowgraph_blur_m,
+                0.0,
+                false,
+                0.05,
+            ),
+            (
+                "analysis.shadowgraph_grain_m",
+                self.shadowgraph_grain_m,
+                0.0,
+                true,
+                0.01,
+            ),
+            (
+                "analysis.shadowgraph_optical_depth",
+                self.shadowgraph_optical_depth,
+                0.0,
+                true,
+                100.0,
+            ),
+            (
+                "analysis.witness_standoff_m",
+                self.witness_standoff_m,
+                0.0,
+                true,
+                10.0,
+            ),
+        ];
+        for (key, value, lo, open_lo, hi) in ranges {
+            check_range(key, value, lo, open_lo, hi, false)?;
+        }
         if let Some([t1, t2]) = self.front_times_s {
             let ok = t1.is_finite() && t2.is_finite() && 0.0 <= t1 && t1 < t2 && t2 <= end_time_s;
             if !ok {

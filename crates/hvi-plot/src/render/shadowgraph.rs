@@ -11,11 +11,9 @@ use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::{scale_bar, PixelRect, SceneInfo};
+use super::{equal_aspect, scale_bar, z_x_mesh, PixelRect, SceneInfo};
 use crate::save::write_png;
-use crate::theme::{
-    fonts, text_style, Area, Chart2d, ThemedAxes, AXIS_TEXT, FAMILY, GUIDE, MEASURE,
-};
+use crate::theme::{fonts, text_style, Area, Chart2d, FAMILY, GUIDE, MEASURE};
 
 /// Image size, px.
 const W: u32 = 1400;
@@ -98,19 +96,9 @@ fn axes(rgb: &mut [u8], image: &Shadowgraph, info: &SceneInfo, tau_s: f64) -> Re
     let probe = chart(&area, 0.0..1.0, 0.0..1.0)?;
     let rect = PixelRect::of(probe.plotting_area().get_pixel_range());
     drop(probe);
-    let scale = (rect.width() / (z.1 - z.0)).min(rect.height() / (x.1 - x.0));
-    let (zc, xc) = (0.5 * (z.0 + z.1), 0.5 * (x.0 + x.1));
-    let (hz, hx) = (0.5 * rect.width() / scale, 0.5 * rect.height() / scale);
-    let (z_mm, x_mm) = ((zc - hz)..(zc + hz), (xc - hx)..(xc + hx));
+    let (z_mm, x_mm, scale) = equal_aspect(z, x, rect);
     let mut c = chart(&area, z_mm.clone(), x_mm.clone())?;
-    c.configure_mesh()
-        .disable_mesh()
-        .x_desc("z (mm), impact direction \u{2192}")
-        .y_desc("x (mm)")
-        .axis_text(AXIS_TEXT)
-        .x_label_formatter(&|v| format!("{v:.0}"))
-        .y_label_formatter(&|v| format!("{v:.0}"))
-        .draw()?;
+    z_x_mesh(&mut c)?;
     let rect = PixelRect::of(c.plotting_area().get_pixel_range());
     root.present()?;
     Ok(ShadowFrame {

@@ -12,12 +12,13 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::{
-    scale_bar, shade, thousands, trimmed_range, Frame, PixelRect, SceneInfo, Splatter, MIN_DOT_PX,
+    equal_aspect, scale_bar, shade, thousands, trimmed_range, z_x_mesh, Frame, PixelRect,
+    SceneInfo, Splatter, MIN_DOT_PX,
 };
 use crate::save::write_png;
 use crate::theme::{
-    fonts, text_style, Area, Chart2d, ThemedAxes, AXIS_TEXT, FAMILY, GUIDE, IMPACTOR, IMPACTOR_RGB,
-    MEASURE, PLATE, PLATE_RGB,
+    fonts, text_style, Area, Chart2d, FAMILY, GUIDE, IMPACTOR, IMPACTOR_RGB, MEASURE, PLATE,
+    PLATE_RGB,
 };
 
 /// The chart of one side-view panel (z horizontal, x vertical, both in mm).
@@ -34,14 +35,6 @@ fn side_chart<'a, 'b>(
         .x_label_area_size(52)
         .y_label_area_size(72)
         .build_cartesian_2d(z_mm, x_mm)?)
-}
-
-/// Ranges (mm) with equal scale on both axes, covering `z` and `x` inside `rect`.
-fn equal_aspect(z: (f64, f64), x: (f64, f64), rect: PixelRect) -> (Range<f64>, Range<f64>, f64) {
-    let scale = (rect.width() / (z.1 - z.0)).min(rect.height() / (x.1 - x.0));
-    let (zc, xc) = (0.5 * (z.0 + z.1), 0.5 * (x.0 + x.1));
-    let (hz, hx) = (0.5 * rect.width() / scale, 0.5 * rect.height() / scale);
-    ((zc - hz)..(zc + hz), (xc - hx)..(xc + hx), scale)
 }
 
 /// The two panels of the side view under a title band `title_h` high.
@@ -181,15 +174,7 @@ fn side_axes(
         let x_half = layout.x_half_mm;
         let (z_mm, x_mm, scale) = equal_aspect(layout.z_mm, (-x_half, x_half), rect);
         let mut chart = side_chart(area, caption, z_mm.clone(), x_mm.clone())?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("z (mm), impact direction \u{2192}")
-            .y_desc("x (mm)")
-            .axis_text(AXIS_TEXT)
-            .x_label_formatter(&|v| format!("{v:.0}"))
-            .y_label_formatter(&|v| format!("{v:.0}"))
-            .draw()?;
+        z_x_mesh(&mut chart)?;
         let rect = PixelRect::of(chart.plotting_area().get_pixel_range());
         panels.push(SidePanel {
             rect,
