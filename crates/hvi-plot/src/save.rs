@@ -6,17 +6,26 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
-/// Writes `bytes` to `path` atomically.
+/// Writes `bytes` to `path` atomically, through `.NAME.tmp.PID` beside it (created as any new
+/// file is, so the picture gets the usual permissions), synced, then renamed over `path`.
 pub(crate) fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or_else(|| Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("cannot create a temporary file in {}", dir.display()))?;
-    tmp.write_all(bytes)?;
-    tmp.as_file().sync_all()?;
-    tmp.persist(path)
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp.{}", std::process::id()));
+    {
+        let mut file = std::fs::File::create(&tmp)
+            .with_context(|| format!("cannot create {}", tmp.display()))?;
+        file.write_all(bytes)
+            .with_context(|| format!("cannot write {}", tmp.display()))?;
+        file.sync_all()?;
+    }
+    std::fs::rename(&tmp, path)
         .with_context(|| format!("cannot move {} into place", path.display()))?;
     Ok(())
 }
@@ -48,4 +57,30 @@ pub(crate) fn encode_png(
 pub fn write_png(path: &Path, rgb: &[u8], w: u32, h: u32) -> Result<()> {
     let bytes = encode_png(rgb, w, h, Some(png::Compression::Fast))?;
     write_atomic_bytes(path, &bytes).with_context(|| format!("cannot write {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Regression: pictures were written through a 0600 temporary file and so were readable
+    /// by their owner only; they get the permissions any new file gets.
+    #[cfg(unix)]
+    #[test]
+    fn pictures_get_the_permissions_of_any_new_file() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().expect("temporary directory");
+        let plain = dir.path().join("plain");
+        std::fs::File::create(&plain).expect("plain file");
+        let picture = dir.path().join("picture.png");
+        write_atomic_bytes(&picture, b"png").expect("written");
+        let mode = |p: &Path| std::fs::metadata(p).expect("exists").permissions().mode() & 0o777;
+        assert_eq!(mode(&picture), mode(&plain));
+        assert_eq!(std::fs::read(&picture).expect("read"), b"png");
+        assert_eq!(
+            std::fs::read_dir(dir.path()).expect("dir").count(),
+            2,
+            "no temporary left"
+        );
+    }
 }
