@@ -5,8 +5,8 @@
 use std::collections::HashMap;
 
 /// Values z on the grid x (columns) by y (rows): `z[row][col]` at `(x[col], y[row])`. NaN marks
-/// a missing value (a failed run); cells touching one are left out.
-#[derive(Debug, Clone, PartialEq)]
+/// a missing value (a failed run; JSON null); cells touching one are left out.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Field {
     /// Column coordinates, strictly increasing.
     pub x: Vec<f64>,

@@ -11,7 +11,7 @@
 use hvi_engine::cloud::CloudObserver;
 use hvi_engine::potential::ContactForm;
 use hvi_engine::scene::{
-    Analysis, Geometry, Material, Resolution, RunSettings, SceneSpec, TimeStep,
+    Analysis, Geometry, Material, Resolution, RunSettings, SceneSpec, SizingRule, TimeStep,
 };
 use hvi_engine::sim::Simulation;
 
@@ -38,6 +38,7 @@ fn default_scene() -> SceneSpec {
             lambda_pa: None,
             rcut_over_sigma: 1.5,
             sizing: true,
+            sizing_rule: SizingRule::Eq12,
         },
         run: RunSettings {
             end_time_s: 32e-6,

@@ -42,6 +42,10 @@ pub enum Command {
     /// Reproduce every figure of the paper through the study runner and its store, and write
     /// report.md: per figure the paper's result, ours, the deciding numbers and a verdict.
     Reproduce(ReproduceArgs),
+    /// The readings study: the calibration grid under each reading of the paper (contact
+    /// prefactor, sizing rule, thermal amplitude, observable definition) at several seeds,
+    /// each reading's Figs. 9 and 10 judged side by side; writes reports/fidelity/.
+    Fidelity(FidelityArgs),
     /// Run one run of a written plan.json by its index (for an external scheduler).
     RunUnit(RunUnitArgs),
     /// Submit the runs a study lacks to a Slurm cluster as one job array (one task per run,
@@ -277,6 +281,38 @@ pub struct ReproduceArgs {
     #[arg(long)]
     pub jobs: Option<usize>,
     /// Validate every run and print the expected wall time; run nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// No progress output.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// `hvi-study fidelity` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct FidelityArgs {
+    /// The readings config.
+    #[arg(long, default_value = "studies/fidelity.toml")]
+    pub config: PathBuf,
+    /// The calibration study's tier (default: the config's `fidelity.tier`).
+    #[arg(long)]
+    pub tier: Option<String>,
+    /// Thermal seeds, comma-separated (default: the config's `fidelity.seeds`).
+    #[arg(long, value_delimiter = ',')]
+    pub seeds: Vec<u64>,
+    /// The report directory (a new or empty directory, or an earlier report).
+    #[arg(long, default_value = "reports/fidelity")]
+    pub out: PathBuf,
+    /// Where the runs are kept: one study store per reading, `<runs>/<tier>/<reading>/`.
+    #[arg(long, default_value = "runs/fidelity")]
+    pub runs: PathBuf,
+    /// Worker threads in all (default: every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Runs at once (default: as many as threads).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Validate every reading and run, print how many runs it takes; run nothing.
     #[arg(long)]
     pub dry_run: bool,
     /// No progress output.

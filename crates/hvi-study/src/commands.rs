@@ -33,6 +33,7 @@ pub fn dispatch(command: Command) -> Result<()> {
         Command::Status(args) => crate::study::collect::status(&args),
         Command::Collect(args) => crate::study::collect::collect(&args),
         Command::Reanalyse(args) => crate::study::reanalyse::reanalyse(&args),
+        Command::Fidelity(args) => crate::fidelity::fidelity(&args).map(|_| ()),
         Command::Reproduce(args) => crate::reproduce::reproduce(&args).map(|_| ()),
         Command::RunUnit(args) => run_unit(&args),
     }

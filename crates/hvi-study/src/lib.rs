@@ -18,5 +18,6 @@
 pub mod accuracy;
 pub mod cli;
 pub mod commands;
+pub mod fidelity;
 pub mod reproduce;
 pub mod study;

@@ -8,7 +8,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::layout::{lay_out, rim_ids, Layout};
-use super::spec::{Geometry, Material, Resolution, SceneSpec};
+use super::spec::{Geometry, Material, Resolution, SceneSpec, SizingRule};
 use super::time_step::choose_time_step;
 use super::validate::Impact;
 use crate::error::{check_positive, check_range, EngineError, Result};
@@ -240,12 +240,22 @@ impl Material {
             10.0,
             false,
         )?;
+        let p = m.sizing_rule.eps_power();
         let (gamma, lambda) = match (m.eps_j, m.kappa_n_m, m.gamma_pa, m.lambda_pa) {
             (eps, kappa, None, None) => {
                 let eps = check_positive("material.eps_j", require("material.eps_j", eps)?)?;
                 let kappa =
                     check_positive("material.kappa_n_m", require("material.kappa_n_m", kappa)?)?;
-                (eps / sigma_ref.powi(3), kappa / sigma_ref)
+                (eps / sigma_ref.powi(p), kappa / sigma_ref)
+            }
+            (None, None, Some(_), _) | (None, None, _, Some(_))
+                if m.sizing_rule != SizingRule::Eq12 =>
+            {
+                return Err(EngineError::Conflict(
+                    "material.gamma_pa and material.lambda_pa are the constants of eq. 12; with \
+                     material.sizing_rule = \"eqs5_6\" give material.eps_j and material.kappa_n_m"
+                        .into(),
+                ))
             }
             (None, None, gamma, lambda) => {
                 let gamma =
@@ -263,10 +273,15 @@ impl Material {
             }
         };
         let (eps, kappa) = if m.sizing {
-            (gamma * sigma.powi(3), lambda * sigma)
+            (gamma * sigma.powi(p), lambda * sigma)
         } else {
             // Without sizing the reference values are used at any sigma (Fig. 4, top panel).
-            (gamma * sigma_ref.powi(3), lambda * sigma_ref)
+            (gamma * sigma_ref.powi(p), lambda * sigma_ref)
+        };
+        // Under eqs. 5/6 eps / sigma^3 is not size-invariant; report it at this sigma.
+        let gamma = match m.sizing_rule {
+            SizingRule::Eq12 => gamma,
+            SizingRule::Eqs5And6 => eps / sigma.powi(3),
         };
         let interaction = Interaction::new(sigma, eps, kappa, rcut_over_sigma * sigma, m.contact);
         Ok(SizedMaterial {
@@ -334,7 +349,7 @@ fn place_impactor(layout: &mut Layout, standoff: f64, r_eq: f64) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use crate::scene::{Geometry, SceneSpec};
+    use crate::scene::{Geometry, SceneSpec, SizingRule};
     use crate::EngineError;
 
     /// Regression: a positive standoff moved the impactor towards the plate and was refused
@@ -354,5 +369,43 @@ mod tests {
         assert!((back.derived.contact_time_s - 1e-3 / v0).abs() < 1e-18);
         assert!(back.derived.steps > at0.derived.steps);
         assert!(matches!(with(-1e-3), Err(EngineError::Overlap { .. })));
+    }
+
+    /// eq. 12 scales eps with sigma^3, the printed eqs. 5/6 with sigma; kappa with sigma in
+    /// both, and at the reference sigma the two agree.
+    #[test]
+    fn the_sizing_rules_scale_eps_as_they_say() {
+        let at = |n: f64, rule: SizingRule| {
+            let mut spec = SceneSpec::calibration(n, 1e-6);
+            spec.material.sizing_rule = rule;
+            spec.build().expect("valid scene").derived
+        };
+        let (a, b) = (
+            at(2000.0, SizingRule::Eq12),
+            at(2000.0, SizingRule::Eqs5And6),
+        );
+        let s = a.sigma_m / a.sigma_ref_m;
+        assert!(
+            s > 2.0,
+            "2000 particles are coarser than the reference: {s}"
+        );
+        assert!((a.eps_j / (0.01 * s.powi(3)) - 1.0).abs() < 1e-12);
+        assert!((b.eps_j / (0.01 * s) - 1.0).abs() < 1e-12);
+        assert_eq!(a.kappa_n_m, b.kappa_n_m);
+        assert!((b.gamma_pa - b.eps_j / b.sigma_m.powi(3)).abs() <= 1e-12 * b.gamma_pa);
+        let mut spec = SceneSpec::calibration(2000.0, 1e-6);
+        spec.material.sizing_rule = SizingRule::Eqs5And6;
+        spec.material.eps_j = None;
+        spec.material.kappa_n_m = None;
+        spec.material.gamma_pa = Some(1e9);
+        spec.material.lambda_pa = Some(1e10);
+        let e = spec
+            .build()
+            .expect_err("gamma with eqs5_6 is a conflict")
+            .to_string();
+        assert!(e.contains("material.sizing_rule"), "{e}");
+        // The default rule is not serialised: fingerprints of existing scenes are unchanged.
+        let json = serde_json::to_string(&SceneSpec::calibration(2000.0, 1e-6)).expect("json");
+        assert!(!json.contains("sizing_rule"), "{json}");
     }
 }

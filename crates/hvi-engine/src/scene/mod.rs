@@ -22,7 +22,8 @@ mod validate;
 pub use analysis::{Analysis, DEFAULT_FRONT_TIMES_S, DEFAULT_QUANTILE};
 pub use build::{Derived, Setup};
 pub use spec::{
-    Geometry, Material, Resolution, RunSettings, SceneSpec, TimeStep, DEFAULT_SKIN_OVER_SIGMA,
+    Geometry, Material, Resolution, RunSettings, SceneSpec, SizingRule, TimeStep,
+    DEFAULT_SKIN_OVER_SIGMA,
 };
 
 // The time-step constants, also at the paths they had when they were defined here.

@@ -150,6 +150,39 @@ pub struct Material {
     /// one. Off only to show what goes wrong without it (Fig. 4, top).
     #[serde(default = "default_true")]
     pub sizing: bool,
+    /// How eps scales with sigma under sizing: "eq12" (eps ~ sigma^3, the default) or "eqs5_6"
+    /// (eps ~ sigma, as equations 5 and 6 of the paper's text print it); kappa ~ sigma in both.
+    #[serde(default, skip_serializing_if = "SizingRule::is_default")]
+    pub sizing_rule: SizingRule,
+}
+
+/// The scaling of eps with the particle diameter under geometric sizing (MODEL.md section 4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum SizingRule {
+    /// Eq. (12): eps = gamma sigma^3, energy per bond proportional to volume per particle.
+    #[default]
+    #[serde(rename = "eq12")]
+    Eq12,
+    /// Eqs. (5) and (6) as printed: eps proportional to sigma. A reading kept to test it
+    /// (`hvi-study fidelity`), not a physical choice: it does not conserve energy per volume.
+    #[serde(rename = "eqs5_6")]
+    Eqs5And6,
+}
+
+impl SizingRule {
+    /// Whether this is the default rule (then it is left out of the scene's JSON, so that
+    /// fingerprints of scenes that do not name it are unchanged).
+    pub fn is_default(&self) -> bool {
+        *self == SizingRule::Eq12
+    }
+
+    /// The power of sigma that eps scales with.
+    pub fn eps_power(self) -> i32 {
+        match self {
+            SizingRule::Eq12 => 3,
+            SizingRule::Eqs5And6 => 1,
+        }
+    }
 }
 
 impl Default for Material {
@@ -162,6 +195,7 @@ impl Default for Material {
             lambda_pa: None,
             rcut_over_sigma: paper::BEST_RCUT_OVER_SIGMA,
             sizing: true,
+            sizing_rule: SizingRule::Eq12,
         }
     }
 }

@@ -469,7 +469,26 @@ fn point(p: (f64, f64)) -> String {
     format!("({}, {})", short(p.0), short(p.1))
 }
 
-fn fig9_figure(rr: &Field, files: Vec<String>) -> Figure {
+/// Fig. 9's checks, named in the order [`fig9_checks`] returns them: the main claim's
+/// ([`FIG9_MAIN_CHECKS`] of them), then the secondary ones.
+pub const FIG9_CHECKS: [&str; 5] = [
+    "R is level apart from the peak",
+    "the plateau is near 1.47",
+    "the peak is at (1, 1.14e6)",
+    "the peak is near 1.54",
+    "the paper's fit is a local maximum",
+];
+
+/// How many of [`FIG9_CHECKS`] make Fig. 9's main claim.
+pub const FIG9_MAIN_CHECKS: usize = 3;
+
+/// Fig. 9's checks on an R field over (eps, kappa): (main claim, secondary).
+pub fn fig9_checks(rr: &Field) -> (Vec<Check>, Vec<Check>) {
+    RatioMap::of(rr).checks()
+}
+
+/// Fig. 9 judged from an R field over (eps, kappa), with its files.
+pub fn fig9_figure(rr: &Field, files: Vec<String>) -> Figure {
     let mut f9 = fig9_pending();
     f9.files = files;
     let m = RatioMap::of(rr);
@@ -712,7 +731,23 @@ fn signed(x: f64) -> String {
     }
 }
 
-fn fig10_figure(va: &Field, files: Vec<String>) -> Figure {
+/// Fig. 10's checks, named in the order [`fig10_checks`] returns them: the main claim's
+/// ([`FIG10_MAIN_CHECKS`]), then the secondary one.
+pub const FIG10_CHECKS: [&str; 2] = [
+    "va/v0 falls as eps grows at every kappa",
+    "va/v0 varies less with kappa than with eps",
+];
+
+/// How many of [`FIG10_CHECKS`] make Fig. 10's main claim.
+pub const FIG10_MAIN_CHECKS: usize = 1;
+
+/// Fig. 10's checks on a va/v0 field over (eps, kappa): (main claim, secondary).
+pub fn fig10_checks(va: &Field) -> (Vec<Check>, Vec<Check>) {
+    VelocityMap::of(va).checks()
+}
+
+/// Fig. 10 judged from a va/v0 field over (eps, kappa), with its files.
+pub fn fig10_figure(va: &Field, files: Vec<String>) -> Figure {
     let mut f10 = fig10_pending();
     f10.files = files;
     let m = VelocityMap::of(va);

@@ -20,7 +20,9 @@ pub use fig3::{fig3, fig3_paper, fig3_pending};
 pub use fig4::{fig4, fig4_paper, fig4_pending};
 pub use fig5_11_12::{fig11_paper, fig11_pending, fig5_11_12, fig5_paper, fig5_pending};
 pub use fig7_9_10::{
-    fig10_paper, fig10_pending, fig7_9_10, fig7_paper, fig7_pending, fig9_paper, fig9_pending,
+    fig10_checks, fig10_figure, fig10_paper, fig10_pending, fig7_9_10, fig7_paper, fig7_pending,
+    fig9_checks, fig9_figure, fig9_paper, fig9_pending, FIG10_CHECKS, FIG10_MAIN_CHECKS,
+    FIG9_CHECKS, FIG9_MAIN_CHECKS,
 };
 
 use std::path::{Path, PathBuf};

@@ -1,0 +1,476 @@
+//! `hvi-study fidelity`: the readings study. The calibration grid (Figs. 7, 9, 10) under each
+//! reading of the paper that could explain a gap between our maps and the paper's, at two
+//! seeds or more; each reading's R and va/v0 maps judged by the same checks as the
+//! reproduction's Figs. 9 and 10 ([`crate::reproduce::stages::fig9_checks`],
+//! [`fig10_checks`](crate::reproduce::stages::fig10_checks)), side by side in
+//! `reports/fidelity/` (`report.md`, `fidelity.json`, `readings.csv`, two maps per reading).
+//!
+//! Every run goes through the study store (`<runs>/<tier>/<reading>/`): a killed study resumes,
+//! a repeated one runs nothing. The seeds are one more axis of the grid (`run.seed`).
+
+pub mod config;
+mod report;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use hvi_analysis::contour::Field;
+use hvi_analysis::observable::Observable;
+use hvi_run::exec::ExecOptions;
+use hvi_run::plan::{build_plan, Plan, PlanRequest};
+use hvi_run::spec::{Axis, Study};
+use hvi_run::store::{Record, RunStatus, Store};
+use hvi_run::study::execute_plan;
+
+use crate::cli::FidelityArgs;
+use crate::reproduce::report::{Check, Figure, Verdict};
+use crate::reproduce::stages::{fig10_checks, fig10_figure, fig9_checks, fig9_figure};
+use crate::study::reanalyse::reanalyse_run;
+use config::{check_seeds, FidelityConfig, Reading, Source};
+pub use report::write_report;
+
+/// The key of the seed axis the study adds to the grid.
+pub const SEED_KEY: &str = "run.seed";
+
+/// One reading's run grid after execution.
+struct Executed {
+    plan: Plan,
+    dir: PathBuf,
+    records: Vec<Record>,
+    cached: usize,
+}
+
+/// One reading, measured and judged.
+#[derive(Debug, Clone)]
+pub struct Judged {
+    /// The reading.
+    pub reading: Reading,
+    /// Where its runs are (its own or those it measures again).
+    pub runs_dir: PathBuf,
+    /// The runs it read (grid points x seeds) and how many of them were measured again from
+    /// their state.
+    pub runs: usize,
+    /// How many of its runs came from the store (0 for a measured reading).
+    pub cached: usize,
+    /// R over (eps, kappa), one per seed, then the seed mean (the judged field).
+    pub length_ratio: SeedFields,
+    /// va/v0 over (eps, kappa), the same.
+    pub front_velocity: SeedFields,
+    /// Fig. 9 judged on the seed mean.
+    pub fig9: Figure,
+    /// Fig. 10 judged on the seed mean.
+    pub fig10: Figure,
+    /// Fig. 9's checks on the seed mean, (main, secondary).
+    pub fig9_checks: (Vec<Check>, Vec<Check>),
+    /// Fig. 10's checks on the seed mean.
+    pub fig10_checks: (Vec<Check>, Vec<Check>),
+    /// Fig. 9's and Fig. 10's verdicts at each seed alone.
+    pub per_seed: Vec<(u64, Verdict, Verdict)>,
+}
+
+impl Judged {
+    /// Every check, Fig. 9's then Fig. 10's, main before secondary.
+    pub fn checks(&self) -> Vec<&Check> {
+        let (a, b) = &self.fig9_checks;
+        let (c, d) = &self.fig10_checks;
+        a.iter().chain(b).chain(c).chain(d).collect()
+    }
+
+    /// (main-claim checks held, all checks held): how close the reading comes to the paper.
+    pub fn score(&self) -> (usize, usize) {
+        let held = |v: &[Check]| v.iter().filter(|c| c.held).count();
+        let main = held(&self.fig9_checks.0) + held(&self.fig10_checks.0);
+        (main, self.checks().iter().filter(|c| c.held).count())
+    }
+}
+
+/// An observable's field per seed and the mean over seeds.
+#[derive(Debug, Clone)]
+pub struct SeedFields {
+    /// (seed, field).
+    pub seeds: Vec<(u64, Field)>,
+    /// The mean over seeds, cell by cell (NaN where a seed has no value).
+    pub mean: Field,
+}
+
+impl SeedFields {
+    /// The mean over grid cells of the spread across seeds (max - min), None with one seed.
+    pub fn seed_spread(&self) -> Option<f64> {
+        if self.seeds.len() < 2 {
+            return None;
+        }
+        let mut spreads = Vec::new();
+        for (r, row) in self.mean.z.iter().enumerate() {
+            for c in 0..row.len() {
+                let v: Vec<f64> = self.seeds.iter().map(|(_, f)| f.z[r][c]).collect();
+                if v.iter().all(|x| x.is_finite()) {
+                    let (lo, hi) = v
+                        .iter()
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                            (a.min(x), b.max(x))
+                        });
+                    spreads.push(hi - lo);
+                }
+            }
+        }
+        (!spreads.is_empty()).then(|| spreads.iter().sum::<f64>() / spreads.len() as f64)
+    }
+}
+
+/// The whole study, judged.
+#[derive(Debug, Clone)]
+pub struct FidelityResult {
+    /// The config.
+    pub config: FidelityConfig,
+    /// The tier run.
+    pub tier: String,
+    /// Its particle count (as the first run reports it).
+    pub particles: Option<f64>,
+    /// The seeds.
+    pub seeds: Vec<u64>,
+    /// Each reading, in the config's order.
+    pub readings: Vec<Judged>,
+    /// Wall time of the command, s.
+    pub wall_seconds: f64,
+    /// Runs simulated by this command.
+    pub ran: usize,
+}
+
+impl FidelityResult {
+    /// The reading closest to the paper: most main-claim checks, then most checks, then the
+    /// earlier in the config (the default first when it ties).
+    pub fn closest(&self) -> Option<&Judged> {
+        let mut best: Option<&Judged> = None;
+        for j in &self.readings {
+            if best.is_none() || best.is_some_and(|b| j.score() > b.score()) {
+                best = Some(j);
+            }
+        }
+        best
+    }
+}
+
+/// The study with the seed axis appended; it must have eps and kappa axes and no other axis
+/// with more than one value.
+fn seeded_study(path: &Path, seeds: &[u64]) -> Result<Study> {
+    let mut study = Study::load(path)?;
+    for key in ["material.eps_j", "material.kappa_n_m"] {
+        if !study
+            .axes
+            .iter()
+            .any(|a| a.key == key && a.values.len() > 1)
+        {
+            bail!(
+                "study {}: the readings study needs an axis `{key}` with two or more values \
+                 (the calibration grid, studies/calibration.toml)",
+                path.display()
+            );
+        }
+    }
+    if let Some(a) = study.axes.iter().find(|a| {
+        !matches!(a.key.as_str(), "material.eps_j" | "material.kappa_n_m") && a.values.len() > 1
+    }) {
+        bail!(
+            "study {}: axis `{}` has {} values (allowed: one; the maps are over eps and kappa)",
+            path.display(),
+            a.key,
+            a.values.len()
+        );
+    }
+    if study.axes.iter().any(|a| a.key == SEED_KEY) {
+        bail!(
+            "study {}: `{SEED_KEY}` is an axis already (the readings study adds it)",
+            path.display()
+        );
+    }
+    study.axes.push(Axis {
+        key: SEED_KEY.into(),
+        values: seeds.iter().map(|&s| serde_json::Value::from(s)).collect(),
+        label: "seed".into(),
+    });
+    Ok(study)
+}
+
+/// Plans every reading with runs of its own (all scenes validated before anything runs).
+fn plans(study: &Study, tier: &str, readings: &[Reading]) -> Result<Vec<Option<Plan>>> {
+    readings
+        .iter()
+        .map(|r| match &r.source {
+            Source::Runs { set } => build_plan(
+                study,
+                &PlanRequest {
+                    tier: Some(tier.to_string()),
+                    particles: None,
+                    set: set.clone(),
+                },
+            )
+            .map(Some)
+            .with_context(|| format!("reading `{}`", r.name)),
+            Source::Measured { .. } => Ok(None),
+        })
+        .collect()
+}
+
+/// Runs held completed by the store in `dir`, of a plan's.
+fn stored(plan: &Plan, dir: &Path) -> Result<usize> {
+    if !dir.join("runs").is_dir() {
+        return Ok(0);
+    }
+    let store = Store::open(dir)?;
+    let mut n = 0;
+    for r in &plan.runs {
+        if matches!(store.lookup(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
+        {
+            n += 1;
+        }
+    }
+    Ok(n)
+}
+
+/// `hvi-study fidelity`: plans, runs (or takes from the store), measures, judges and writes
+/// the report. With `--dry-run` it plans and prints what it would run.
+pub fn fidelity(args: &FidelityArgs) -> Result<Option<FidelityResult>> {
+    let t0 = Instant::now();
+    let config = FidelityConfig::load(&args.config)?;
+    let tier = args.tier.clone().unwrap_or_else(|| config.tier.clone());
+    let seeds = if args.seeds.is_empty() {
+        config.seeds.clone()
+    } else {
+        check_seeds(&args.seeds, "--seeds")?;
+        args.seeds.clone()
+    };
+    if args.threads == Some(0) || args.jobs == Some(0) {
+        bail!("invalid value for `--threads`/`--jobs`: 0 (allowed: an integer >= 1)");
+    }
+    let study = seeded_study(&config.study, &seeds)?;
+    if !args.dry_run {
+        report::check_out(&args.out)?;
+    }
+    let plans = plans(&study, &tier, &config.readings)?;
+    let root = args.runs.join(&tier);
+    let dir_of = |r: &Reading| root.join(&r.name);
+    let mut todo = 0;
+    let mut total = 0;
+    for (r, p) in config.readings.iter().zip(&plans) {
+        if let Some(p) = p {
+            total += p.runs.len();
+            todo += p.runs.len() - stored(p, &dir_of(r))?;
+        }
+    }
+    if !args.quiet || args.dry_run {
+        eprintln!(
+            "readings study `{}` at tier `{tier}`, seeds {seeds:?}: {} readings, {total} runs \
+             ({} in the store, {todo} to run) in {}",
+            config.path.display(),
+            config.readings.len(),
+            total - todo,
+            root.display()
+        );
+    }
+    if args.dry_run {
+        return Ok(None);
+    }
+    let exec = ExecOptions {
+        threads: args.threads.unwrap_or(0),
+        jobs: args.jobs,
+        progress: !args.quiet,
+    };
+    let mut executed: Vec<Option<Executed>> = Vec::new();
+    for (r, p) in config.readings.iter().zip(plans) {
+        let Some(plan) = p else {
+            executed.push(None);
+            continue;
+        };
+        let dir = dir_of(r);
+        if !args.quiet {
+            eprintln!(
+                "reading `{}`: {} runs in {}",
+                r.name,
+                plan.runs.len(),
+                dir.display()
+            );
+        }
+        plan.write(&dir)?;
+        let (_, rep) = execute_plan(&plan, &dir, &exec)?;
+        executed.push(Some(Executed {
+            plan,
+            dir,
+            records: rep.records,
+            cached: rep.cached,
+        }));
+    }
+    let ran = executed
+        .iter()
+        .flatten()
+        .map(|e| e.plan.runs.len() - e.cached)
+        .sum();
+    let mut judged = Vec::new();
+    for (k, r) in config.readings.iter().enumerate() {
+        judged
+            .push(judge(r, k, &executed, &seeds).with_context(|| format!("reading `{}`", r.name))?);
+    }
+    let particles = executed
+        .iter()
+        .flatten()
+        .flat_map(|e| &e.records)
+        .find_map(|rec| rec.observables.get(Observable::Particles));
+    let result = FidelityResult {
+        config,
+        tier,
+        particles,
+        seeds,
+        readings: judged,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+        ran,
+    };
+    write_report(&result, &args.out)?;
+    if !args.quiet {
+        eprintln!("wrote {}", args.out.join("report.md").display());
+    }
+    Ok(Some(result))
+}
+
+/// (R, va/v0) of every run of `e`'s plan for reading `r`: from the records, or measured again
+/// from each run's state when the reading changes an analysis setting.
+fn values(r: &Reading, e: &Executed) -> Result<Vec<(f64, f64)>> {
+    let pick = |o: &hvi_analysis::observable::Observables| {
+        let v = |x: Observable| o.get(x).unwrap_or(f64::NAN);
+        (v(r.length_ratio), v(r.front_velocity))
+    };
+    let changes = match &r.source {
+        Source::Measured {
+            changes, analysis, ..
+        } if !analysis.is_empty() => Some(changes),
+        _ => None,
+    };
+    let mut out = Vec::with_capacity(e.plan.runs.len());
+    for (run, rec) in e.plan.runs.iter().zip(&e.records) {
+        if rec.status != RunStatus::Completed {
+            out.push((f64::NAN, f64::NAN));
+            continue;
+        }
+        match changes {
+            None => out.push(pick(&rec.observables)),
+            Some(c) => {
+                let dir = e.dir.join(&run.dir);
+                let again = reanalyse_run(&dir, c)?.with_context(|| {
+                    format!(
+                        "run {} kept no state.bin to measure again: remove it and run the \
+                         readings study again",
+                        dir.display()
+                    )
+                })?;
+                out.push(pick(&again.summary.observables()));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The fields of one value over (eps, kappa), one per seed, and their mean.
+fn seed_fields(plan: &Plan, values: &[f64], seeds: &[u64]) -> Result<SeedFields> {
+    let axis = |key: &str| {
+        plan.axes
+            .iter()
+            .position(|a| a.key == key)
+            .with_context(|| format!("the plan has no axis `{key}`"))
+    };
+    let (ax, ay, az) = (
+        axis("material.eps_j")?,
+        axis("material.kappa_n_m")?,
+        axis(SEED_KEY)?,
+    );
+    let sorted = |k: usize| -> Result<Vec<(f64, usize)>> {
+        let mut v: Vec<(f64, usize)> = plan.axes[k]
+            .values
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                v.as_f64()
+                    .map(|x| (x, i))
+                    .context("a non-numeric axis value")
+            })
+            .collect::<Result<_>>()?;
+        v.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Ok(v)
+    };
+    let (xs, ys) = (sorted(ax)?, sorted(ay)?);
+    let field = |z: Vec<Vec<f64>>| {
+        Field::new(
+            xs.iter().map(|p| p.0).collect(),
+            ys.iter().map(|p| p.0).collect(),
+            z,
+        )
+        .context("the eps and kappa values must be distinct")
+    };
+    let mut per_seed = Vec::new();
+    for (s, &seed) in seeds.iter().enumerate() {
+        let mut z = vec![vec![f64::NAN; xs.len()]; ys.len()];
+        for (run, &v) in plan.runs.iter().zip(values) {
+            if run.coords[az] != s {
+                continue;
+            }
+            let c = xs.iter().position(|&(_, i)| i == run.coords[ax]);
+            let r = ys.iter().position(|&(_, i)| i == run.coords[ay]);
+            if let (Some(c), Some(r)) = (c, r) {
+                z[r][c] = v;
+            }
+        }
+        per_seed.push((seed, field(z)?));
+    }
+    let mut mean = vec![vec![f64::NAN; xs.len()]; ys.len()];
+    for (r, row) in mean.iter_mut().enumerate() {
+        for (c, cell) in row.iter_mut().enumerate() {
+            let v: Vec<f64> = per_seed.iter().map(|(_, f)| f.z[r][c]).collect();
+            if v.iter().all(|x| x.is_finite()) {
+                *cell = v.iter().sum::<f64>() / v.len() as f64;
+            }
+        }
+    }
+    Ok(SeedFields {
+        seeds: per_seed,
+        mean: field(mean)?,
+    })
+}
+
+/// Measures and judges reading `k`.
+fn judge(r: &Reading, k: usize, executed: &[Option<Executed>], seeds: &[u64]) -> Result<Judged> {
+    let base = match &r.source {
+        Source::Runs { .. } => k,
+        Source::Measured { from, .. } => *from,
+    };
+    let e = executed[base]
+        .as_ref()
+        .context("the reading it measures again has no runs")?;
+    let v = values(r, e)?;
+    let (rr, va): (Vec<f64>, Vec<f64>) = v.into_iter().unzip();
+    let length_ratio = seed_fields(&e.plan, &rr, seeds)?;
+    let front_velocity = seed_fields(&e.plan, &va, seeds)?;
+    let files = |o: &str| vec![format!("{}_{o}.png", r.name)];
+    let fig9 = fig9_figure(&length_ratio.mean, files("R"));
+    let fig10 = fig10_figure(&front_velocity.mean, files("va"));
+    let per_seed = length_ratio
+        .seeds
+        .iter()
+        .zip(&front_velocity.seeds)
+        .map(|((s, rf), (_, vf))| {
+            let (a, b) = fig9_checks(rf);
+            let (c, d) = fig10_checks(vf);
+            (*s, Verdict::of_claims(&a, &b), Verdict::of_claims(&c, &d))
+        })
+        .collect();
+    Ok(Judged {
+        reading: r.clone(),
+        runs_dir: e.dir.clone(),
+        runs: e.plan.runs.len(),
+        cached: if base == k { e.cached } else { 0 },
+        fig9_checks: fig9_checks(&length_ratio.mean),
+        fig10_checks: fig10_checks(&front_velocity.mean),
+        length_ratio,
+        front_velocity,
+        fig9,
+        fig10,
+        per_seed,
+    })
+}
