@@ -317,3 +317,47 @@ fn accuracy_compares_seed_means_and_resumes_from_the_store() {
     assert_eq!(stderr.matches("(stored)").count(), 4, "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn run_into_an_earlier_run_clears_its_files_and_refuses_other_directories() {
+    let out = scratch("again");
+    let o = run(&out, &["--render", "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("cloud_side.png").exists());
+    // Again without --render: the old pictures go, so none sits beside the new tables.
+    let o = run(&out, &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("held an earlier run: removed its"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("cloud_side.png"), "{stderr}");
+    assert!(!out.join("cloud_side.png").exists());
+    assert!(out.join("summary.json").exists());
+
+    // A foreign file, a study directory, a store's run: refused, nothing removed.
+    std::fs::write(out.join("notes.txt"), "mine").expect("file");
+    let o = run(&out, &[]);
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("a file that a run does not write (notes.txt)"),
+        "{stderr}"
+    );
+    assert!(out.join("summary.json").exists(), "nothing removed");
+    for marker in ["plan.json", "record.json"] {
+        let dir = scratch(&format!("marker-{marker}"));
+        std::fs::create_dir_all(&dir).expect("dir");
+        std::fs::write(dir.join(marker), "{}").expect("marker");
+        let o = run(&dir, &[]);
+        assert!(!o.status.success());
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            stderr.contains(marker) && stderr.contains("refusing"),
+            "{stderr}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -171,11 +171,21 @@ fn running_again_does_no_new_simulation() {
         .expect("csv")
         .starts_with("index,material.eps_j,material.kappa_n_m,status,fingerprint"));
 
+    let tables = |out: &Path| {
+        ["results.csv", "results.json"].map(|f| std::fs::read(out.join(f)).expect("table"))
+    };
+    let fresh = tables(&out);
+
     let second = sweep(&study, &out, &[]);
     assert_ok(&second);
     assert_eq!(counts(&second), (4, 4, 0, 0), "{}", stderr(&second));
     assert_eq!(records(&out), before, "a cached run was rewritten");
     assert_eq!(results(&out), rows);
+    // Byte for byte: numbers read back from the records are the numbers written.
+    assert!(
+        tables(&out) == fresh,
+        "tables from stored runs differ from fresh ones"
+    );
 }
 
 #[test]

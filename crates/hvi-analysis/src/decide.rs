@@ -356,11 +356,72 @@ pub fn largest_deviation_from_finest(curves: &[Vec<EnergySample>]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// How long every curve stays within `bound` of the last one (the finest): the time since first
+/// contact, s, of the last of [`DEVIATION_POINTS`] - 1 interior times of the common span before
+/// the first time any curve's kinetic or potential energy differs from the finest's by more
+/// than `bound` times its initial kinetic energy; the span's end when none does, its start when
+/// the first time already does. NaN with fewer than two curves or samples.
+pub fn coincide_until(curves: &[Vec<EnergySample>], bound: f64) -> f64 {
+    let Some((finest, others)) = curves.split_last() else {
+        return f64::NAN;
+    };
+    if others.is_empty() || curves.iter().any(|c| c.len() < 2) {
+        return f64::NAN;
+    }
+    let ke0 = finest[0].kinetic_j;
+    let t0 = curves
+        .iter()
+        .map(|c| c[0].tau_s)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let t1 = curves
+        .iter()
+        .map(|c| c[c.len() - 1].tau_s)
+        .fold(f64::INFINITY, f64::min);
+    let mut until = t0;
+    for k in 1..DEVIATION_POINTS {
+        let t = t0 + (t1 - t0) * k as f64 / DEVIATION_POINTS as f64;
+        let f = interpolate(finest, t);
+        let apart = others.iter().any(|c| {
+            let a = interpolate(c, t);
+            (a.0 - f.0).abs().max((a.1 - f.1).abs()) > bound * ke0
+        });
+        if apart {
+            return until;
+        }
+        until = t;
+    }
+    t1
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     const NAN: f64 = f64::NAN;
+
+    #[test]
+    fn curves_coincide_until_the_first_time_one_parts() {
+        let curve = |kin: &dyn Fn(f64) -> f64| -> Vec<EnergySample> {
+            (0..=100)
+                .map(|i| {
+                    let t = i as f64 * 1e-8;
+                    EnergySample {
+                        tau_s: t,
+                        kinetic_j: kin(t),
+                        potential_j: 1.0 - kin(t),
+                    }
+                })
+                .collect()
+        };
+        let finest = curve(&|_| 1.0);
+        // Parts by 0.2 (over the initial 1 J) from 0.5 us on.
+        let parting = curve(&|t| if t < 0.5e-6 { 1.0 } else { 0.8 });
+        let until = coincide_until(&[parting, finest.clone()], 0.1);
+        assert!((0.49e-6..0.5e-6).contains(&until), "{until}");
+        let same = coincide_until(&[finest.clone(), finest.clone()], 0.1);
+        assert_eq!(same, 1e-6, "the whole span");
+        assert!(coincide_until(&[finest], 0.1).is_nan(), "one curve");
+    }
 
     #[test]
     fn monotonicity_with_tolerance_and_gaps() {

@@ -172,3 +172,103 @@ pub fn write_lammps_data(path: &Path, sim: &Simulation) -> Result<()> {
         Ok(())
     })
 }
+
+/// The files `hvi-study run` writes into its output directory (besides `dump_*.xyz` and
+/// temporary `.NAME.tmp.PID` files).
+pub const RUN_FILES: [&str; 11] = [
+    "summary.json",
+    "energy.csv",
+    "cloud_track.csv",
+    "fragments.csv",
+    "craters.csv",
+    "state.bin",
+    "cloud_side.png",
+    "cloud_series.png",
+    "fragments.png",
+    "shadowgraph.png",
+    "cloud_track.png",
+];
+
+/// Whether `name` is a file a run writes (see [`RUN_FILES`]).
+fn is_run_file(name: &str) -> bool {
+    RUN_FILES.contains(&name)
+        || (name.starts_with("dump_") && name.ends_with(".xyz"))
+        || (name.starts_with('.') && name.contains(".tmp."))
+}
+
+/// Makes `dir` ready for a new run: a missing or empty directory is fine; one that holds an
+/// earlier run has that run's files removed (returned, so the caller can say so), so that no
+/// old picture sits beside new tables. Refuses a study directory (`plan.json` or `runs/`), a
+/// run of a study store (`record.json`) and a directory with files a run does not write
+/// (other than the names in `keep`), naming them; nothing is removed then.
+pub fn clear_run_dir(dir: &Path, keep: &[&std::ffi::OsStr]) -> Result<Vec<String>> {
+    if !dir.exists() {
+        return Ok(Vec::new());
+    }
+    if !dir.is_dir() {
+        anyhow::bail!(
+            "invalid value for `--out`: {} is a file (allowed: a directory)",
+            dir.display()
+        );
+    }
+    for (marker, what) in [
+        ("plan.json", "a study directory (it has plan.json)"),
+        ("runs", "a study directory (it has runs/)"),
+        ("record.json", "a run of a study store (it has record.json)"),
+    ] {
+        if dir.join(marker).exists() {
+            anyhow::bail!(
+                "refusing to run into --out {}: it is {what}, and a single run's files would \
+                 mix with it; choose a new or empty directory",
+                dir.display()
+            );
+        }
+    }
+    let mut ours = Vec::new();
+    let mut foreign = Vec::new();
+    let entries =
+        std::fs::read_dir(dir).with_context(|| format!("cannot read --out {}", dir.display()))?;
+    for e in entries {
+        let e = e.with_context(|| format!("cannot read --out {}", dir.display()))?;
+        let name = e.file_name();
+        if keep.contains(&name.as_os_str()) {
+            continue;
+        }
+        let text = name.to_string_lossy().into_owned();
+        if is_run_file(&text) && e.file_type().is_ok_and(|t| t.is_file()) {
+            ours.push(text);
+        } else {
+            foreign.push(text);
+        }
+    }
+    if !foreign.is_empty() {
+        foreign.sort();
+        anyhow::bail!(
+            "refusing to run into --out {}: it holds {} that a run does not write ({}{}); choose \
+             a new or empty directory, or remove them",
+            dir.display(),
+            if foreign.len() == 1 {
+                "a file"
+            } else {
+                "files"
+            },
+            foreign
+                .iter()
+                .take(3)
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(", "),
+            if foreign.len() > 3 { ", ..." } else { "" }
+        );
+    }
+    ours.sort();
+    for name in &ours {
+        std::fs::remove_file(dir.join(name)).with_context(|| {
+            format!(
+                "cannot remove the earlier run's {}",
+                dir.join(name).display()
+            )
+        })?;
+    }
+    Ok(ours)
+}

@@ -57,6 +57,22 @@ fn run(args: RunArgs) -> Result<()> {
     }
     let spec = load_scene(&args.scene, &args.sets)?;
     let pool = thread_pool(args.threads)?;
+    // The LAMMPS data file may be written into --out by an earlier run: it is the user's.
+    let keep: Vec<&std::ffi::OsStr> = args
+        .lammps_data
+        .iter()
+        .filter(|p| p.parent() == Some(args.out.as_path()))
+        .filter_map(|p| p.file_name())
+        .collect();
+    let removed = hvi_run::output::clear_run_dir(&args.out, &keep)?;
+    if !removed.is_empty() && !args.quiet {
+        eprintln!(
+            "{} held an earlier run: removed its {} files ({})",
+            args.out.display(),
+            removed.len(),
+            removed.join(", ")
+        );
+    }
     let opts = RunOptions {
         out_dir: args.out.clone(),
         dump_every: args.dump_every,
