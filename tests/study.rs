@@ -528,3 +528,62 @@ fn validity_map_draws_f_with_the_cutoff_contour_and_exports_the_boundary() {
         .expect("runs");
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
+
+#[test]
+fn a_damaged_or_edited_record_is_moved_aside_and_run_again() {
+    let dir = scratch("damaged");
+    let study = write_study(&dir, "damaged", GRID_2X2, TINY);
+    let out = dir.join("out");
+    assert_ok(&sweep(&study, &out, &[]));
+    let fresh = results(&out);
+    let recs = records(&out);
+    assert_eq!(recs.len(), 4);
+    // One record truncated, one with a number edited (still valid JSON), one removed.
+    let rec = |i: usize| out.join("runs").join(&recs[i].0).join("record.json");
+    let text = std::fs::read_to_string(rec(0)).expect("record");
+    std::fs::write(rec(0), &text[..text.len() / 2]).expect("truncate");
+    let edited = std::fs::read_to_string(rec(1)).expect("record").replacen(
+        "\"wall_seconds\": ",
+        "\"wall_seconds\": 1",
+        1,
+    );
+    std::fs::write(rec(1), edited).expect("edit");
+    std::fs::remove_file(rec(2)).expect("remove");
+
+    // A read-only look names the damage and changes nothing.
+    let o = bin().args(["reanalyse"]).arg(&out).output().expect("runs");
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("damaged run"), "{}", stderr(&o));
+
+    let again = sweep(&study, &out, &[]);
+    assert_ok(&again);
+    assert_eq!(counts(&again), (4, 1, 3, 0), "{}", stderr(&again));
+    let err = stderr(&again);
+    for why in ["not a run record", "checksum mismatch", "no record.json"] {
+        assert!(err.contains(why), "{why}: {err}");
+    }
+    let aside: Vec<String> = std::fs::read_dir(out.join("runs"))
+        .expect("runs")
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("damaged-"))
+        .collect();
+    assert_eq!(aside.len(), 3, "kept for inspection: {aside:?}");
+    // The study is whole again, with the same numbers (the engine is deterministic).
+    let strip = |rows: Vec<serde_json::Value>| -> Vec<serde_json::Value> {
+        rows.into_iter()
+            .map(|mut r| {
+                r.as_object_mut().map(|o| o.remove("wall_seconds"));
+                r
+            })
+            .collect()
+    };
+    assert_eq!(strip(results(&out)), strip(fresh));
+    let live = records(&out)
+        .into_iter()
+        .filter(|(n, ..)| !n.starts_with("damaged-"))
+        .count();
+    assert_eq!(live, 4);
+    let third = sweep(&study, &out, &[]);
+    assert_eq!(counts(&third), (4, 4, 0, 0), "{}", stderr(&third));
+}

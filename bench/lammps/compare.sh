@@ -100,7 +100,9 @@ json() { # json FILE EXPR  -> prints python expression on the parsed file (d = t
   python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))' "$1" "$2"
 }
 
-SETS=(--set "resolution.particles=$N" "${EXTRA_SETS[@]}")
+# The same step as LAMMPS's fixed one: hvi's adaptive stride off (run.max_stride=1); a --set
+# given on the command line comes later and wins.
+SETS=(--set "resolution.particles=$N" --set "run.max_stride=1" "${EXTRA_SETS[@]}")
 
 # ---- (a0) probe: initial state and the time step --------------------------------------------
 # One step with --lammps-data: writes the data file and tells us dt (it depends on the

@@ -30,8 +30,10 @@ use hvi_analysis::observable::Observables;
 use hvi_engine::scene::SceneSpec;
 use serde::{Deserialize, Serialize};
 
+use sha2::{Digest, Sha256};
+
 use crate::output::write_atomic_bytes;
-use crate::plan::{DIR_DIGITS, ENGINE_VERSION, STUDY_FORMAT_VERSION};
+use crate::plan::{canonical_json, DIR_DIGITS, ENGINE_VERSION, STUDY_FORMAT_VERSION};
 use crate::run::{run_scene, RunOptions, Summary};
 
 /// How a run ended.
@@ -76,6 +78,27 @@ pub struct Record {
     pub threads: usize,
     /// hvi-study version that ran it.
     pub engine_version: String,
+    /// SHA-256 (hex) of the record's canonical JSON without this field ([`Record::digest`]):
+    /// a record changed on disk is caught, not used. Absent in records of earlier versions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub checksum: Option<String>,
+}
+
+impl Record {
+    /// The SHA-256 (hex) of the record's canonical JSON with `checksum` left out.
+    pub fn digest(&self) -> Result<String> {
+        let mut bare = self.clone();
+        bare.checksum = None;
+        let value = serde_json::to_value(&bare).context("record as JSON")?;
+        let digest = Sha256::digest(canonical_json(&value).as_bytes());
+        Ok(digest.iter().map(|b| format!("{b:02x}")).collect())
+    }
+
+    /// The record with its checksum set.
+    pub fn sealed(mut self) -> Result<Record> {
+        self.checksum = Some(self.digest()?);
+        Ok(self)
+    }
 }
 
 /// A run to execute: its scene and its identity.
@@ -97,6 +120,8 @@ pub struct Job {
 #[derive(Debug, Clone)]
 pub struct Store {
     runs: PathBuf,
+    /// Whether a damaged run is moved aside (and so runs again) rather than an error.
+    repair: bool,
 }
 
 static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
@@ -193,7 +218,7 @@ impl Store {
         let runs = study_dir.join("runs");
         fs::create_dir_all(&runs)
             .with_context(|| format!("cannot create run store {}", runs.display()))?;
-        let store = Store { runs };
+        let store = Store { runs, repair: true };
         store.sweep_stale()?;
         Ok(store)
     }
@@ -208,7 +233,10 @@ impl Store {
                 study_dir.display()
             );
         }
-        Ok(Store { runs })
+        Ok(Store {
+            runs,
+            repair: false,
+        })
     }
 
     /// The directories of finished runs (named by [`DIR_DIGITS`] hex digits and holding a
@@ -260,28 +288,29 @@ impl Store {
             .join(&fingerprint[..DIR_DIGITS.min(fingerprint.len())])
     }
 
-    /// The record of a finished run, if there is one. An unreadable record or one with another
-    /// fingerprint is an error: results of different inputs are never mixed.
+    /// The record of a finished run, if there is one. A damaged run (a directory without
+    /// `record.json`, a record that does not parse, or one whose checksum does not match its
+    /// content) is moved aside to `runs/damaged-<digits>-<time>-<pid>` (kept for inspection,
+    /// reported on stderr) and counts as not run, so it runs again; a store opened read-only
+    /// ([`Store::existing`]) reports it as an error instead. A record with another fingerprint
+    /// or format is an error: results of different inputs are never mixed.
     pub fn lookup(&self, fingerprint: &str) -> Result<Option<Record>> {
         let dir = self.dir(fingerprint);
         let path = dir.join("record.json");
         if !path.exists() {
             if dir.exists() {
-                bail!(
-                    "{} exists without record.json: not written by this store; move it away",
-                    dir.display()
-                );
+                return self.damaged(&dir, "it has no record.json");
             }
             return Ok(None);
         }
         let text =
             fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
-        let rec: Record = serde_json::from_str(&text).with_context(|| {
-            format!(
-                "{} is not a run record; move the directory away",
-                path.display()
-            )
-        })?;
+        let rec: Record = match serde_json::from_str(&text) {
+            Ok(r) => r,
+            Err(e) => {
+                return self.damaged(&dir, &format!("its record.json is not a run record ({e})"))
+            }
+        };
         if rec.fingerprint != fingerprint {
             bail!(
                 "refusing to mix results: {} holds fingerprint {} but this run's is {fingerprint}; \
@@ -297,7 +326,51 @@ impl Store {
                 rec.format
             );
         }
+        if let Some(sum) = &rec.checksum {
+            if *sum != rec.digest()? {
+                return self.damaged(
+                    &dir,
+                    "its record.json was changed after it was written (checksum mismatch)",
+                );
+            }
+        }
         Ok(Some(rec))
+    }
+
+    /// A damaged run directory: moved aside (repairing store) or an error (read-only store).
+    fn damaged(&self, dir: &Path, why: &str) -> Result<Option<Record>> {
+        if !self.repair {
+            bail!(
+                "damaged run {}: {why}; the next sweep of the study moves it aside and runs it \
+                 again",
+                dir.display()
+            );
+        }
+        let digits = dir
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let stamp = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        let aside = self.runs.join(format!(
+            "damaged-{digits}-{stamp}-{}-{}",
+            std::process::id(),
+            TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        fs::rename(dir, &aside).with_context(|| {
+            format!(
+                "damaged run {} ({why}): cannot move it aside",
+                dir.display()
+            )
+        })?;
+        sync_dir(&self.runs);
+        eprintln!(
+            "run store: {} is damaged ({why}); moved it to {} and it runs again",
+            dir.display(),
+            aside.display()
+        );
+        Ok(None)
     }
 
     /// Runs a job on `threads` worker threads and stores its directory atomically. A failed
@@ -367,7 +440,9 @@ impl Store {
             wall_seconds: t0.elapsed().as_secs_f64(),
             threads: threads.max(1),
             engine_version: ENGINE_VERSION.to_string(),
-        };
+            checksum: None,
+        }
+        .sealed()?;
         write_atomic_bytes(
             &tmp.join("record.json"),
             serde_json::to_string_pretty(&record)?.as_bytes(),
