@@ -45,6 +45,7 @@ struct ReadingFile {
     front_velocity: Option<String>,
     #[serde(default)]
     default: bool,
+    seeds: Option<Vec<u64>>,
 }
 
 /// Where a reading's numbers come from.
@@ -81,6 +82,8 @@ pub struct Reading {
     pub front_velocity: Observable,
     /// Whether it is the project's default reading (no overrides, default observables).
     pub default: bool,
+    /// Its own seeds instead of `fidelity.seeds` (a reading with runs of its own only).
+    pub seeds: Option<Vec<u64>>,
 }
 
 impl Reading {
@@ -255,6 +258,12 @@ fn reading(i: usize, r: ReadingFile, before: &[Reading]) -> Result<Reading> {
             }
         }
     };
+    if let Some(seeds) = &r.seeds {
+        if r.from.is_some() {
+            bail!("{at}.seeds: a reading measured from another's runs has that reading's seeds");
+        }
+        check_seeds(seeds, &format!("{at}.seeds"))?;
+    }
     let length_ratio = observable(
         &format!("{at}.length_ratio"),
         r.length_ratio.as_deref(),
@@ -272,6 +281,7 @@ fn reading(i: usize, r: ReadingFile, before: &[Reading]) -> Result<Reading> {
         length_ratio,
         front_velocity,
         default: r.default,
+        seeds: r.seeds,
     };
     let plain = reading.source == Source::Runs { set: Vec::new() }
         && reading.length_ratio == Observable::LengthRatio
@@ -362,6 +372,16 @@ mod tests {
             (
                 "[[readings]]\nname = \"a\"\nlabel = \"x\"\ndefault = true\nset = [\"run.seed=3\"]\n",
                 "readings[0] (`a`).default",
+            ),
+            (
+                &format!(
+                    "{BASE}[[readings]]\nname = \"q\"\nlabel = \"x\"\nfrom = \"printed\"\nseeds = [3]\n"
+                ),
+                "readings[1] (`q`).seeds: a reading measured",
+            ),
+            (
+                &format!("{BASE}[[readings]]\nname = \"q\"\nlabel = \"x\"\nseeds = []\n"),
+                "readings[1] (`q`).seeds: empty",
             ),
         ];
         for (readings, want) in cases {

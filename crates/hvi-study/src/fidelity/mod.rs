@@ -36,6 +36,7 @@ pub const SEED_KEY: &str = "run.seed";
 /// One reading's run grid after execution.
 struct Executed {
     plan: Plan,
+    seeds: Vec<u64>,
     dir: PathBuf,
     records: Vec<Record>,
     cached: usize,
@@ -46,6 +47,8 @@ struct Executed {
 pub struct Judged {
     /// The reading.
     pub reading: Reading,
+    /// The seeds its runs were run at.
+    pub seeds: Vec<u64>,
     /// Where its runs are (its own or those it measures again).
     pub runs_dir: PathBuf,
     /// The runs it read (grid points x seeds) and how many of them were measured again from
@@ -192,21 +195,34 @@ fn seeded_study(path: &Path, seeds: &[u64]) -> Result<Study> {
     Ok(study)
 }
 
-/// Plans every reading with runs of its own (all scenes validated before anything runs).
-fn plans(study: &Study, tier: &str, readings: &[Reading]) -> Result<Vec<Option<Plan>>> {
-    readings
+/// Plans every reading with runs of its own, each with its seeds (the command line's, else the
+/// reading's, else the config's); all scenes validated before anything runs.
+fn plans(
+    config: &FidelityConfig,
+    tier: &str,
+    seeds: Option<&[u64]>,
+) -> Result<Vec<Option<(Plan, Vec<u64>)>>> {
+    config
+        .readings
         .iter()
         .map(|r| match &r.source {
-            Source::Runs { set } => build_plan(
-                study,
-                &PlanRequest {
-                    tier: Some(tier.to_string()),
-                    particles: None,
-                    set: set.clone(),
-                },
-            )
-            .map(Some)
-            .with_context(|| format!("reading `{}`", r.name)),
+            Source::Runs { set } => {
+                let seeds = seeds
+                    .or(r.seeds.as_deref())
+                    .unwrap_or(&config.seeds)
+                    .to_vec();
+                let study = seeded_study(&config.study, &seeds)?;
+                let plan = build_plan(
+                    &study,
+                    &PlanRequest {
+                        tier: Some(tier.to_string()),
+                        particles: None,
+                        set: set.clone(),
+                    },
+                )
+                .with_context(|| format!("reading `{}`", r.name))?;
+                Ok(Some((plan, seeds)))
+            }
             Source::Measured { .. } => Ok(None),
         })
         .collect()
@@ -234,26 +250,27 @@ pub fn fidelity(args: &FidelityArgs) -> Result<Option<FidelityResult>> {
     let t0 = Instant::now();
     let config = FidelityConfig::load(&args.config)?;
     let tier = args.tier.clone().unwrap_or_else(|| config.tier.clone());
-    let seeds = if args.seeds.is_empty() {
-        config.seeds.clone()
+    let cli_seeds = if args.seeds.is_empty() {
+        None
     } else {
         check_seeds(&args.seeds, "--seeds")?;
-        args.seeds.clone()
+        Some(args.seeds.as_slice())
     };
+    let seeds = cli_seeds.map_or_else(|| config.seeds.clone(), <[u64]>::to_vec);
     if args.threads == Some(0) || args.jobs == Some(0) {
         bail!("invalid value for `--threads`/`--jobs`: 0 (allowed: an integer >= 1)");
     }
-    let study = seeded_study(&config.study, &seeds)?;
+    seeded_study(&config.study, &seeds)?;
     if !args.dry_run {
         report::check_out(&args.out)?;
     }
-    let plans = plans(&study, &tier, &config.readings)?;
+    let plans = plans(&config, &tier, cli_seeds)?;
     let root = args.runs.join(&tier);
     let dir_of = |r: &Reading| root.join(&r.name);
     let mut todo = 0;
     let mut total = 0;
     for (r, p) in config.readings.iter().zip(&plans) {
-        if let Some(p) = p {
+        if let Some((p, _)) = p {
             total += p.runs.len();
             todo += p.runs.len() - stored(p, &dir_of(r))?;
         }
@@ -278,7 +295,7 @@ pub fn fidelity(args: &FidelityArgs) -> Result<Option<FidelityResult>> {
     };
     let mut executed: Vec<Option<Executed>> = Vec::new();
     for (r, p) in config.readings.iter().zip(plans) {
-        let Some(plan) = p else {
+        let Some((plan, seeds)) = p else {
             executed.push(None);
             continue;
         };
@@ -295,6 +312,7 @@ pub fn fidelity(args: &FidelityArgs) -> Result<Option<FidelityResult>> {
         let (_, rep) = execute_plan(&plan, &dir, &exec)?;
         executed.push(Some(Executed {
             plan,
+            seeds,
             dir,
             records: rep.records,
             cached: rep.cached,
@@ -307,8 +325,7 @@ pub fn fidelity(args: &FidelityArgs) -> Result<Option<FidelityResult>> {
         .sum();
     let mut judged = Vec::new();
     for (k, r) in config.readings.iter().enumerate() {
-        judged
-            .push(judge(r, k, &executed, &seeds).with_context(|| format!("reading `{}`", r.name))?);
+        judged.push(judge(r, k, &executed).with_context(|| format!("reading `{}`", r.name))?);
     }
     let particles = executed
         .iter()
@@ -435,7 +452,7 @@ fn seed_fields(plan: &Plan, values: &[f64], seeds: &[u64]) -> Result<SeedFields>
 }
 
 /// Measures and judges reading `k`.
-fn judge(r: &Reading, k: usize, executed: &[Option<Executed>], seeds: &[u64]) -> Result<Judged> {
+fn judge(r: &Reading, k: usize, executed: &[Option<Executed>]) -> Result<Judged> {
     let base = match &r.source {
         Source::Runs { .. } => k,
         Source::Measured { from, .. } => *from,
@@ -445,8 +462,8 @@ fn judge(r: &Reading, k: usize, executed: &[Option<Executed>], seeds: &[u64]) ->
         .context("the reading it measures again has no runs")?;
     let v = values(r, e)?;
     let (rr, va): (Vec<f64>, Vec<f64>) = v.into_iter().unzip();
-    let length_ratio = seed_fields(&e.plan, &rr, seeds)?;
-    let front_velocity = seed_fields(&e.plan, &va, seeds)?;
+    let length_ratio = seed_fields(&e.plan, &rr, &e.seeds)?;
+    let front_velocity = seed_fields(&e.plan, &va, &e.seeds)?;
     let files = |o: &str| vec![format!("{}_{o}.png", r.name)];
     let fig9 = fig9_figure(&length_ratio.mean, files("R"));
     let fig10 = fig10_figure(&front_velocity.mean, files("va"));
@@ -462,6 +479,7 @@ fn judge(r: &Reading, k: usize, executed: &[Option<Executed>], seeds: &[u64]) ->
         .collect();
     Ok(Judged {
         reading: r.clone(),
+        seeds: e.seeds.clone(),
         runs_dir: e.dir.clone(),
         runs: e.plan.runs.len(),
         cached: if base == k { e.cached } else { 0 },
