@@ -195,13 +195,16 @@ fn seeded_study(path: &Path, seeds: &[u64]) -> Result<Study> {
     Ok(study)
 }
 
+/// A reading's plan and the seeds it runs at.
+type SeededPlan = (Plan, Vec<u64>);
+
 /// Plans every reading with runs of its own, each with its seeds (the command line's, else the
 /// reading's, else the config's); all scenes validated before anything runs.
 fn plans(
     config: &FidelityConfig,
     tier: &str,
     seeds: Option<&[u64]>,
-) -> Result<Vec<Option<(Plan, Vec<u64>)>>> {
+) -> Result<Vec<Option<SeededPlan>>> {
     config
         .readings
         .iter()
