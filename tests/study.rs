@@ -587,3 +587,71 @@ fn a_damaged_or_edited_record_is_moved_aside_and_run_again() {
     let third = sweep(&study, &out, &[]);
     assert_eq!(counts(&third), (4, 4, 0, 0), "{}", stderr(&third));
 }
+
+#[test]
+fn concurrent_processes_on_one_study_do_each_run_once() {
+    let dir = scratch("concurrent");
+    let study = write_study(&dir, "concurrent", GRID_2X2, TINY);
+    let out = dir.join("out");
+    // Two sweeps at once (the second given another seed would plan over the first's plan):
+    // the second waits for the first, then reuses its runs.
+    let spawn = || {
+        bin()
+            .arg("sweep")
+            .arg(&study)
+            .arg("--out")
+            .arg(&out)
+            .args(["--threads", "1"])
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("starts")
+    };
+    let (a, b) = (spawn(), spawn());
+    let (a, b) = (
+        a.wait_with_output().expect("a"),
+        b.wait_with_output().expect("b"),
+    );
+    assert_ok(&a);
+    assert_ok(&b);
+    let (ca, cb) = (counts(&a), counts(&b));
+    assert_eq!(ca.2 + cb.2, 4, "each run once: {ca:?} {cb:?}");
+    let waited = format!("{}{}", stderr(&a), stderr(&b));
+    assert!(
+        waited.contains("is working in this study directory; waiting"),
+        "{waited}"
+    );
+
+    // Two Slurm-like tasks of the same run at once: one computes it, the other waits for it
+    // and keeps its result.
+    let plan = out.join("plan.json");
+    std::fs::remove_dir_all(out.join("runs")).expect("fresh store");
+    let unit = || {
+        bin()
+            .args(["run-unit"])
+            .arg(&plan)
+            .args(["1", "--threads", "1"])
+            .stderr(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .expect("starts")
+    };
+    let (a, b) = (unit(), unit());
+    let (a, b) = (
+        a.wait_with_output().expect("a"),
+        b.wait_with_output().expect("b"),
+    );
+    assert_ok(&a);
+    assert_ok(&b);
+    let both = format!("{}{}", stderr(&a), stderr(&b));
+    assert!(
+        both.contains("done by another process meanwhile") || both.contains("already done"),
+        "{both}"
+    );
+    let runs: Vec<_> = std::fs::read_dir(out.join("runs"))
+        .expect("runs")
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| !n.starts_with('.'))
+        .collect();
+    assert_eq!(runs.len(), 1, "{runs:?}");
+}

@@ -56,6 +56,8 @@ pub struct ExecReport {
     pub ran: usize,
     /// Runs found finished in the store.
     pub cached: usize,
+    /// Runs another process finished while this one waited for them (not run here).
+    pub elsewhere: usize,
     /// Runs that failed (now or before, when not re-run).
     pub failed: usize,
     /// Wall time, s.
@@ -63,10 +65,16 @@ pub struct ExecReport {
 }
 
 impl ExecReport {
-    /// One line: `runs: 12 total, 4 cached, 8 ran, 1 failed, 93.2 s`.
+    /// One line: `runs: 12 total, 4 cached, 8 ran, 1 failed, 93.2 s` (with `, 3 done by
+    /// another process` before the time when another process finished some meanwhile).
     pub fn line(&self) -> String {
+        let elsewhere = if self.elsewhere > 0 {
+            format!(", {} done by another process", self.elsewhere)
+        } else {
+            String::new()
+        };
         format!(
-            "runs: {} total, {} cached, {} ran, {} failed, {:.1} s",
+            "runs: {} total, {} cached, {} ran, {} failed{elsewhere}, {:.1} s",
             self.records.len(),
             self.cached,
             self.ran,
@@ -157,6 +165,7 @@ pub fn execute(
     opts: &ExecOptions,
 ) -> Result<ExecReport> {
     let t0 = Instant::now();
+    let elsewhere_before = store.done_elsewhere();
     let (records, pending) = look_up(store, jobs)?;
     let cached = records.iter().filter(|r| r.is_some()).count();
     let phases = order_runs(jobs, &pending, opts);
@@ -194,7 +203,8 @@ pub fn execute(
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let ran = results.len();
+    let elsewhere = store.done_elsewhere() - elsewhere_before;
+    let ran = results.len() - elsewhere;
     let records = gather_records(store, jobs, records, results)?;
     let failed = records
         .iter()
@@ -204,6 +214,7 @@ pub fn execute(
         records,
         ran,
         cached,
+        elsewhere,
         failed,
         wall_seconds: t0.elapsed().as_secs_f64(),
     })

@@ -295,6 +295,8 @@ impl Plan {
     pub fn write(&self, dir: &Path) -> Result<PathBuf> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create study directory {}", dir.display()))?;
+        // One planning process per study directory: a second waits (crate::lock).
+        crate::lock::hold_study(dir)?;
         let path = dir.join("plan.json");
         if path.exists() {
             // Only the study and tier matter here: an older plan (another engine version, its

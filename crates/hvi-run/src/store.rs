@@ -120,6 +120,8 @@ pub struct Job {
 #[derive(Debug, Clone)]
 pub struct Store {
     runs: PathBuf,
+    /// Runs this store was asked to compute that another process finished meanwhile.
+    elsewhere: std::sync::Arc<AtomicU64>,
     /// Whether a damaged run is moved aside (and so runs again) rather than an error.
     repair: bool,
 }
@@ -218,7 +220,11 @@ impl Store {
         let runs = study_dir.join("runs");
         fs::create_dir_all(&runs)
             .with_context(|| format!("cannot create run store {}", runs.display()))?;
-        let store = Store { runs, repair: true };
+        let store = Store {
+            runs,
+            repair: true,
+            elsewhere: Default::default(),
+        };
         store.sweep_stale()?;
         Ok(store)
     }
@@ -236,6 +242,7 @@ impl Store {
         Ok(Store {
             runs,
             repair: false,
+            elsewhere: Default::default(),
         })
     }
 
@@ -280,6 +287,12 @@ impl Store {
         }
         v.sort_by(|a, b| a.path.cmp(&b.path));
         Ok(v)
+    }
+
+    /// How many runs [`Store::execute`] took from another process that finished them while
+    /// this one waited, so far.
+    pub fn done_elsewhere(&self) -> usize {
+        self.elsewhere.load(Ordering::Relaxed) as usize
     }
 
     /// The directory of a run.
@@ -376,7 +389,18 @@ impl Store {
     /// Runs a job on `threads` worker threads and stores its directory atomically. A failed
     /// simulation (instability, panic) is a record with status `failed`, not an error; errors
     /// are for the store itself (disk, permissions).
+    ///
+    /// The run is locked while it is computed ([`crate::lock::lock_run`]): when another process
+    /// computes it, this waits, and takes that process's completed record instead of running
+    /// it again ([`Store::done_elsewhere`] counts those).
     pub fn execute(&self, job: &Job, threads: usize) -> Result<Record> {
+        let _claim = crate::lock::lock_run(&self.dir(&job.fingerprint))?;
+        if let Some(rec) = self.lookup(&job.fingerprint)? {
+            if rec.status == RunStatus::Completed {
+                self.elsewhere.fetch_add(1, Ordering::Relaxed);
+                return Ok(rec);
+            }
+        }
         let digits = &job.fingerprint[..DIR_DIGITS.min(job.fingerprint.len())];
         let tmp = self.runs.join(format!(
             ".tmp-{digits}-{}-{}-{}",

@@ -86,7 +86,11 @@ pub fn run_unit(
         _ => {
             let threads = threads
                 .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-            store.execute(&job, threads)?
+            let r = store.execute(&job, threads)?;
+            if store.done_elsewhere() > 0 {
+                eprintln!("run {index}: done by another process meanwhile; its result is kept");
+            }
+            r
         }
     };
     let dir = store.dir(&job.fingerprint);
