@@ -12,7 +12,7 @@ use plotters::style::RGBColor;
 use serde::Serialize;
 
 use super::{FidelityResult, Judged, SeedFields};
-use crate::reproduce::report::{fmt_num, short, Figure};
+use crate::reproduce::report::{fmt_num, Figure};
 use crate::reproduce::stages::{FIG10_CHECKS, FIG10_MAIN_CHECKS, FIG9_CHECKS, FIG9_MAIN_CHECKS};
 use hvi_run::output::{write_atomic_bytes, write_csv_atomic};
 
@@ -236,7 +236,7 @@ fn draw_maps(res: &FidelityResult, j: &Judged, out: &Path) -> Result<()> {
         "reading `{}`; tier `{}`, {} particles, mean of seeds {seeds}",
         j.reading.name,
         res.tier,
-        res.particles.map_or("?".into(), short)
+        res.particles.map_or("?".into(), |n| format!("{n:.0}"))
     );
     let plot = |f: &SeedFields, title: String, value: &str, peak: bool| ContourPlot {
         title,
@@ -297,7 +297,7 @@ fn markdown(res: &FidelityResult) -> String {
         res.config.path.display(),
         res.config.study.display(),
         res.tier,
-        res.particles.map_or("?".into(), short),
+        res.particles.map_or("?".into(), |n| format!("{n:.0}")),
         res.seeds,
         res.ran,
         res.readings
