@@ -2,7 +2,7 @@
 //! reading of the paper that could explain a gap between our maps and the paper's, at two
 //! seeds or more; each reading's R and va/v0 maps judged by the same checks as the
 //! reproduction's Figs. 9 and 10 ([`crate::reproduce::stages::fig9_checks`],
-//! [`fig10_checks`](crate::reproduce::stages::fig10_checks)), side by side in
+//! [`crate::reproduce::stages::fig10_checks`]), side by side in
 //! `reports/fidelity/` (`report.md`, `fidelity.json`, `readings.csv`, two maps per reading).
 //!
 //! Every run goes through the study store (`<runs>/<tier>/<reading>/`): a killed study resumes,
