@@ -49,7 +49,7 @@ from = "printed"
 analysis = ["analysis.quantile=1"]
 
 [[readings]]
-name = "own-quantile"
+name = "quantile-0.995"
 label = "the runs' own quantile, measured again"
 from = "printed"
 analysis = ["analysis.quantile=0.995"]
@@ -138,7 +138,7 @@ fn the_readings_study_reports_every_reading_from_its_runs_and_reruns_nothing() {
     let out = dir.join("report");
     let report = json(&out.join("fidelity.json"));
     assert_eq!(report["ran"], 16, "2 readings x 4 points x 2 seeds");
-    for name in ["printed", "wca", "maximum", "own-quantile", "shadowgraph"] {
+    for name in ["printed", "wca", "maximum", "quantile-0.995", "shadowgraph"] {
         for map in ["R", "va"] {
             let png = out.join(format!("{name}_{map}.png"));
             assert!(
@@ -170,7 +170,7 @@ fn the_readings_study_reports_every_reading_from_its_runs_and_reruns_nothing() {
             assert_eq!(got("shadowgraph", "length_ratio_mean"), want);
             // Measured again from state.bin with the runs' own quantile: the runs' numbers
             // (f32 positions on disk: within 1e-5).
-            let again = got("own-quantile", "length_ratio_mean");
+            let again = got("quantile-0.995", "length_ratio_mean");
             let own = got("printed", "length_ratio_mean");
             assert!((again - own).abs() <= 1e-5 * own, "{again} vs {own}");
         }

@@ -484,14 +484,20 @@ pub fn contour_plot(stem: &Path, p: &ContourPlot) -> Result<()> {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
         draw(&root, p)?;
     }
-    let png_path = stem.with_extension("png");
+    // The extension is appended, not substituted: a stem may hold dots (`quantile-0.9_R`).
+    let with = |ext: &str| {
+        let mut name = stem.as_os_str().to_owned();
+        name.push(format!(".{ext}"));
+        std::path::PathBuf::from(name)
+    };
+    let png_path = with("png");
     write_atomic_bytes(&png_path, &encode_png(&rgb, w, h, None)?)?;
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
         draw(&root, p)?;
     }
-    write_atomic_bytes(&stem.with_extension("svg"), svg.as_bytes())?;
+    write_atomic_bytes(&with("svg"), svg.as_bytes())?;
     Ok(())
 }
 
