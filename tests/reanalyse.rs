@@ -281,7 +281,11 @@ fn stderr(o: &Output) -> String {
 fn store_files(out: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     let mut v = Vec::new();
     for run in std::fs::read_dir(out.join("runs")).expect("runs") {
-        for f in std::fs::read_dir(run.expect("entry").path()).expect("run dir") {
+        let run = run.expect("entry").path();
+        if !run.is_dir() {
+            continue; // a run's lock file
+        }
+        for f in std::fs::read_dir(&run).expect("run dir") {
             let p = f.expect("file").path();
             v.push((p.clone(), std::fs::read(&p).expect("readable")));
         }
