@@ -7,8 +7,8 @@
 //! functions, so it is bit-identical (`assert_eq!`). On disk positions and velocities are f32
 //! (relative rounding 2^-24 = 6e-8 per coordinate); the cloud's members and labels are kept
 //! as the run found them, so counts are exact and masses (sums of the same per-body masses in
-//! the same order) are exact up to how `summary.json` reads back (serde_json's default float
-//! parsing may miss by an ulp: 1e-15 relative). Lengths, sizes, ratios and crater diameters
+//! the same order) are exact (serde_json reads floats back exactly: `float_roundtrip`); the
+//! tolerance left for them, 1e-15 relative, costs nothing. Lengths, sizes, ratios and crater diameters
 //! come back within 1e-6 relative (a coordinate's rounding over a length of the same order,
 //! times a few); va, a difference of two fronts that in these 4 us runs lie 0.5 us (3 mm)
 //! apart at z of about 3 cm, within 1e-5 (2 x 6e-8 x 3 cm / 3 mm = 1.2e-6, times a margin).

@@ -20,12 +20,15 @@ use hvi_analysis::observable::Observable;
 use hvi_run::exec::ExecOptions;
 use hvi_run::plan::{build_plan, Plan, PlanRequest};
 use hvi_run::spec::{Axis, Study};
-use hvi_run::store::{Record, RunStatus, Store};
+use hvi_run::store::{Record, RunStatus};
 use hvi_run::study::execute_plan;
 
 use crate::cli::FidelityArgs;
 use crate::reproduce::report::{Check, Figure, Verdict};
-use crate::reproduce::stages::{fig10_checks, fig10_figure, fig9_checks, fig9_figure};
+use crate::reproduce::stages::{
+    completed_runs, fig10_checks, fig10_figure, fig9_checks, fig9_figure,
+};
+use crate::study::figures::sorted_axis;
 use crate::study::reanalyse::reanalyse_run;
 use config::{check_seeds, FidelityConfig, Reading, Source};
 pub use report::write_report;
@@ -231,22 +234,6 @@ fn plans(
         .collect()
 }
 
-/// Runs held completed by the store in `dir`, of a plan's.
-fn stored(plan: &Plan, dir: &Path) -> Result<usize> {
-    if !dir.join("runs").is_dir() {
-        return Ok(0);
-    }
-    let store = Store::open(dir)?;
-    let mut n = 0;
-    for r in &plan.runs {
-        if matches!(store.lookup(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
-        {
-            n += 1;
-        }
-    }
-    Ok(n)
-}
-
 /// `hvi-study fidelity`: plans, runs (or takes from the store), measures, judges and writes
 /// the report. With `--dry-run` it plans and prints what it would run.
 pub fn fidelity(args: &FidelityArgs) -> Result<Option<FidelityResult>> {
@@ -265,7 +252,7 @@ pub fn fidelity(args: &FidelityArgs) -> Result<Option<FidelityResult>> {
     }
     seeded_study(&config.study, &seeds)?;
     if !args.dry_run {
-        report::check_out(&args.out)?;
+        crate::reproduce::report::check_report_dir(&args.out, "fidelity.json", "fidelity")?;
     }
     let plans = plans(&config, &tier, cli_seeds)?;
     let root = args.runs.join(&tier);
@@ -275,7 +262,7 @@ pub fn fidelity(args: &FidelityArgs) -> Result<Option<FidelityResult>> {
     for (r, p) in config.readings.iter().zip(&plans) {
         if let Some((p, _)) = p {
             total += p.runs.len();
-            todo += p.runs.len() - stored(p, &dir_of(r))?;
+            todo += p.runs.len() - completed_runs(p, &dir_of(r))?;
         }
     }
     if !args.quiet || args.dry_run {
@@ -401,21 +388,7 @@ fn seed_fields(plan: &Plan, values: &[f64], seeds: &[u64]) -> Result<SeedFields>
         axis("material.kappa_n_m")?,
         axis(SEED_KEY)?,
     );
-    let sorted = |k: usize| -> Result<Vec<(f64, usize)>> {
-        let mut v: Vec<(f64, usize)> = plan.axes[k]
-            .values
-            .iter()
-            .enumerate()
-            .map(|(i, v)| {
-                v.as_f64()
-                    .map(|x| (x, i))
-                    .context("a non-numeric axis value")
-            })
-            .collect::<Result<_>>()?;
-        v.sort_by(|a, b| a.0.total_cmp(&b.0));
-        Ok(v)
-    };
-    let (xs, ys) = (sorted(ax)?, sorted(ay)?);
+    let (xs, ys) = (sorted_axis(plan, ax)?, sorted_axis(plan, ay)?);
     let field = |z: Vec<Vec<f64>>| {
         Field::new(
             xs.iter().map(|p| p.0).collect(),

@@ -5,41 +5,16 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use hvi_engine::paper;
 use hvi_plot::contour::{contour_plot, ContourPlot, Marker};
 use plotters::style::RGBColor;
 use serde::Serialize;
 
 use super::{FidelityResult, Judged, SeedFields};
-use crate::reproduce::report::{fmt_num, Figure};
+use crate::reproduce::report::{cell, check_report_dir, fmt_num, numbers_table, Figure};
 use crate::reproduce::stages::{FIG10_CHECKS, FIG10_MAIN_CHECKS, FIG9_CHECKS, FIG9_MAIN_CHECKS};
 use hvi_run::output::{write_atomic_bytes, write_csv_atomic};
-
-/// Checks the report directory before anything runs: new, empty, or an earlier report of this
-/// command (it holds `fidelity.json`).
-pub fn check_out(out: &Path) -> Result<()> {
-    if out.exists() {
-        if !out.is_dir() {
-            bail!(
-                "invalid value for `--out`: {} is a file (allowed: a directory)",
-                out.display()
-            );
-        }
-        let empty = std::fs::read_dir(out)
-            .with_context(|| format!("cannot read --out {}", out.display()))?
-            .next()
-            .is_none();
-        if !empty && !out.join("fidelity.json").exists() {
-            bail!(
-                "refusing to write into --out {}: it is not empty and holds no fidelity.json \
-                 (not a report of `hvi-study fidelity`); choose a new or empty directory",
-                out.display()
-            );
-        }
-    }
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create --out {}", out.display()))
-}
 
 /// All check names, Fig. 9's then Fig. 10's, in [`Judged::checks`] order, with whether each is
 /// part of its figure's main claim.
@@ -163,7 +138,7 @@ fn unreproduced(res: &FidelityResult) -> Vec<String> {
 
 /// Writes the whole report into `out`.
 pub fn write_report(res: &FidelityResult, out: &Path) -> Result<()> {
-    check_out(out)?;
+    check_report_dir(out, "fidelity.json", "fidelity")?;
     for j in &res.readings {
         draw_maps(res, j, out)?;
     }
@@ -270,10 +245,6 @@ fn draw_maps(res: &FidelityResult, j: &Judged, out: &Path) -> Result<()> {
             false,
         ),
     )
-}
-
-fn cell(s: &str) -> String {
-    s.replace('|', "\\|").replace('\n', " ")
 }
 
 fn opt(x: Option<f64>) -> String {
@@ -434,19 +405,6 @@ fn reading_section(s: &mut String, j: &Judged, readings: &[super::config::Readin
     );
     for f in [&j.fig9, &j.fig10] {
         let _ = writeln!(s, "**Fig. {}: {}.** {}\n", f.id, f.verdict.word(), f.reason);
-        let _ = writeln!(
-            s,
-            "| deciding number | value | how / paper |\n|---|---|---|"
-        );
-        for n in &f.numbers {
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} |",
-                cell(&n.name),
-                cell(&n.value.show()),
-                cell(&n.note)
-            );
-        }
-        let _ = writeln!(s);
+        numbers_table(s, &f.numbers);
     }
 }

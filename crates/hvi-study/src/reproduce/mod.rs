@@ -48,7 +48,7 @@ pub fn reproduce(args: &ReproduceArgs) -> Result<Reproduction> {
     // Read the previous report before anything is written (it may be --out itself).
     let previous = load_previous(args)?;
     if !args.dry_run {
-        check_out(&out)?;
+        report::check_report_dir(&out, "reproduce.json", "reproduce")?;
     }
     say(
         args,
@@ -121,36 +121,6 @@ fn load_previous(args: &ReproduceArgs) -> Result<Option<Reproduction>> {
                 .with_context(|| format!("--previous {}", d.display()))
         })
         .transpose()
-}
-
-/// Checks the report directory: a new or empty directory, or a previous report.
-fn check_out(out: &Path) -> Result<()> {
-    if out.exists() {
-        if !out.is_dir() {
-            bail!(
-                "invalid value for `--out`: {} is a file (allowed: a directory)",
-                out.display()
-            );
-        }
-        let empty = std::fs::read_dir(out)
-            .with_context(|| format!("cannot read --out {}", out.display()))?
-            .next()
-            .is_none();
-        if !empty && !out.join("reproduce.json").exists() {
-            bail!(
-                "refusing to write into --out {}: it is not empty and holds no reproduce.json \
-                 (not a report of `hvi-study reproduce`); choose a new or empty directory",
-                out.display()
-            );
-        }
-    }
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("cannot create --out {}", out.display()))?;
-    let probe = out.join(format!(".write-test-{}", std::process::id()));
-    std::fs::write(&probe, b"")
-        .with_context(|| format!("cannot write into --out {}", out.display()))?;
-    let _ = std::fs::remove_file(&probe);
-    Ok(())
 }
 
 /// This tier's estimate and, when `[estimate]` names another tier, that tier's (planned only).

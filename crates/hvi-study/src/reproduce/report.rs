@@ -348,8 +348,62 @@ pub struct Reproduction {
     pub changes: Option<Vec<String>>,
 }
 
-fn cell(s: &str) -> String {
+/// Text as one Markdown table cell (pipes escaped, on one line).
+pub fn cell(s: &str) -> String {
     s.replace('|', "\\|").replace('\n', " ")
+}
+
+/// Checks a report directory before anything runs, and creates it: a new or empty directory,
+/// or an earlier report of `command` (it holds `marker`, e.g. `reproduce.json`); it must be
+/// writable.
+pub fn check_report_dir(out: &Path, marker: &str, command: &str) -> Result<()> {
+    if out.exists() {
+        if !out.is_dir() {
+            anyhow::bail!(
+                "invalid value for `--out`: {} is a file (allowed: a directory)",
+                out.display()
+            );
+        }
+        let empty = std::fs::read_dir(out)
+            .with_context(|| format!("cannot read --out {}", out.display()))?
+            .next()
+            .is_none();
+        if !empty && !out.join(marker).exists() {
+            anyhow::bail!(
+                "refusing to write into --out {}: it is not empty and holds no {marker} \
+                 (not a report of `hvi-study {command}`); choose a new or empty directory",
+                out.display()
+            );
+        }
+    }
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create --out {}", out.display()))?;
+    let probe = out.join(format!(".write-test-{}", std::process::id()));
+    std::fs::write(&probe, b"")
+        .with_context(|| format!("cannot write into --out {}", out.display()))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+/// A figure's deciding numbers as a Markdown table (nothing when it has none).
+pub fn numbers_table(s: &mut String, numbers: &[Number]) {
+    if numbers.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "| deciding number | value | how / paper |\n|---|---|---|"
+    );
+    for n in numbers {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} |",
+            cell(&n.name),
+            cell(&n.value.show()),
+            cell(&n.note)
+        );
+    }
+    s.push('\n');
 }
 
 impl Reproduction {
@@ -558,22 +612,7 @@ fn figure_section(s: &mut String, f: &Figure) {
     let _ = writeln!(s, "- **Paper:** {}", f.paper);
     let _ = writeln!(s, "- **Ours:** {}", f.ours);
     let _ = writeln!(s, "- **Verdict: {}.** {}\n", f.verdict.word(), f.reason);
-    if !f.numbers.is_empty() {
-        let _ = writeln!(
-            s,
-            "| deciding number | value | how / paper |\n|---|---|---|"
-        );
-        for n in &f.numbers {
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} |",
-                cell(&n.name),
-                cell(&n.value.show()),
-                cell(&n.note)
-            );
-        }
-        s.push('\n');
-    }
+    numbers_table(s, &f.numbers);
 }
 
 /// Whether two values are the same, numbers to 1e-12 relative (a number read back from JSON

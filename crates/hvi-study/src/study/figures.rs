@@ -30,6 +30,23 @@ pub fn map_axes(plan: &Plan) -> Result<(usize, usize)> {
     }
 }
 
+/// Axis `k`'s values, sorted, each with its index in the plan's axis (an error naming the axis
+/// when a value is not a number).
+pub fn sorted_axis(plan: &Plan, k: usize) -> Result<Vec<(f64, usize)>> {
+    let mut v: Vec<(f64, usize)> = plan.axes[k]
+        .values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            v.as_f64()
+                .map(|x| (x, i))
+                .ok_or_else(|| anyhow!("axis `{}` is not numeric", plan.axes[k].key))
+        })
+        .collect::<Result<_>>()?;
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    Ok(v)
+}
+
 /// The field of `value(record)` over axes (ax, ay) of a plan, at the other axes' values of
 /// run `slice_run`. Failed or missing runs are NaN. Axis values are sorted.
 pub fn field_of(
@@ -39,22 +56,8 @@ pub fn field_of(
     slice_run: usize,
     value: impl Fn(&Record) -> Option<f64>,
 ) -> Result<Field> {
-    let num = |k: usize| -> Result<Vec<(f64, usize)>> {
-        let mut v: Vec<(f64, usize)> = plan.axes[k]
-            .values
-            .iter()
-            .enumerate()
-            .map(|(i, v)| {
-                v.as_f64()
-                    .map(|x| (x, i))
-                    .ok_or_else(|| anyhow!("axis `{}` is not numeric", plan.axes[k].key))
-            })
-            .collect::<Result<_>>()?;
-        v.sort_by(|a, b| a.0.total_cmp(&b.0));
-        Ok(v)
-    };
-    let xs = num(ax)?;
-    let ys = num(ay)?;
+    let xs = sorted_axis(plan, ax)?;
+    let ys = sorted_axis(plan, ay)?;
     let slice = &plan.run(slice_run)?.coords;
     let mut z = vec![vec![f64::NAN; xs.len()]; ys.len()];
     for (run, rec) in plan.runs.iter().zip(records) {

@@ -140,8 +140,12 @@ pub fn plan_records(plan: &Plan, dir: &Path) -> Result<Vec<Record>> {
         .collect()
 }
 
-/// How many of a plan's runs the store in `dir` holds completed.
+/// How many of a plan's runs the store in `dir` holds completed (0, creating nothing, when
+/// it has no store yet).
 pub fn completed_runs(plan: &Plan, dir: &Path) -> Result<usize> {
+    if !dir.join("runs").is_dir() {
+        return Ok(0);
+    }
     let store = Store::open(dir)?;
     let mut n = 0;
     for r in &plan.runs {
