@@ -18,7 +18,7 @@ use std::process::Output;
 
 use hvi_analysis::observable::{Observable, Observables};
 use hvi_engine::cloud::{remeasure, CloudObserver, CloudResult};
-use hvi_engine::scene::{Analysis, SceneSpec};
+use hvi_engine::scene::{Analysis, SceneSpec, DEFAULT_QUANTILE};
 use hvi_engine::sim::Simulation;
 use hvi_run::run::{run_scene, RunOptions, Summary};
 use hvi_run::state::{file_bytes, STATE_FILE};
@@ -342,7 +342,7 @@ fn a_study_is_reanalysed_with_runs_without_state_reported_and_skipped() {
         assert_eq!(r["status"], "completed");
         assert_eq!(r["material.eps_j"], want["material.eps_j"]);
         assert_eq!(r["n_frag"], want["n_frag"]);
-        assert_eq!(r["analysis_quantile"], 0.995);
+        assert_eq!(r["analysis_quantile"], DEFAULT_QUANTILE);
         let (a, b) = (
             r["length_ratio"].as_f64().expect("R"),
             want["length_ratio"].as_f64().expect("R"),
@@ -355,7 +355,7 @@ fn a_study_is_reanalysed_with_runs_without_state_reported_and_skipped() {
     let victim = out.join(table[1]["dir"].as_str().expect("dir"));
     std::fs::remove_file(victim.join(STATE_FILE)).expect("remove state");
     let before = store_files(&out);
-    let o = reanalyse(&out, &["--set", "analysis.quantile=0.9", "--table", "q90"]);
+    let o = reanalyse(&out, &["--set", "analysis.quantile=0.95", "--table", "q95"]);
     let err = stderr(&o);
     assert!(o.status.success(), "{err}");
     assert!(
@@ -369,13 +369,13 @@ fn a_study_is_reanalysed_with_runs_without_state_reported_and_skipped() {
         err.contains("reanalysed 1 of 2 completed runs (1 without state"),
         "{err}"
     );
-    let q90 = rows(&out.join("q90.json"));
-    assert_eq!(q90[0]["status"], "completed");
-    assert_eq!(q90[0]["analysis_quantile"], 0.9);
-    assert_ne!(q90[0]["length_ratio"], table[0]["length_ratio"]);
-    assert_eq!(q90[1]["status"], "no_state");
-    assert!(q90[1]["length_ratio"].is_null());
-    assert!(q90[1]["error"].as_str().expect("why").contains("no state"));
+    let q95 = rows(&out.join("q95.json"));
+    assert_eq!(q95[0]["status"], "completed");
+    assert_eq!(q95[0]["analysis_quantile"], 0.95);
+    assert_ne!(q95[0]["length_ratio"], table[0]["length_ratio"]);
+    assert_eq!(q95[1]["status"], "no_state");
+    assert!(q95[1]["length_ratio"].is_null());
+    assert!(q95[1]["error"].as_str().expect("why").contains("no state"));
     assert_eq!(store_files(&out), before, "the runs' files are only read");
 
     // (d) A truncated state file: the table is written, the error names the file, no panic.

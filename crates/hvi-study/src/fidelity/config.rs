@@ -28,6 +28,8 @@ struct Header {
     tier: String,
     seeds: Vec<u64>,
     #[serde(default)]
+    set: Vec<String>,
+    #[serde(default)]
     description: String,
 }
 
@@ -125,6 +127,8 @@ pub struct FidelityConfig {
     pub tier: String,
     /// The thermal seeds every run reading is run at.
     pub seeds: Vec<u64>,
+    /// Scene overrides of every run of every reading, before the reading's own `set`.
+    pub set: Vec<String>,
     /// What the config is for.
     pub description: String,
     /// The readings, in the report's order.
@@ -178,6 +182,7 @@ impl FidelityConfig {
             study: dir.join(h.study),
             tier: h.tier,
             seeds: h.seeds,
+            set: h.set,
             description: h.description,
             readings,
         })

@@ -223,7 +223,7 @@ fn plans(
                     &PlanRequest {
                         tier: Some(tier.to_string()),
                         particles: None,
-                        set: set.clone(),
+                        set: config.set.iter().chain(set).cloned().collect(),
                     },
                 )
                 .with_context(|| format!("reading `{}`", r.name))?;
