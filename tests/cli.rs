@@ -361,3 +361,70 @@ fn run_into_an_earlier_run_clears_its_files_and_refuses_other_directories() {
     }
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// The summary without what depends on the machine's speed (wall times, rates, timings).
+fn physics(out: &Path) -> serde_json::Value {
+    let mut s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
+            .expect("json");
+    let o = s.as_object_mut().expect("object");
+    for key in ["wall_seconds", "particle_steps_per_second", "timing"] {
+        assert!(o.remove(key).is_some(), "summary lacks {key}");
+    }
+    s
+}
+
+#[test]
+fn output_flags_never_change_the_trajectory() {
+    // Render times inside the run and dumps at an odd interval: the adaptive step lands on the
+    // scene's render times whether or not frames are captured, and takes dumps where it is.
+    let scene = [
+        "--set",
+        "run.end_time_s=6e-6",
+        "--set",
+        "analysis.render_times_s=[0.0, 3.3e-6, 5.1e-6]",
+        "--threads",
+        "1",
+        "--quiet",
+    ];
+    let plain = scratch("plain");
+    let o = run(&plain, &scene);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let reference = physics(&plain);
+    let energy = std::fs::read_to_string(plain.join("energy.csv")).expect("energy.csv");
+    assert!(reference["steps"].as_u64().expect("steps") > 100);
+    assert!(reference["stride_limits"].is_object() || reference["stride_limits"].is_array());
+    let flagged = scratch("flagged");
+    let data = flagged.join("init.data");
+    let flags: [&[&str]; 3] = [
+        &["--render"],
+        &["--dump-every", "77"],
+        &["--render", "--dump-every", "333", "--lammps-data"],
+    ];
+    for extra in flags {
+        let _ = std::fs::remove_dir_all(&flagged);
+        let mut args: Vec<&str> = scene.to_vec();
+        args.extend_from_slice(extra);
+        if extra.contains(&"--lammps-data") {
+            args.push(data.to_str().expect("utf8"));
+        }
+        let o = run(&flagged, &args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(physics(&flagged), reference, "with {extra:?}");
+        assert_eq!(
+            std::fs::read_to_string(flagged.join("energy.csv")).expect("energy.csv"),
+            energy,
+            "with {extra:?}"
+        );
+        if extra.contains(&"--dump-every") {
+            let dumps = std::fs::read_dir(&flagged)
+                .expect("dir")
+                .filter_map(|e| e.ok())
+                .filter(|e| e.path().extension().is_some_and(|x| x == "xyz"))
+                .count();
+            assert!(dumps >= 2, "with {extra:?}: {dumps} dumps");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&plain);
+    let _ = std::fs::remove_dir_all(&flagged);
+}

@@ -442,27 +442,28 @@ fn set_up(spec: &SceneSpec, opts: &RunOptions) -> Result<(Simulation, Counts)> {
 }
 
 /// The render times within the run as (step, time) pairs, by step (the nearest step to each
-/// time, each step once); times beyond the end are skipped, with a note when progress is on.
+/// time, each step once); times beyond the end are skipped, with a note when rendering is asked
+/// for and progress is on. They are the scene's own (`analysis.render_times_s`), so the adaptive
+/// step lands on them whether or not frames are captured: asking for pictures never changes the
+/// trajectory.
 fn render_steps(spec: &SceneSpec, d: &Derived, opts: &RunOptions) -> Vec<(u64, f64)> {
     let end_tau = d.steps as f64 * d.dt_s - d.contact_time_s;
     let mut render_steps: Vec<(u64, f64)> = Vec::new();
-    if opts.render {
-        for &t in &spec.analysis.render_times_s {
-            if t <= end_tau + 0.5 * d.dt_s {
-                let s = step_at_tau(d, t);
-                if !render_steps.iter().any(|&(x, _)| x == s) {
-                    render_steps.push((s, t));
-                }
-            } else if opts.progress {
-                eprintln!(
-                    "render: tau = {:.2} us is beyond the end of the run ({:.2} us), skipped",
-                    t * 1e6,
-                    end_tau * 1e6
-                );
+    for &t in &spec.analysis.render_times_s {
+        if t <= end_tau + 0.5 * d.dt_s {
+            let s = step_at_tau(d, t);
+            if !render_steps.iter().any(|&(x, _)| x == s) {
+                render_steps.push((s, t));
             }
+        } else if opts.render && opts.progress {
+            eprintln!(
+                "render: tau = {:.2} us is beyond the end of the run ({:.2} us), skipped",
+                t * 1e6,
+                end_tau * 1e6
+            );
         }
-        render_steps.sort_by_key(|&(s, _)| s);
     }
+    render_steps.sort_by_key(|&(s, _)| s);
     render_steps
 }
 
@@ -490,8 +491,10 @@ struct Gathered {
     max_drift: f64,
     /// The cloud, observed as the scene's `[analysis]` asks (None when all is off).
     observer: Option<CloudObserver>,
-    /// Steps (and times) at which a frame of the 3-D series is captured.
+    /// The scene's render steps (and times): the adaptive step lands on each.
     render_steps: Vec<(u64, f64)>,
+    /// Whether a frame of the 3-D series is captured at each render step (`--render`).
+    capture: bool,
     /// The captured frames.
     frames: Vec<Frame>,
     /// Ballistic cut-off bookkeeping: broken-bond counts at the energy samples, (tau, count).
@@ -522,6 +525,7 @@ impl Gathered {
             observer: (analysis.cloud || analysis.track_every > 0)
                 .then(|| CloudObserver::new(sim, analysis, spec.run.end_time_s)),
             render_steps: render_steps(spec, &sim.derived, opts),
+            capture: opts.render,
             frames: Vec::new(),
             break_history: Vec::new(),
             failure: None,
@@ -532,9 +536,10 @@ impl Gathered {
         Ok(run)
     }
 
-    /// Steps `sim` to the end of the run, landing on every output time (energy samples,
-    /// dumps, cloud samples, render times), and stops at the first instability (kept in
-    /// `failure`). Returns the stepping wall time without the cloud observation and frame
+    /// Steps `sim` to the end of the run, landing on every time the scene samples (energy
+    /// samples, cloud samples, render times), and stops at the first instability (kept in
+    /// `failure`). Dumps (`--dump-every K`) are taken at the first step at or after each
+    /// multiple of K, never landed on, so asking for them does not change the trajectory. Returns the stepping wall time without the cloud observation and frame
     /// captures, s: the engine's throughput.
     fn step_to_end(
         &mut self,
@@ -553,8 +558,9 @@ impl Gathered {
             self.dump(&opts.out_dir, sim, 0)?;
         }
         let mut next_thermo = thermo_every;
+        let mut next_dump = if dump_every > 0 { dump_every } else { u64::MAX };
         while sim.step < d.steps {
-            let next = self.next_landing(sim.step, d.steps, energy_every, dump_every);
+            let next = self.next_landing(sim.step, d.steps, energy_every);
             if let Err(e) = sim.step_until(next) {
                 self.failure = Some(e);
                 break;
@@ -570,7 +576,8 @@ impl Gathered {
                 self.consider_cutoff(sim, &spec.run, opts.progress);
             }
             self.observe(sim);
-            if dump_every > 0 && (at_multiple(s, dump_every) || s == d.steps) {
+            if s >= next_dump || (dump_every > 0 && s == d.steps) {
+                next_dump = next_multiple(s, dump_every);
                 self.dump(&opts.out_dir, sim, s)?;
             }
             if opts.progress && (s >= next_thermo || s == d.steps) {
@@ -588,13 +595,11 @@ impl Gathered {
             .as_secs_f64())
     }
 
-    /// The next base step after `s` at which something is due (the end, an energy sample, a
-    /// dump, a cloud sample, a render time): an adaptive step lands on it.
-    fn next_landing(&self, s: u64, end: u64, energy_every: u64, dump_every: u64) -> u64 {
+    /// The next base step after `s` at which the scene samples something (the end, an energy
+    /// sample, a cloud sample, a render time): an adaptive step lands on it. Only the scene
+    /// decides these, never the output flags.
+    fn next_landing(&self, s: u64, end: u64, energy_every: u64) -> u64 {
         let mut next = end.min(next_multiple(s, energy_every));
-        if dump_every > 0 {
-            next = next.min(next_multiple(s, dump_every));
-        }
         if let Some(due) = self.observer.as_ref().and_then(|o| o.next_due(s)) {
             next = next.min(due);
         }
@@ -663,7 +668,7 @@ impl Gathered {
         if let Some(o) = self.observer.as_mut() {
             o.observe(sim);
         }
-        if self.render_steps.iter().any(|&(s, _)| s == sim.step) {
+        if self.capture && self.render_steps.iter().any(|&(s, _)| s == sim.step) {
             let t = Instant::now();
             self.frames.push(Frame::capture(sim));
             self.render_time += t.elapsed();
