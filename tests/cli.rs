@@ -112,20 +112,18 @@ fn run_writes_summary_energy_dumps_and_lammps_data() {
         csv.starts_with("time_s,tau_s,kinetic_j,contact_j,bond_j,broken_j,total_j,bonds_broken")
     );
     assert!(csv.lines().count() > 3);
-    let dumps: Vec<_> = std::fs::read_dir(&out)
-        .expect("dir")
-        .filter_map(|e| e.ok())
-        .filter(|e| e.path().extension().is_some_and(|x| x == "xyz"))
-        .collect();
-    assert!(dumps.len() >= 2, "expected XYZ snapshots");
-    let xyz = std::fs::read_to_string(dumps[0].path()).expect("xyz");
-    let mut lines = xyz.lines();
+    let trajectory = std::fs::read_to_string(out.join("trajectory.extxyz")).expect("trajectory");
+    let mut lines = trajectory.lines();
     let n: usize = lines.next().expect("count").trim().parse().expect("count");
-    assert!(lines
-        .next()
-        .expect("comment")
-        .contains("Properties=species:S:1:id:I:1:body:I:1:pos:R:3:velo:R:3"));
-    assert_eq!(lines.count(), n);
+    assert!(lines.next().expect("comment").contains(
+        "Properties=species:S:1:pos:R:3:velo:R:3:masses:R:1:momenta:R:3:id:I:1:body:I:1:fragment:I:1:broken_bonds:I:1"
+    ));
+    let frames = trajectory
+        .lines()
+        .filter(|l| l.starts_with("Properties="))
+        .count();
+    assert!(frames >= 2, "expected several frames, got {frames}");
+    assert_eq!(trajectory.lines().count(), frames * (n + 2));
     let lammps = std::fs::read_to_string(&data).expect("lammps data");
     assert!(lammps.contains(&format!("{n} atoms")));
     for section in ["Masses", "Atoms # bond", "Velocities", "Bonds"] {
@@ -417,14 +415,105 @@ fn output_flags_never_change_the_trajectory() {
             "with {extra:?}"
         );
         if extra.contains(&"--dump-every") {
-            let dumps = std::fs::read_dir(&flagged)
-                .expect("dir")
-                .filter_map(|e| e.ok())
-                .filter(|e| e.path().extension().is_some_and(|x| x == "xyz"))
+            let trajectory =
+                std::fs::read_to_string(flagged.join("trajectory.extxyz")).expect("trajectory");
+            let frames = trajectory
+                .lines()
+                .filter(|l| l.starts_with("Properties="))
                 .count();
-            assert!(dumps >= 2, "with {extra:?}: {dumps} dumps");
+            assert!(frames >= 2, "with {extra:?}: {frames} frames");
         }
     }
     let _ = std::fs::remove_dir_all(&plain);
     let _ = std::fs::remove_dir_all(&flagged);
+}
+
+/// Runs a Python snippet with `python3`; None (after saying why) where Python or the module is
+/// missing, which fails under CI (`.ci/run` installs them).
+fn python(module: &str, code: &str) -> Option<Output> {
+    let probe = Command::new("python3")
+        .args(["-c", &format!("import {module}")])
+        .output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "python3 with `{module}` is missing under CI (.ci/run installs it)"
+        );
+        eprintln!("skipped: python3 with `{module}` is missing (pip install {module})");
+        return None;
+    }
+    Some(
+        Command::new("python3")
+            .args(["-c", code])
+            .output()
+            .expect("python3 runs"),
+    )
+}
+
+#[test]
+fn the_trajectory_opens_in_ase_with_every_frame_velocities_masses_and_fragments() {
+    let out = scratch("ase");
+    let o = run(
+        &out,
+        &[
+            "--set",
+            "run.end_time_s=3e-6",
+            "--dump-every",
+            "200",
+            "--threads",
+            "2",
+            "--quiet",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
+            .expect("json");
+    let particles = summary["particles"].as_u64().expect("particles");
+    let broken = summary["bonds_broken"].as_u64().expect("broken");
+    let impactor = summary["derived"]["mass_impactor_kg"].as_f64().expect("m");
+    let base_steps = summary["base_steps"].as_u64().expect("base steps");
+    // Frames at step 0, at the first step at or after each multiple of 200, and at the end.
+    let path = out.join("trajectory.extxyz");
+    let code = format!(
+        r#"
+import ase.io, numpy as np
+frames = ase.io.read(r"{path}", index=":")
+last = frames[-1]
+v = last.get_velocities()
+rel = np.abs(v - last.arrays["velo"]).max() / np.abs(last.arrays["velo"]).max()
+m = last.get_masses()
+print(len(frames), len(last), rel, m[last.arrays["body"] == 0][0],
+      int(last.arrays["broken_bonds"].sum()), len(set(last.arrays["fragment"])),
+      int(last.info["step"]), sorted(last.arrays["id"])[-1])
+"#,
+        path = path.display()
+    );
+    let Some(o) = python("ase", &code) else {
+        return;
+    };
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let got: Vec<&str> = text.split_whitespace().collect();
+    assert_eq!(got.len(), 8, "{text}");
+    let frames: u64 = got[0].parse().expect("frames");
+    assert!(
+        frames > base_steps / 200,
+        "{frames} frames for {base_steps} steps"
+    );
+    assert_eq!(got[1].parse::<u64>().expect("n"), particles);
+    let rel: f64 = got[2].parse().expect("rel");
+    assert!(
+        rel < 1e-8,
+        "ASE's velocities (momenta / masses) differ by {rel}"
+    );
+    let m: f64 = got[3].parse().expect("mass");
+    assert!((m - impactor).abs() <= 1e-9 * impactor, "{m} vs {impactor}");
+    // Each broken bond counts at both of its particles.
+    assert_eq!(got[4].parse::<u64>().expect("broken"), 2 * broken);
+    let fragments: u64 = got[5].parse().expect("fragments");
+    assert!(fragments > 1 && fragments < particles, "{fragments}");
+    assert_eq!(got[6].parse::<u64>().expect("step"), base_steps);
+    assert_eq!(got[7].parse::<u64>().expect("id"), particles - 1);
+    let _ = std::fs::remove_dir_all(&out);
 }

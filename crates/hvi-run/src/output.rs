@@ -65,29 +65,114 @@ fn by_id(p: &Particles) -> Vec<u32> {
     p.index_of_id()
 }
 
-/// Extended XYZ snapshot: species, id, body (0 impactor, 1 target), position (m), velocity
-/// (m/s), in id order. OVITO and ASE read it; units are SI, not Angstrom.
-pub fn write_xyz(path: &Path, sim: &Simulation) -> Result<()> {
-    let p = &sim.particles;
-    write_atomic(path, |w| {
+/// The file name of a run's multi-frame extended XYZ trajectory (`--dump-every`).
+pub const TRAJECTORY_FILE: &str = "trajectory.extxyz";
+
+/// The per-particle columns of a trajectory frame, as the `Properties` key names them.
+/// `masses` and `momenta` are the names ASE maps onto `Atoms` (so `get_masses()` and
+/// `get_velocities()` work); `velo` is OVITO's name for the velocity.
+pub const TRAJECTORY_PROPERTIES: &str = "species:S:1:pos:R:3:velo:R:3:masses:R:1:momenta:R:3:id:I:1:body:I:1:fragment:I:1:broken_bonds:I:1";
+
+/// A run's dumps as one multi-frame extended XYZ file (`trajectory.extxyz`), which OVITO reads
+/// as a trajectory and `ase.io.read(path, index=":")` as a list of frames. Per particle, in id
+/// order: species, position (m), velocity (m/s), mass (kg), momentum (kg m/s), id, body
+/// (0 impactor, 1 target), fragment (its smallest particle id: particles joined by intact bonds
+/// share it) and broken bonds. Units are SI and written as they are: ASE and OVITO take the
+/// numbers as given (ASE would call them Angstrom and amu; velocities from momenta / masses come
+/// out in m/s). Frames are written to `.trajectory.extxyz.partial` and the file is moved into
+/// place when the run ends, so a file named `trajectory.extxyz` is always whole.
+pub struct Trajectory {
+    partial: std::path::PathBuf,
+    path: std::path::PathBuf,
+    w: BufWriter<fs::File>,
+    frames: usize,
+    /// Intact bonds of each particle (by id) when the trajectory started: a broken bond's slots
+    /// are cleared at the next neighbour build, so the count broken is this minus the intact.
+    initial_bonds: Vec<u8>,
+}
+
+/// Intact bonds of each particle, by id.
+fn intact_bonds_by_id(p: &Particles) -> Vec<u8> {
+    let mut n = vec![0u8; p.len()];
+    for i in 0..p.len() {
+        n[p.id[i] as usize] = p.intact_partners_of(i).count() as u8;
+    }
+    n
+}
+
+impl Trajectory {
+    /// Starts the trajectory in `dir`; broken bonds count from the state of `sim` now (t = 0).
+    pub fn create(dir: &Path, sim: &Simulation) -> Result<Self> {
+        let path = dir.join(TRAJECTORY_FILE);
+        let partial = dir.join(format!(".{TRAJECTORY_FILE}.partial"));
+        let file = fs::File::create(&partial)
+            .with_context(|| format!("cannot create {}", partial.display()))?;
+        Ok(Trajectory {
+            partial,
+            path,
+            w: BufWriter::new(file),
+            frames: 0,
+            initial_bonds: intact_bonds_by_id(&sim.particles),
+        })
+    }
+
+    /// Appends the state at base step `step` as one frame.
+    pub fn frame(&mut self, sim: &Simulation, step: u64) -> Result<()> {
+        let p = &sim.particles;
+        let fragment = hvi_engine::cloud::label_fragments(p);
+        let w = &mut self.w;
         writeln!(w, "{}", p.len())?;
         writeln!(
             w,
-            "Properties=species:S:1:id:I:1:body:I:1:pos:R:3:velo:R:3 Time={:.9e} tau={:.9e} units=SI pbc=\"F F F\"",
+            "Properties={TRAJECTORY_PROPERTIES} Time={:.9e} tau={:.9e} step={step} frame={} \
+             units=\"SI: m, m/s, kg, kg m/s, s\" pbc=\"F F F\"",
             sim.time_s(),
-            sim.tau_s()
+            sim.tau_s(),
+            self.frames,
         )?;
         for i in by_id(p) {
             let i = i as usize;
-            let (x, v) = (p.pos[i], p.vel[i]);
+            let (x, v, m) = (p.pos[i], p.vel[i], p.mass[i]);
+            let intact = p.intact_partners_of(i).count() as u8;
+            let broken = self.initial_bonds[p.id[i] as usize].saturating_sub(intact);
             writeln!(
                 w,
-                "Al {} {} {:.12e} {:.12e} {:.12e} {:.9e} {:.9e} {:.9e}",
-                p.id[i], p.body[i] as u8, x.x, x.y, x.z, v.x, v.y, v.z
+                "Al {:.12e} {:.12e} {:.12e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {} {} {} {}",
+                x.x,
+                x.y,
+                x.z,
+                v.x,
+                v.y,
+                v.z,
+                m,
+                m * v.x,
+                m * v.y,
+                m * v.z,
+                p.id[i],
+                p.body[i] as u8,
+                fragment[i],
+                broken
             )?;
         }
+        w.flush()
+            .with_context(|| format!("cannot write {}", self.partial.display()))?;
+        self.frames += 1;
         Ok(())
-    })
+    }
+
+    /// Frames written so far.
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// Syncs the file and moves it into place as `trajectory.extxyz`.
+    pub fn finish(mut self) -> Result<()> {
+        self.w.flush()?;
+        self.w.get_ref().sync_all()?;
+        fs::rename(&self.partial, &self.path)
+            .with_context(|| format!("cannot move {} into place", self.path.display()))?;
+        Ok(())
+    }
 }
 
 /// The state as a LAMMPS data file (`units si`, `atom_style bond`): atoms (id = hvi id + 1,
@@ -173,7 +258,7 @@ pub fn write_lammps_data(path: &Path, sim: &Simulation) -> Result<()> {
     })
 }
 
-/// The files `hvi-study run` writes into its output directory (besides `dump_*.xyz` and
+/// The files `hvi-study run` writes into its output directory (besides `trajectory.extxyz` and
 /// temporary `.NAME.tmp.PID` files).
 pub const RUN_FILES: [&str; 11] = [
     "summary.json",
@@ -192,7 +277,9 @@ pub const RUN_FILES: [&str; 11] = [
 /// Whether `name` is a file a run writes (see [`RUN_FILES`]).
 fn is_run_file(name: &str) -> bool {
     RUN_FILES.contains(&name)
-        || (name.starts_with("dump_") && name.ends_with(".xyz"))
+        || name == TRAJECTORY_FILE
+        || (name.starts_with("dump_") && name.ends_with(".xyz")) // earlier versions' dumps
+        || name == format!(".{TRAJECTORY_FILE}.partial")
         || (name.starts_with('.') && name.contains(".tmp."))
 }
 

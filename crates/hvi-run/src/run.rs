@@ -19,7 +19,7 @@ use hvi_engine::EngineError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::{Deserialize, Serialize};
 
-use crate::output::{write_atomic_bytes, write_csv_atomic, write_lammps_data, write_xyz};
+use crate::output::{write_atomic_bytes, write_csv_atomic, write_lammps_data, Trajectory};
 use hvi_analysis::observable::{Observable, Observables};
 use hvi_plot::render::{self, Frame, SceneInfo};
 
@@ -554,8 +554,12 @@ impl Gathered {
         let dump_every = opts.dump_every.unwrap_or(0);
         let energy_every = spec.run.energy_every;
         let step_wall0 = Instant::now();
-        if dump_every > 0 {
-            self.dump(&opts.out_dir, sim, 0)?;
+        let mut trajectory = match dump_every {
+            0 => None,
+            _ => Some(Trajectory::create(&opts.out_dir, sim)?),
+        };
+        if let Some(t) = trajectory.as_mut() {
+            self.dump(t, sim, 0)?;
         }
         let mut next_thermo = thermo_every;
         let mut next_dump = if dump_every > 0 { dump_every } else { u64::MAX };
@@ -576,9 +580,12 @@ impl Gathered {
                 self.consider_cutoff(sim, &spec.run, opts.progress);
             }
             self.observe(sim);
-            if s >= next_dump || (dump_every > 0 && s == d.steps) {
+            if let Some(t) = trajectory
+                .as_mut()
+                .filter(|_| s >= next_dump || s == d.steps)
+            {
                 next_dump = next_multiple(s, dump_every);
-                self.dump(&opts.out_dir, sim, s)?;
+                self.dump(t, sim, s)?;
             }
             if opts.progress && (s >= next_thermo || s == d.steps) {
                 next_thermo = next_multiple(s, thermo_every);
@@ -587,6 +594,11 @@ impl Gathered {
         }
         if let Some(b) = &bar {
             b.finish_and_clear();
+        }
+        if let Some(t) = trajectory {
+            let t0 = Instant::now();
+            t.finish()?;
+            self.output_time += t0.elapsed();
         }
         let observed_in_loop = self.observer.as_ref().map_or(Duration::ZERO, |o| o.elapsed);
         Ok(step_wall0
@@ -675,10 +687,10 @@ impl Gathered {
         }
     }
 
-    /// Writes the snapshot `dump_<step>.xyz` into `dir`.
-    fn dump(&mut self, dir: &Path, sim: &Simulation, step: u64) -> Result<()> {
+    /// Appends the state at base step `step` to the trajectory.
+    fn dump(&mut self, trajectory: &mut Trajectory, sim: &Simulation, step: u64) -> Result<()> {
         let t = Instant::now();
-        write_xyz(&dir.join(format!("dump_{step:09}.xyz")), sim)?;
+        trajectory.frame(sim, step)?;
         self.output_time += t.elapsed();
         Ok(())
     }
