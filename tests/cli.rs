@@ -517,3 +517,91 @@ print(len(frames), len(last), rel, m[last.arrays["body"] == 0][0],
     assert_eq!(got[7].parse::<u64>().expect("id"), particles - 1);
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn vtk_frames_open_in_meshio_and_a_later_run_clears_them() {
+    let out = scratch("vtk");
+    let args = [
+        "--set",
+        "run.end_time_s=3e-6",
+        "--dump-every",
+        "200",
+        "--threads",
+        "2",
+        "--quiet",
+    ];
+    let o = run(&out, &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
+            .expect("json");
+    let particles = summary["particles"].as_u64().expect("particles");
+    let broken = summary["bonds_broken"].as_u64().expect("broken");
+    let pvd = std::fs::read_to_string(out.join("trajectory.pvd")).expect("pvd");
+    let files: Vec<&str> = pvd
+        .lines()
+        .filter_map(|l| l.split("file=\"").nth(1))
+        .filter_map(|f| f.split('"').next())
+        .collect();
+    assert!(files.len() >= 2, "{pvd}");
+    for f in &files {
+        assert!(out.join(f).is_file(), "{f} listed in the .pvd is missing");
+    }
+    // Every frame read by meshio: one vertex cell per particle, the point data, and the last
+    // frame's positions and velocities those of the extended XYZ trajectory's last frame.
+    let code = format!(
+        r#"
+import meshio, numpy as np, re
+pvd = open(r"{dir}/trajectory.pvd").read()
+steps = [float(t) for t in re.findall(r'timestep="([^"]+)"', pvd)]
+files = re.findall(r'file="([^"]+)"', pvd)
+assert steps == sorted(steps), steps
+for f in files:
+    m = meshio.read(r"{dir}/" + f)
+    assert [c.type for c in m.cells] == ["vertex"], m.cells
+    assert len(m.cells[0].data) == len(m.points)
+last = meshio.read(r"{dir}/" + files[-1])
+xyz = open(r"{dir}/trajectory.extxyz").read().splitlines()
+n = int(xyz[0])
+rows = np.array([[float(v) for v in l.split()[1:7]] for l in xyz[-n:]])
+print(len(files), len(last.points), int(last.point_data["broken_bonds"].sum()),
+      np.abs(last.points - rows[:, 0:3]).max(), np.abs(last.point_data["velocity"] - rows[:, 3:6]).max(),
+      int(last.point_data["id"].max()), sorted(last.point_data.keys()))
+"#,
+        dir = out.display()
+    );
+    if let Some(o) = python("meshio", &code) {
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = String::from_utf8_lossy(&o.stdout);
+        let got: Vec<&str> = text.split_whitespace().collect();
+        assert!(got.len() >= 7, "{text}");
+        assert_eq!(got[0].parse::<usize>().expect("frames"), files.len());
+        assert_eq!(got[1].parse::<u64>().expect("n"), particles);
+        assert_eq!(got[2].parse::<u64>().expect("broken"), 2 * broken);
+        // The extended XYZ writes 13 significant digits for positions, 10 for velocities.
+        assert!(got[3].parse::<f64>().expect("dx") < 1e-13, "{text}");
+        assert!(got[4].parse::<f64>().expect("dv") < 1e-5, "{text}");
+        assert_eq!(got[5].parse::<u64>().expect("id"), particles - 1);
+        for name in ["velocity", "mass", "body", "fragment", "broken_bonds"] {
+            assert!(
+                text.contains(&format!("'{name}'")),
+                "{name} missing: {text}"
+            );
+        }
+    }
+    // The same directory again, extended XYZ only: the earlier run's VTK files go.
+    let mut again: Vec<&str> = args.to_vec();
+    again.extend_from_slice(&["--dump-format", "extxyz"]);
+    let o = run(&out, &again);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("trajectory.extxyz").is_file());
+    assert!(!out.join("trajectory.pvd").exists() && !out.join("vtk").exists());
+    // VTK only: no extended XYZ.
+    let mut vtk_only: Vec<&str> = args.to_vec();
+    vtk_only.extend_from_slice(&["--dump-format", "vtk"]);
+    let o = run(&out, &vtk_only);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!out.join("trajectory.extxyz").exists());
+    assert!(out.join("trajectory.pvd").is_file() && out.join("vtk/frame_00000.vtu").is_file());
+    let _ = std::fs::remove_dir_all(&out);
+}

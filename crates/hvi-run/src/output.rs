@@ -67,24 +67,57 @@ fn by_id(p: &Particles) -> Vec<u32> {
 
 /// The file name of a run's multi-frame extended XYZ trajectory (`--dump-every`).
 pub const TRAJECTORY_FILE: &str = "trajectory.extxyz";
+/// The ParaView collection of a run's VTK frames (`--dump-every`).
+pub const PVD_FILE: &str = "trajectory.pvd";
+/// The directory of a run's VTK frames, `frame_NNNNN.vtu`.
+pub const VTK_DIR: &str = "vtk";
+
+/// Which files a run's dumps go to (`--dump-format`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DumpFormat {
+    /// `trajectory.extxyz` only (OVITO, ASE).
+    Extxyz,
+    /// `trajectory.pvd` with `vtk/frame_NNNNN.vtu` only (ParaView, meshio).
+    Vtk,
+    /// Both.
+    #[default]
+    Both,
+}
+
+impl DumpFormat {
+    /// Whether the extended XYZ trajectory is written.
+    pub fn extxyz(self) -> bool {
+        matches!(self, DumpFormat::Extxyz | DumpFormat::Both)
+    }
+    /// Whether the VTK frames are written.
+    pub fn vtk(self) -> bool {
+        matches!(self, DumpFormat::Vtk | DumpFormat::Both)
+    }
+}
 
 /// The per-particle columns of a trajectory frame, as the `Properties` key names them.
 /// `masses` and `momenta` are the names ASE maps onto `Atoms` (so `get_masses()` and
 /// `get_velocities()` work); `velo` is OVITO's name for the velocity.
 pub const TRAJECTORY_PROPERTIES: &str = "species:S:1:pos:R:3:velo:R:3:masses:R:1:momenta:R:3:id:I:1:body:I:1:fragment:I:1:broken_bonds:I:1";
 
-/// A run's dumps as one multi-frame extended XYZ file (`trajectory.extxyz`), which OVITO reads
-/// as a trajectory and `ase.io.read(path, index=":")` as a list of frames. Per particle, in id
-/// order: species, position (m), velocity (m/s), mass (kg), momentum (kg m/s), id, body
-/// (0 impactor, 1 target), fragment (its smallest particle id: particles joined by intact bonds
-/// share it) and broken bonds. Units are SI and written as they are: ASE and OVITO take the
-/// numbers as given (ASE would call them Angstrom and amu; velocities from momenta / masses come
-/// out in m/s). Frames are written to `.trajectory.extxyz.partial` and the file is moved into
-/// place when the run ends, so a file named `trajectory.extxyz` is always whole.
+/// A run's dumps: one multi-frame extended XYZ file (`trajectory.extxyz`), which OVITO reads
+/// as a trajectory and `ase.io.read(path, index=":")` as a list of frames, and/or one VTK
+/// unstructured grid per frame (`vtk/frame_NNNNN.vtu`, a vertex cell per particle) collected by
+/// `trajectory.pvd` with each frame's time since first contact, for ParaView. Per particle, in
+/// id order: position (m), velocity (m/s), mass (kg), id, body (0 impactor, 1 target), fragment
+/// (its smallest particle id: particles joined by intact bonds share it) and broken bonds; the
+/// extended XYZ adds species and momentum (kg m/s). Units are SI and written as they are: ASE
+/// and OVITO take the numbers as given (ASE would call them Angstrom and amu; velocities from
+/// momenta / masses come out in m/s). The extended XYZ is written to
+/// `.trajectory.extxyz.partial` and each `.vtu` atomically; the trajectory and the `.pvd` are
+/// moved into place when the run ends, so a file with its final name is always whole.
 pub struct Trajectory {
+    dir: std::path::PathBuf,
     partial: std::path::PathBuf,
     path: std::path::PathBuf,
-    w: BufWriter<fs::File>,
+    w: Option<BufWriter<fs::File>>,
+    /// The VTK frames written so far: (tau, file relative to the run directory).
+    vtk: Option<Vec<(f64, String)>>,
     frames: usize,
     /// Intact bonds of each particle (by id) when the trajectory started: a broken bond's slots
     /// are cleared at the next neighbour build, so the count broken is this minus the intact.
@@ -101,16 +134,33 @@ fn intact_bonds_by_id(p: &Particles) -> Vec<u8> {
 }
 
 impl Trajectory {
-    /// Starts the trajectory in `dir`; broken bonds count from the state of `sim` now (t = 0).
-    pub fn create(dir: &Path, sim: &Simulation) -> Result<Self> {
+    /// Starts the trajectory in `dir` in `format`; broken bonds count from the state of `sim`
+    /// now (t = 0).
+    pub fn create(dir: &Path, sim: &Simulation, format: DumpFormat) -> Result<Self> {
         let path = dir.join(TRAJECTORY_FILE);
         let partial = dir.join(format!(".{TRAJECTORY_FILE}.partial"));
-        let file = fs::File::create(&partial)
-            .with_context(|| format!("cannot create {}", partial.display()))?;
+        let w = match format.extxyz() {
+            true => Some(BufWriter::new(
+                fs::File::create(&partial)
+                    .with_context(|| format!("cannot create {}", partial.display()))?,
+            )),
+            false => None,
+        };
+        let vtk = match format.vtk() {
+            true => {
+                let vtk_dir = dir.join(VTK_DIR);
+                fs::create_dir_all(&vtk_dir)
+                    .with_context(|| format!("cannot create {}", vtk_dir.display()))?;
+                Some(Vec::new())
+            }
+            false => None,
+        };
         Ok(Trajectory {
+            dir: dir.to_path_buf(),
             partial,
             path,
-            w: BufWriter::new(file),
+            w,
+            vtk,
             frames: 0,
             initial_bonds: intact_bonds_by_id(&sim.particles),
         })
@@ -120,42 +170,25 @@ impl Trajectory {
     pub fn frame(&mut self, sim: &Simulation, step: u64) -> Result<()> {
         let p = &sim.particles;
         let fragment = hvi_engine::cloud::label_fragments(p);
-        let w = &mut self.w;
-        writeln!(w, "{}", p.len())?;
-        writeln!(
-            w,
-            "Properties={TRAJECTORY_PROPERTIES} Time={:.9e} tau={:.9e} step={step} frame={} \
-             units=\"SI: m, m/s, kg, kg m/s, s\" pbc=\"F F F\"",
-            sim.time_s(),
-            sim.tau_s(),
-            self.frames,
-        )?;
-        for i in by_id(p) {
-            let i = i as usize;
-            let (x, v, m) = (p.pos[i], p.vel[i], p.mass[i]);
-            let intact = p.intact_partners_of(i).count() as u8;
-            let broken = self.initial_bonds[p.id[i] as usize].saturating_sub(intact);
-            writeln!(
-                w,
-                "Al {:.12e} {:.12e} {:.12e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {} {} {} {}",
-                x.x,
-                x.y,
-                x.z,
-                v.x,
-                v.y,
-                v.z,
-                m,
-                m * v.x,
-                m * v.y,
-                m * v.z,
-                p.id[i],
-                p.body[i] as u8,
-                fragment[i],
-                broken
-            )?;
+        let order = by_id(p);
+        let broken: Vec<u8> = order
+            .iter()
+            .map(|&i| {
+                let i = i as usize;
+                let intact = p.intact_partners_of(i).count() as u8;
+                self.initial_bonds[p.id[i] as usize].saturating_sub(intact)
+            })
+            .collect();
+        if let Some(w) = self.w.as_mut() {
+            write_xyz_frame(w, sim, step, self.frames, &order, &fragment, &broken)
+                .with_context(|| format!("cannot write {}", self.partial.display()))?;
         }
-        w.flush()
-            .with_context(|| format!("cannot write {}", self.partial.display()))?;
+        if let Some(vtk) = self.vtk.as_mut() {
+            let name = format!("{VTK_DIR}/frame_{:05}.vtu", self.frames);
+            let bytes = vtu_frame(sim, step, &order, &fragment, &broken)?;
+            write_atomic_bytes(&self.dir.join(&name), &bytes)?;
+            vtk.push((sim.tau_s(), name));
+        }
         self.frames += 1;
         Ok(())
     }
@@ -165,14 +198,146 @@ impl Trajectory {
         self.frames
     }
 
-    /// Syncs the file and moves it into place as `trajectory.extxyz`.
-    pub fn finish(mut self) -> Result<()> {
-        self.w.flush()?;
-        self.w.get_ref().sync_all()?;
-        fs::rename(&self.partial, &self.path)
-            .with_context(|| format!("cannot move {} into place", self.path.display()))?;
+    /// Syncs the extended XYZ file and moves it into place as `trajectory.extxyz`; writes the
+    /// `.pvd` collection of the VTK frames.
+    pub fn finish(self) -> Result<()> {
+        if let Some(mut w) = self.w {
+            w.flush()?;
+            w.get_ref().sync_all()?;
+            fs::rename(&self.partial, &self.path)
+                .with_context(|| format!("cannot move {} into place", self.path.display()))?;
+        }
+        if let Some(vtk) = &self.vtk {
+            write_atomic(&self.dir.join(PVD_FILE), |w| {
+                writeln!(w, "<?xml version=\"1.0\"?>")?;
+                writeln!(
+                    w,
+                    "<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">"
+                )?;
+                writeln!(w, "  <Collection>")?;
+                for (tau, file) in vtk {
+                    writeln!(
+                        w,
+                        "    <DataSet timestep=\"{tau:.9e}\" group=\"\" part=\"0\" file=\"{file}\"/>"
+                    )?;
+                }
+                writeln!(w, "  </Collection>")?;
+                writeln!(w, "</VTKFile>")?;
+                Ok(())
+            })?;
+        }
         Ok(())
     }
+}
+
+/// One extended XYZ frame (see [`Trajectory`]), particles in `order` (by id).
+fn write_xyz_frame(
+    w: &mut impl Write,
+    sim: &Simulation,
+    step: u64,
+    frame: usize,
+    order: &[u32],
+    fragment: &[u32],
+    broken: &[u8],
+) -> Result<()> {
+    let p = &sim.particles;
+    writeln!(w, "{}", p.len())?;
+    writeln!(
+        w,
+        "Properties={TRAJECTORY_PROPERTIES} Time={:.9e} tau={:.9e} step={step} frame={frame} \
+         units=\"SI: m, m/s, kg, kg m/s, s\" pbc=\"F F F\"",
+        sim.time_s(),
+        sim.tau_s(),
+    )?;
+    for (k, &i) in order.iter().enumerate() {
+        let i = i as usize;
+        let (x, v, m) = (p.pos[i], p.vel[i], p.mass[i]);
+        writeln!(
+            w,
+            "Al {:.12e} {:.12e} {:.12e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {} {} {} {}",
+            x.x,
+            x.y,
+            x.z,
+            v.x,
+            v.y,
+            v.z,
+            m,
+            m * v.x,
+            m * v.y,
+            m * v.z,
+            p.id[i],
+            p.body[i] as u8,
+            fragment[i],
+            broken[k]
+        )?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// One VTK XML unstructured grid (`.vtu`, binary in base64 as vtkio writes it): a vertex cell
+/// per particle, in `order` (by id), with the point data `velocity` (m/s), `mass` (kg), `id`,
+/// `body`, `fragment` and `broken_bonds`, and the step and times in the title.
+fn vtu_frame(
+    sim: &Simulation,
+    step: u64,
+    order: &[u32],
+    fragment: &[u32],
+    broken: &[u8],
+) -> Result<Vec<u8>> {
+    use vtkio::model::{
+        Attribute, Attributes, ByteOrder, CellType, Cells, DataSet, UnstructuredGridPiece, Version,
+        VertexNumbers, Vtk,
+    };
+    let p = &sim.particles;
+    let n = order.len();
+    let mut points = Vec::with_capacity(3 * n);
+    let mut velocity = Vec::with_capacity(3 * n);
+    for &i in order {
+        let (x, v) = (p.pos[i as usize], p.vel[i as usize]);
+        points.extend_from_slice(&[x.x, x.y, x.z]);
+        velocity.extend_from_slice(&[v.x, v.y, v.z]);
+    }
+    let pick =
+        |f: &dyn Fn(usize) -> u32| -> Vec<u32> { order.iter().map(|&i| f(i as usize)).collect() };
+    let mass: Vec<f64> = order.iter().map(|&i| p.mass[i as usize]).collect();
+    let point = vec![
+        Attribute::vectors("velocity").with_data(velocity),
+        Attribute::scalars("mass", 1).with_data(mass),
+        Attribute::scalars("id", 1).with_data(pick(&|i| p.id[i])),
+        Attribute::scalars("body", 1).with_data(pick(&|i| p.body[i] as u32)),
+        Attribute::scalars("fragment", 1).with_data(pick(&|i| fragment[i])),
+        Attribute::scalars("broken_bonds", 1)
+            .with_data(broken.iter().map(|&b| b as u32).collect::<Vec<u32>>()),
+    ];
+    let vtk = Vtk {
+        version: Version::new((1, 0)),
+        title: format!(
+            "hvi-study {} step={step} time_s={:.9e} tau_s={:.9e} (SI units)",
+            env!("CARGO_PKG_VERSION"),
+            sim.time_s(),
+            sim.tau_s()
+        ),
+        byte_order: ByteOrder::LittleEndian,
+        file_path: None,
+        data: DataSet::inline(UnstructuredGridPiece {
+            points: points.into(),
+            cells: Cells {
+                cell_verts: VertexNumbers::XML {
+                    connectivity: (0..n as u64).collect(),
+                    offsets: (1..=n as u64).collect(),
+                },
+                types: vec![CellType::Vertex; n],
+            },
+            data: Attributes {
+                point,
+                cell: Vec::new(),
+            },
+        }),
+    };
+    let mut bytes = Vec::new();
+    vtk.write_xml(&mut bytes).context("VTK frame")?;
+    Ok(bytes)
 }
 
 /// The state as a LAMMPS data file (`units si`, `atom_style bond`): atoms (id = hvi id + 1,
@@ -274,12 +439,25 @@ pub const RUN_FILES: [&str; 11] = [
     "cloud_track.png",
 ];
 
+/// Whether `path` is a run's VTK directory: files `frame_NNNNN.vtu` (and temporary files) only.
+fn is_vtk_dir(path: &Path) -> bool {
+    std::fs::read_dir(path).is_ok_and(|entries| {
+        entries.filter_map(|e| e.ok()).all(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            e.file_type().is_ok_and(|t| t.is_file())
+                && ((name.starts_with("frame_") && name.ends_with(".vtu"))
+                    || (name.starts_with('.') && name.contains(".tmp.")))
+        })
+    })
+}
+
 /// Whether `name` is a file a run writes (see [`RUN_FILES`]).
 fn is_run_file(name: &str) -> bool {
     RUN_FILES.contains(&name)
         || name == TRAJECTORY_FILE
         || (name.starts_with("dump_") && name.ends_with(".xyz")) // earlier versions' dumps
         || name == format!(".{TRAJECTORY_FILE}.partial")
+        || name == PVD_FILE
         || (name.starts_with('.') && name.contains(".tmp."))
 }
 
@@ -322,7 +500,8 @@ pub fn clear_run_dir(dir: &Path, keep: &[&std::ffi::OsStr]) -> Result<Vec<String
             continue;
         }
         let text = name.to_string_lossy().into_owned();
-        if is_run_file(&text) && e.file_type().is_ok_and(|t| t.is_file()) {
+        let file = is_run_file(&text) && e.file_type().is_ok_and(|t| t.is_file());
+        if file || (text == VTK_DIR && is_vtk_dir(&e.path())) {
             ours.push(text);
         } else {
             foreign.push(text);
@@ -350,7 +529,13 @@ pub fn clear_run_dir(dir: &Path, keep: &[&std::ffi::OsStr]) -> Result<Vec<String
     }
     ours.sort();
     for name in &ours {
-        std::fs::remove_file(dir.join(name)).with_context(|| {
+        let path = dir.join(name);
+        let removed = if path.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        removed.with_context(|| {
             format!(
                 "cannot remove the earlier run's {}",
                 dir.join(name).display()

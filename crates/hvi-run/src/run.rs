@@ -19,7 +19,9 @@ use hvi_engine::EngineError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::{Deserialize, Serialize};
 
-use crate::output::{write_atomic_bytes, write_csv_atomic, write_lammps_data, Trajectory};
+use crate::output::{
+    write_atomic_bytes, write_csv_atomic, write_lammps_data, DumpFormat, Trajectory,
+};
 use hvi_analysis::observable::{Observable, Observables};
 use hvi_plot::render::{self, Frame, SceneInfo};
 
@@ -28,8 +30,11 @@ use hvi_plot::render::{self, Frame, SceneInfo};
 pub struct RunOptions {
     /// Output directory (created if missing).
     pub out_dir: PathBuf,
-    /// Write an extended XYZ snapshot every this many steps (and at the end).
+    /// Dump the state at t = 0, at the first step at or after every this many base steps, and
+    /// at the end ([`crate::output::Trajectory`]).
     pub dump_every: Option<u64>,
+    /// The files the dumps go to.
+    pub dump_format: DumpFormat,
     /// Write the initial state as a LAMMPS data file here.
     pub lammps_data: Option<PathBuf>,
     /// Show a progress bar and thermo lines on stderr.
@@ -556,7 +561,7 @@ impl Gathered {
         let step_wall0 = Instant::now();
         let mut trajectory = match dump_every {
             0 => None,
-            _ => Some(Trajectory::create(&opts.out_dir, sim)?),
+            _ => Some(Trajectory::create(&opts.out_dir, sim, opts.dump_format)?),
         };
         if let Some(t) = trajectory.as_mut() {
             self.dump(t, sim, 0)?;

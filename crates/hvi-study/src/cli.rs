@@ -388,9 +388,14 @@ pub struct RunArgs {
     /// Worker threads (default: all cores). Results are identical for any count.
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Write an extended XYZ snapshot every K steps (OVITO, ASE).
+    /// Dump the particles at t = 0, at the first step at or after every K base steps, and at
+    /// the end: trajectory.extxyz (OVITO, ASE) and trajectory.pvd with vtk/frame_NNNNN.vtu
+    /// (ParaView). Never changes the trajectory.
     #[arg(long, value_name = "K")]
     pub dump_every: Option<u64>,
+    /// Which files the dumps go to.
+    #[arg(long, value_enum, default_value_t = DumpFormatArg::Both, requires = "dump_every")]
+    pub dump_format: DumpFormatArg,
     /// Write the initial state as a LAMMPS data file (units si, atom_style bond).
     #[arg(long, value_name = "FILE")]
     pub lammps_data: Option<PathBuf>,
@@ -401,6 +406,27 @@ pub struct RunArgs {
     /// (3-D views at analysis.render_times_s, Fig. 12), fragments.png, cloud_track.png.
     #[arg(long)]
     pub render: bool,
+}
+
+/// `--dump-format`.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DumpFormatArg {
+    /// trajectory.extxyz only (OVITO, ASE).
+    Extxyz,
+    /// trajectory.pvd and vtk/frame_NNNNN.vtu only (ParaView, meshio).
+    Vtk,
+    /// Both.
+    Both,
+}
+
+impl From<DumpFormatArg> for hvi_run::output::DumpFormat {
+    fn from(f: DumpFormatArg) -> Self {
+        match f {
+            DumpFormatArg::Extxyz => Self::Extxyz,
+            DumpFormatArg::Vtk => Self::Vtk,
+            DumpFormatArg::Both => Self::Both,
+        }
+    }
 }
 
 /// `hvi-study bench` arguments.

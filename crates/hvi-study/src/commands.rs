@@ -76,6 +76,7 @@ fn run(args: RunArgs) -> Result<()> {
     let opts = RunOptions {
         out_dir: args.out.clone(),
         dump_every: args.dump_every,
+        dump_format: args.dump_format.into(),
         lammps_data: args.lammps_data,
         progress: !args.quiet,
         render: args.render,
