@@ -605,3 +605,60 @@ print(len(files), len(last.points), int(last.point_data["broken_bonds"].sum()),
     assert!(out.join("trajectory.pvd").is_file() && out.join("vtk/frame_00000.vtu").is_file());
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn keys_lists_the_registry_the_docs_print_and_suspicious_values_warn() {
+    let o = bin().args(["keys", "--markdown"]).output().expect("runs");
+    assert!(o.status.success());
+    let table = String::from_utf8_lossy(&o.stdout).into_owned();
+    let docs = std::fs::read_to_string(repo().join("docs/running.md")).expect("docs");
+    assert!(
+        docs.contains(&table),
+        "docs/running.md's keys table is not `hvi-study keys --markdown`: regenerate it"
+    );
+    assert!(table.lines().count() > 45, "{table}");
+    let o = bin()
+        .args(["keys", "analysis.quantile"])
+        .output()
+        .expect("runs");
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("analysis.quantile") && text.contains("[0.5, 1]"),
+        "{text}"
+    );
+    assert!(!text.contains("scene.v0_m_s"), "{text}");
+
+    // km/s typed as m/s: allowed, but it warns; so does a run too short for a cloud.
+    let out = scratch("warn");
+    let o = run(
+        &out,
+        &[
+            "--set",
+            "scene.v0_m_s=6.7",
+            "--set",
+            "run.end_time_s=1e-7",
+            "--quiet",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("warning: scene.v0_m_s = 6.7 m/s is below 100 m/s"),
+        "{err}"
+    );
+    assert!(
+        err.contains("warning: run.end_time_s = 1.000e-7 s is shorter than"),
+        "{err}"
+    );
+    // A study file given to `run`.
+    let o = bin()
+        .arg("run")
+        .arg(repo().join("studies/calibration.toml"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("hvi-study sweep FILE"));
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -26,6 +26,8 @@ pub enum Command {
     /// Run one scene and write summary.json, energy.csv, cloud_track.csv and fragments.csv
     /// into --out.
     Run(RunArgs),
+    /// Every scene key a scene file or --set accepts: unit, allowed values, default, meaning.
+    Keys(KeysArgs),
     /// Validate a study and write its plan.json (every run's scene checked), running nothing.
     Plan(StudyArgs),
     /// Run every run of a study (in parallel, finished runs reused) and write results.csv/json.
@@ -406,6 +408,16 @@ pub struct RunArgs {
     /// (3-D views at analysis.render_times_s, Fig. 12), fragments.png, cloud_track.png.
     #[arg(long)]
     pub render: bool,
+}
+
+/// `hvi-study keys` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct KeysArgs {
+    /// Print the table as Markdown (the keys table of docs/running.md).
+    #[arg(long)]
+    pub markdown: bool,
+    /// Only the keys whose name contains this text (e.g. `analysis.`, `shadowgraph`).
+    pub filter: Option<String>,
 }
 
 /// `--dump-format`.

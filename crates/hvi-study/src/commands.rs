@@ -8,12 +8,16 @@ use anyhow::{Context, Result};
 use hvi_run::run::{run_scene, RunOptions};
 use hvi_run::scene_file::load_scene;
 
-use crate::cli::{AccuracyArgs, BenchArgs, Command, RunArgs, RunUnitArgs, SubmitArgs};
+use crate::cli::{AccuracyArgs, BenchArgs, Command, KeysArgs, RunArgs, RunUnitArgs, SubmitArgs};
 
 /// Runs one subcommand.
 pub fn dispatch(command: Command) -> Result<()> {
     match command {
         Command::Run(args) => run(args),
+        Command::Keys(args) => {
+            keys(&args);
+            Ok(())
+        }
         Command::Bench(args) => bench(args),
         Command::Accuracy(args) => accuracy(args),
         Command::Stability(args) => crate::study::stability::stability(&args).map(|cells| {
@@ -50,12 +54,58 @@ fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
         .context("cannot start worker threads")
 }
 
+/// `hvi-study keys`: the key registry as a table (aligned text, or Markdown).
+fn keys(args: &KeysArgs) {
+    use hvi_engine::scene::keys::{markdown, KEYS};
+    if args.markdown && args.filter.is_none() {
+        print!("{}", markdown());
+        return;
+    }
+    let keys: Vec<_> = KEYS
+        .iter()
+        .filter(|k| args.filter.as_deref().is_none_or(|f| k.name.contains(f)))
+        .collect();
+    if args.markdown {
+        println!("| key | unit | allowed | default | meaning |\n|---|---|---|---|---|");
+        for k in keys {
+            println!(
+                "| `{}` | {} | {} | {} | {} |",
+                k.name,
+                k.unit(),
+                k.allowed.describe(),
+                k.default,
+                k.meaning
+            );
+        }
+        return;
+    }
+    let width = keys.iter().map(|k| k.name.len()).max().unwrap_or(0);
+    for k in keys {
+        println!(
+            "{:width$}  {:6}  {}; default {}\n{:width$}  {}",
+            k.name,
+            k.unit(),
+            k.allowed.describe(),
+            if k.default.is_empty() {
+                "none"
+            } else {
+                k.default
+            },
+            "",
+            k.meaning.replace("  ", " "),
+        );
+    }
+}
+
 /// `hvi-study run`.
 fn run(args: RunArgs) -> Result<()> {
     if args.dump_every == Some(0) {
         anyhow::bail!("invalid value for `--dump-every`: 0 (allowed: an integer >= 1)");
     }
     let spec = load_scene(&args.scene, &args.sets)?;
+    for w in spec.warnings() {
+        eprintln!("warning: {w}");
+    }
     let pool = thread_pool(args.threads)?;
     // The LAMMPS data file may be written into --out by an earlier run: it is the user's.
     let keep: Vec<&std::ffi::OsStr> = args

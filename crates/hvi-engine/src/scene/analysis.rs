@@ -4,7 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{check_range, EngineError, Result};
+use super::keys;
+use crate::error::{EngineError, Result};
 use crate::paper;
 
 /// Default quantile of the front and of the radial extent. MODEL.md section 5 suggests "for
@@ -132,47 +133,19 @@ impl Analysis {
 
     /// Checks every value against its allowed range, naming the key.
     pub fn validate(&self, end_time_s: f64) -> Result<()> {
-        // (key, value, lower bound, lower bound open, upper bound); every upper bound closed.
-        let ranges = [
-            ("analysis.quantile", self.quantile, 0.5, false, 1.0),
-            (
-                "analysis.shadowgraph_pixel_m",
-                self.shadowgraph_pixel_m,
-                0.0,
-                true,
-                0.01,
-            ),
-            (
-                "analysis.shadowgraph_blur_m",
-                self.shadowgraph_blur_m,
-                0.0,
-                false,
-                0.05,
-            ),
-            (
-                "analysis.shadowgraph_grain_m",
-                self.shadowgraph_grain_m,
-                0.0,
-                true,
-                0.01,
-            ),
+        // The intervals are the key registry's (`super::keys`).
+        for (key, value) in [
+            ("analysis.quantile", self.quantile),
+            ("analysis.shadowgraph_pixel_m", self.shadowgraph_pixel_m),
+            ("analysis.shadowgraph_blur_m", self.shadowgraph_blur_m),
+            ("analysis.shadowgraph_grain_m", self.shadowgraph_grain_m),
             (
                 "analysis.shadowgraph_optical_depth",
                 self.shadowgraph_optical_depth,
-                0.0,
-                true,
-                100.0,
             ),
-            (
-                "analysis.witness_standoff_m",
-                self.witness_standoff_m,
-                0.0,
-                true,
-                10.0,
-            ),
-        ];
-        for (key, value, lo, open_lo, hi) in ranges {
-            check_range(key, value, lo, open_lo, hi, false)?;
+            ("analysis.witness_standoff_m", self.witness_standoff_m),
+        ] {
+            keys::check(key, value)?;
         }
         if let Some([t1, t2]) = self.front_times_s {
             let ok = t1.is_finite() && t2.is_finite() && 0.0 <= t1 && t1 < t2 && t2 <= end_time_s;

@@ -7,11 +7,12 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::keys;
 use super::layout::{lay_out, rim_ids, Layout};
 use super::spec::{Geometry, Material, Resolution, SceneSpec, SizingRule};
 use super::time_step::choose_time_step;
 use super::validate::Impact;
-use crate::error::{check_positive, check_range, EngineError, Result};
+use crate::error::{check_range, EngineError, Result};
 use crate::paper;
 use crate::potential::Interaction;
 use crate::state::{Body, Particles};
@@ -194,18 +195,11 @@ impl Resolution {
     fn lattice_spacing_m(&self, geometry: &Geometry) -> Result<f64> {
         match (self.particles, self.particles_across_d) {
             (Some(n), None) => {
-                check_range("resolution.particles", n, 8.0, false, 5e8, false)?;
+                keys::check("resolution.particles", n)?;
                 Ok((geometry.volume_m3() / n).cbrt())
             }
             (None, Some(k)) => {
-                check_range(
-                    "resolution.particles_across_d",
-                    k,
-                    2.0,
-                    false,
-                    2000.0,
-                    false,
-                )?;
+                keys::check("resolution.particles_across_d", k)?;
                 match *geometry {
                     Geometry::SphereOnPlate { diameter_m, .. } => Ok(diameter_m / k),
                     Geometry::FlyerPlate { .. } => Err(EngineError::invalid(
@@ -243,9 +237,9 @@ impl Material {
         let p = m.sizing_rule.eps_power();
         let (gamma, lambda) = match (m.eps_j, m.kappa_n_m, m.gamma_pa, m.lambda_pa) {
             (eps, kappa, None, None) => {
-                let eps = check_positive("material.eps_j", require("material.eps_j", eps)?)?;
+                let eps = keys::check("material.eps_j", require("material.eps_j", eps)?)?;
                 let kappa =
-                    check_positive("material.kappa_n_m", require("material.kappa_n_m", kappa)?)?;
+                    keys::check("material.kappa_n_m", require("material.kappa_n_m", kappa)?)?;
                 (eps / sigma_ref.powi(p), kappa / sigma_ref)
             }
             (None, None, Some(_), _) | (None, None, _, Some(_))
@@ -258,10 +252,9 @@ impl Material {
                 ))
             }
             (None, None, gamma, lambda) => {
-                let gamma =
-                    check_positive("material.gamma_pa", require("material.gamma_pa", gamma)?)?;
+                let gamma = keys::check("material.gamma_pa", require("material.gamma_pa", gamma)?)?;
                 let lambda =
-                    check_positive("material.lambda_pa", require("material.lambda_pa", lambda)?)?;
+                    keys::check("material.lambda_pa", require("material.lambda_pa", lambda)?)?;
                 (gamma, lambda)
             }
             _ => {

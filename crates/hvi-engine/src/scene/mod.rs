@@ -8,12 +8,14 @@
 //!
 //! One job per file: `spec` (the types and their defaults), `analysis` (the `[analysis]`
 //! settings and their defaults), `time_step` (the choice of the base step),
-//! `validate` (range checks of the geometry and run settings), `build` (the steps from a spec
+//! `keys` (the registry of every key: meaning, allowed values, default; the intervals the
+//! checks use), `validate` (range checks of the geometry and run settings), `build` (the steps from a spec
 //! to a [`Setup`], and the [`Derived`] numbers), `layout` (lattice sites, bonds, thermal
 //! velocities). Everything public is re-exported here, so paths are `hvi_engine::scene::X`.
 
 mod analysis;
 mod build;
+pub mod keys;
 mod layout;
 mod spec;
 mod time_step;
@@ -25,6 +27,7 @@ pub use spec::{
     Geometry, Material, Resolution, RunSettings, SceneSpec, SizingRule, TimeStep,
     DEFAULT_SKIN_OVER_SIGMA,
 };
+pub use validate::SUSPICIOUS_V0_M_S;
 
 // The time-step constants, also at the paths they had when they were defined here.
 pub use crate::step::{

@@ -1,8 +1,9 @@
 //! The choice of a scene's base time step from `run.dt_s` ("auto" or seconds),
 //! `run.dt_factor` and `run.dt_over_bound`, against the stability bound of `crate::step`.
 
+use super::keys;
 use super::spec::{RunSettings, TimeStep};
-use crate::error::{check_positive, check_range, EngineError, Result};
+use crate::error::{check_positive, EngineError, Result};
 use crate::paper;
 use crate::step::{AUTO_STEP_SAFETY, MAX_STEP_DISPLACEMENT_OVER_SIGMA, MAX_STEP_OVER_SQRT_M_K};
 
@@ -19,7 +20,7 @@ pub(super) fn choose_time_step(
     // "auto" never exceeds AUTO_STEP_SAFETY of the bound (fast impacts, stiff springs); a
     // fixed step beyond the bound is refused.
     let dt = match (run.dt_over_bound, run.dt_s) {
-        (Some(f), _) => check_range("run.dt_over_bound", f, 0.0, true, 8.0, false)? * dt_max,
+        (Some(f), _) => keys::check("run.dt_over_bound", f)? * dt_max,
         (None, TimeStep::Auto) => (paper::TIME_STEP_S * (sigma / sigma_ref) * run.dt_factor)
             .min(AUTO_STEP_SAFETY * dt_max),
         (None, TimeStep::Fixed(dt)) => {

@@ -2,9 +2,10 @@
 //! ranges, naming the key on error. Values that need the resolution (thicknesses in lattice
 //! steps, the time step) are checked where they are derived.
 
-use super::spec::{Geometry, RunSettings};
-use crate::error::{check_positive, check_range, EngineError, Result};
-use crate::step::{MAX_STRIDE, MAX_STRIDE_DISPLACEMENT_OVER_SIGMA};
+use super::keys;
+use super::spec::{Geometry, RunSettings, SceneSpec};
+use crate::error::{EngineError, Result};
+use crate::step::MAX_STRIDE;
 
 /// The impact's numbers common to both geometries, once checked.
 #[derive(Debug, Clone, Copy)]
@@ -20,7 +21,7 @@ pub(super) struct Impact {
 impl Geometry {
     /// Checks velocity, density, standoff and the bodies' dimensions.
     pub(super) fn validate(&self) -> Result<Impact> {
-        let v0 = check_range("scene.v0_m_s", self.v0_m_s(), 0.0, true, 1e5, false)?;
+        let v0 = keys::check("scene.v0_m_s", self.v0_m_s())?;
         let (density, standoff) = match *self {
             Geometry::SphereOnPlate {
                 density_kg_m3,
@@ -33,7 +34,7 @@ impl Geometry {
                 ..
             } => (density_kg_m3, standoff_m),
         };
-        check_positive("scene.density_kg_m3", density)?;
+        keys::check("scene.density_kg_m3", density)?;
         if !standoff.is_finite() {
             return Err(EngineError::invalid(
                 "scene.standoff_m",
@@ -48,9 +49,9 @@ impl Geometry {
                 width_over_d,
                 ..
             } => {
-                check_positive("scene.diameter_m", diameter_m)?;
-                check_positive("scene.t_over_d", t_over_d)?;
-                check_range("scene.width_over_d", width_over_d, 1.0, false, 1e3, false)?;
+                keys::check("scene.diameter_m", diameter_m)?;
+                keys::check("scene.t_over_d", t_over_d)?;
+                keys::check("scene.width_over_d", width_over_d)?;
             }
             Geometry::FlyerPlate {
                 flyer_thickness_m,
@@ -58,9 +59,9 @@ impl Geometry {
                 width_m,
                 ..
             } => {
-                check_positive("scene.flyer_thickness_m", flyer_thickness_m)?;
-                check_positive("scene.target_thickness_m", target_thickness_m)?;
-                check_positive("scene.width_m", width_m)?;
+                keys::check("scene.flyer_thickness_m", flyer_thickness_m)?;
+                keys::check("scene.target_thickness_m", target_thickness_m)?;
+                keys::check("scene.width_m", width_m)?;
             }
         }
         Ok(Impact {
@@ -80,24 +81,10 @@ impl RunSettings {
 
     /// End time, step factor, thermal velocities, neighbour list and adaptive step.
     fn validate_stepping(&self) -> Result<()> {
-        check_positive("run.end_time_s", self.end_time_s)?;
-        check_range("run.dt_factor", self.dt_factor, 0.0, true, 1e3, false)?;
-        check_range(
-            "run.thermal_ratio",
-            self.thermal_ratio,
-            0.0,
-            false,
-            0.1,
-            false,
-        )?;
-        check_range(
-            "run.skin_over_sigma",
-            self.skin_over_sigma,
-            0.0,
-            true,
-            2.0,
-            false,
-        )?;
+        keys::check("run.end_time_s", self.end_time_s)?;
+        keys::check("run.dt_factor", self.dt_factor)?;
+        keys::check("run.thermal_ratio", self.thermal_ratio)?;
+        keys::check("run.skin_over_sigma", self.skin_over_sigma)?;
         let b = self.frame_block_over_sigma;
         if !(b == 0.0 || (2.0..=1e3).contains(&b)) {
             return Err(EngineError::invalid(
@@ -113,13 +100,9 @@ impl RunSettings {
                 format!("a whole number from 1 to {MAX_STRIDE} (1: a fixed step)"),
             ));
         }
-        check_range(
+        keys::check(
             "run.stride_displacement_over_sigma",
             self.stride_displacement_over_sigma,
-            0.0,
-            true,
-            MAX_STRIDE_DISPLACEMENT_OVER_SIGMA,
-            false,
         )?;
         Ok(())
     }
@@ -133,46 +116,47 @@ impl RunSettings {
                 "an integer >= 1",
             ));
         }
-        check_range(
-            "run.max_energy_drift",
-            self.max_energy_drift,
-            0.0,
-            true,
-            f64::INFINITY,
-            false,
-        )?;
-        check_range(
-            "run.min_distance_over_sigma",
-            self.min_distance_over_sigma,
-            0.0,
-            false,
-            1.0,
-            true,
-        )?;
-        check_range(
-            "run.cutoff_min_tau_s",
-            self.cutoff_min_tau_s,
-            0.0,
-            false,
-            f64::INFINITY,
-            true,
-        )?;
-        check_range(
-            "run.cutoff_quiet_s",
-            self.cutoff_quiet_s,
-            0.0,
-            true,
-            f64::INFINITY,
-            true,
-        )?;
-        check_range(
-            "run.cutoff_break_fraction",
-            self.cutoff_break_fraction,
-            0.0,
-            false,
-            1.0,
-            false,
-        )?;
+        keys::check("run.max_energy_drift", self.max_energy_drift)?;
+        keys::check("run.min_distance_over_sigma", self.min_distance_over_sigma)?;
+        keys::check("run.cutoff_min_tau_s", self.cutoff_min_tau_s)?;
+        keys::check("run.cutoff_quiet_s", self.cutoff_quiet_s)?;
+        keys::check("run.cutoff_break_fraction", self.cutoff_break_fraction)?;
         Ok(())
+    }
+}
+
+/// Below this impact velocity a scene draws a warning (km/s typed as m/s?), m/s.
+pub const SUSPICIOUS_V0_M_S: f64 = 100.0;
+
+impl SceneSpec {
+    /// Values that are allowed but almost surely a mistake, each as one sentence naming the
+    /// key: an impact velocity below [`SUSPICIOUS_V0_M_S`], or a run too short for the sphere
+    /// to get through the plate (no debris cloud forms) while the cloud is measured.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        let v0 = self.scene.v0_m_s();
+        if v0 > 0.0 && v0 < SUSPICIOUS_V0_M_S {
+            w.push(format!(
+                "scene.v0_m_s = {v0} m/s is below {SUSPICIOUS_V0_M_S} m/s: hypervelocity impacts \
+                 are 3000-10000 m/s (was it typed in km/s?)"
+            ));
+        }
+        if let Geometry::SphereOnPlate {
+            diameter_m,
+            t_over_d,
+            ..
+        } = self.scene
+        {
+            let through = (diameter_m * t_over_d) / v0;
+            if self.analysis.cloud && v0 > 0.0 && self.run.end_time_s < through {
+                w.push(format!(
+                    "run.end_time_s = {:.3e} s is shorter than the {:.3e} s the sphere needs to \
+                     cross the plate at v0 (t / v0): no debris cloud forms, so the cloud's \
+                     numbers will be empty",
+                    self.run.end_time_s, through
+                ));
+            }
+        }
+        w
     }
 }
