@@ -662,3 +662,49 @@ fn keys_lists_the_registry_the_docs_print_and_suspicious_values_warn() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("hvi-study sweep FILE"));
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn completions_man_pages_and_help_say_what_each_command_takes() {
+    let o = bin().args(["completions", "bash"]).output().expect("runs");
+    assert!(o.status.success());
+    let script = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        script.contains("hvi-study") && script.contains("validity-map"),
+        "{script}"
+    );
+    let dir = scratch("man");
+    let o = bin()
+        .args(["man", "--out"])
+        .arg(&dir)
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for page in [
+        "hvi-study.1",
+        "hvi-study-run.1",
+        "hvi-study-keys.1",
+        "hvi-study-sweep.1",
+    ] {
+        let text = std::fs::read_to_string(dir.join(page)).expect(page);
+        assert!(
+            text.starts_with(".ie") || text.contains(".TH"),
+            "{page}: {text}"
+        );
+    }
+    let help = |cmd: &str| {
+        let o = bin().args([cmd, "--help"]).output().expect("runs");
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    // Commands that run nothing take no --threads or --jobs.
+    for cmd in ["status", "collect"] {
+        let h = help(cmd);
+        assert!(
+            !h.contains("--threads") && !h.contains("--jobs"),
+            "{cmd}: {h}"
+        );
+        assert!(h.contains("--tier"), "{cmd}: {h}");
+    }
+    assert!(help("sweep").contains("--jobs"));
+    assert!(help("validity-map").contains("studies/validity-map.toml"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -28,6 +28,11 @@ pub enum Command {
     Run(RunArgs),
     /// Every scene key a scene file or --set accepts: unit, allowed values, default, meaning.
     Keys(KeysArgs),
+    /// Print a shell completion script, e.g. `hvi-study completions bash >
+    /// ~/.local/share/bash-completion/completions/hvi-study`.
+    Completions(CompletionsArgs),
+    /// Write the man pages (hvi-study.1 and one per subcommand) into a directory.
+    Man(ManArgs),
     /// Validate a study and write its plan.json (every run's scene checked), running nothing.
     Plan(StudyArgs),
     /// Run every run of a study (in parallel, finished runs reused) and write results.csv/json.
@@ -37,6 +42,7 @@ pub enum Command {
     Calibrate(CalibrateArgs),
     /// Validity map: the study's grid over (v0, t/D), F contour with the cut-off in red
     /// (Fig. 16b), the boundary as validity_boundary.csv, runs marked valid in results.csv.
+    #[command(mut_arg("study", |a| a.help("Study file (TOML), e.g. studies/validity-map.toml")))]
     ValidityMap(ValidityArgs),
     /// Stability map: every slice of studies/stability/ (v0 x t/D, v0 x step, eps x kappa)
     /// run through the study store; writes a map per slice, stability.csv and stability.md.
@@ -172,13 +178,52 @@ pub struct ValidityArgs {
     pub cutoff: Option<f64>,
 }
 
+/// Which study store `status` and `collect` read: the flags of [`StudyArgs`] that choose the
+/// study, its tier and its directory (no threads or jobs: they run nothing).
+#[derive(Args, Debug, Clone)]
+pub struct StoreArgs {
+    /// Study file (TOML), e.g. studies/calibration.toml, or a study directory or its plan.json.
+    pub study: PathBuf,
+    /// Resolution tier, as named in the study's `[tiers]` (default: its default_tier, `quick`).
+    #[arg(long)]
+    pub tier: Option<String>,
+    /// The tier's particle count as the study ran it (resolution.particles).
+    #[arg(long, value_name = "N")]
+    pub particles: Option<f64>,
+    /// A scene override of every run as the study ran it: section.key=value.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// Output directory (default: `runs/studies/<study>/<tier>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// No progress output.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+impl StoreArgs {
+    /// The same selection as the study flags a running command takes.
+    pub fn to_study(&self) -> StudyArgs {
+        StudyArgs {
+            study: self.study.clone(),
+            tier: self.tier.clone(),
+            particles: self.particles,
+            sets: self.sets.clone(),
+            out: self.out.clone(),
+            threads: None,
+            jobs: None,
+            quiet: self.quiet,
+        }
+    }
+}
+
 /// `hvi-study status` arguments.
 #[derive(Args, Debug, Clone)]
 pub struct StatusArgs {
     /// The study (a study file with the flags `sweep` takes, or a study directory or its
     /// plan.json).
     #[command(flatten)]
-    pub study: StudyArgs,
+    pub store: StoreArgs,
     /// One line per run: its state, where it runs, its directory.
     #[arg(long, short)]
     pub verbose: bool,
@@ -202,7 +247,7 @@ pub struct CollectArgs {
     /// The study (a study file with the flags `sweep` takes, or a study directory or its
     /// plan.json).
     #[command(flatten)]
-    pub study: StudyArgs,
+    pub store: StoreArgs,
     /// Write what this command writes (default: `calibrate` for a study with `[calibrate]`,
     /// `validity-map` for one with `[validity]`, else `sweep`).
     #[arg(long = "as", value_enum, value_name = "COMMAND")]
@@ -408,6 +453,22 @@ pub struct RunArgs {
     /// (3-D views at analysis.render_times_s, Fig. 12), fragments.png, cloud_track.png.
     #[arg(long)]
     pub render: bool,
+}
+
+/// `hvi-study completions` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct CompletionsArgs {
+    /// The shell.
+    #[arg(value_enum)]
+    pub shell: clap_complete::Shell,
+}
+
+/// `hvi-study man` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct ManArgs {
+    /// Directory for the pages (created if missing).
+    #[arg(long, default_value = "man")]
+    pub out: PathBuf,
 }
 
 /// `hvi-study keys` arguments.

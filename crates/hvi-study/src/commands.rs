@@ -18,6 +18,12 @@ pub fn dispatch(command: Command) -> Result<()> {
             keys(&args);
             Ok(())
         }
+        Command::Completions(args) => {
+            let mut cmd = <crate::cli::Cli as clap::CommandFactory>::command();
+            clap_complete::generate(args.shell, &mut cmd, "hvi-study", &mut std::io::stdout());
+            Ok(())
+        }
+        Command::Man(args) => man(&args),
         Command::Bench(args) => bench(args),
         Command::Accuracy(args) => accuracy(args),
         Command::Stability(args) => crate::study::stability::stability(&args).map(|cells| {
@@ -52,6 +58,39 @@ fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
         .num_threads(threads.unwrap_or(0))
         .build()
         .context("cannot start worker threads")
+}
+
+/// `hvi-study man`: hvi-study.1 and hvi-study-SUBCOMMAND.1 into `--out`.
+fn man(args: &crate::cli::ManArgs) -> Result<()> {
+    let cmd = <crate::cli::Cli as clap::CommandFactory>::command();
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create --out {}", args.out.display()))?;
+    let mut pages = 0;
+    let mut write = |name: String, cmd: clap::Command| -> Result<()> {
+        let mut bytes = Vec::new();
+        clap_mangen::Man::new(cmd)
+            .title(name.to_uppercase())
+            .render(&mut bytes)?;
+        let path = args.out.join(format!("{name}.1"));
+        hvi_run::output::write_atomic_bytes(&path, &bytes)?;
+        pages += 1;
+        Ok(())
+    };
+    for sub in cmd.get_subcommands() {
+        let name = format!("hvi-study-{}", sub.get_name());
+        let page = sub
+            .clone()
+            .display_name(name.clone())
+            .bin_name(name.replace("hvi-study-", "hvi-study "));
+        write(name, page)?;
+    }
+    write("hvi-study".into(), cmd)?;
+    println!(
+        "{pages} man pages in {} (man -l {}/hvi-study.1)",
+        args.out.display(),
+        args.out.display()
+    );
+    Ok(())
 }
 
 /// `hvi-study keys`: the key registry as a table (aligned text, or Markdown).

@@ -173,7 +173,7 @@ impl Survey {
 /// `hvi-study status`: counts on the first line (`... N runs: D done, F failed, R running, P
 /// pending (Q queued in Slurm)`), then the Slurm jobs, then with --verbose one line per run.
 pub fn status(args: &StatusArgs) -> Result<()> {
-    let (plan, dir) = open_plan(&args.study)?;
+    let (plan, dir) = open_plan(&args.store.to_study())?;
     let survey = survey(&plan, &dir)?;
     let (done, failed, running, pending, queued) = survey.counts();
     let mut s = format!(
@@ -267,7 +267,7 @@ fn missing_record(plan: &Plan, i: usize) -> Record {
 /// listed on stderr; the command still writes everything and exits 0, so a partial study can
 /// be looked at while the rest runs.
 pub fn collect(args: &CollectArgs) -> Result<()> {
-    let (plan, dir) = open_plan(&args.study)?;
+    let (plan, dir) = open_plan(&args.store.to_study())?;
     let store = Store::open(&dir)?;
     let records: Vec<Option<Record>> = plan
         .runs
@@ -294,7 +294,7 @@ pub fn collect(args: &CollectArgs) -> Result<()> {
         .map(|(i, r)| r.clone().unwrap_or_else(|| missing_record(&plan, i)))
         .collect();
     let table = results_table(&plan, &records);
-    let quiet = args.study.quiet;
+    let quiet = args.store.quiet;
     let done = records.iter().flatten().cloned().collect::<Vec<_>>();
     print_failures(&done);
     match kind {
