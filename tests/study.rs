@@ -664,3 +664,117 @@ fn concurrent_processes_on_one_study_do_each_run_once() {
         .collect();
     assert_eq!(runs.len(), 1, "{runs:?}");
 }
+
+/// Starts a sweep, waits for `finished` records beyond those already there, and sends `signal`
+/// (`INT` or `TERM`); returns the exit code and stderr.
+fn interrupt_sweep(
+    study: &Path,
+    out: &Path,
+    signal: &str,
+    finished: usize,
+) -> (Option<i32>, String) {
+    let before = records(out).len();
+    let mut child = bin()
+        .arg("sweep")
+        .arg(study)
+        .arg("--out")
+        .arg(out)
+        .args(["--threads", "1", "--quiet"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawns");
+    let t0 = Instant::now();
+    while records(out).len() < before + finished {
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "no run finished in 2 min"
+        );
+        if let Some(status) = child.try_wait().expect("wait") {
+            panic!("the study ended before it could be interrupted: {status}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let kill = std::process::Command::new("kill")
+        .arg(format!("-{signal}"))
+        .arg(child.id().to_string())
+        .status()
+        .expect("kill runs");
+    assert!(kill.success());
+    let o = child.wait_with_output().expect("reaped");
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+/// Temporary and set-aside directories in a store (the runs' lock files stay by design).
+fn leftovers(out: &Path) -> Vec<String> {
+    std::fs::read_dir(out.join("runs"))
+        .expect("runs")
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".tmp-") || n.starts_with(".old-"))
+        .collect()
+}
+
+#[test]
+fn ctrl_c_and_sigterm_stop_a_study_cleanly_and_it_resumes() {
+    let dir = scratch("interrupt");
+    let study = write_study(
+        &dir,
+        "interrupt",
+        "[[axes]]\nkey = \"run.seed\"\nvalues = [1, 2, 3, 4, 5, 6]\n",
+        "\"resolution.particles=1500\", \"run.end_time_s=6e-6\"",
+    );
+    let out = dir.join("out");
+    // Ctrl-C after the first run: the run in progress stops and leaves nothing, the tables of
+    // what finished are written, exit 130 with how to resume.
+    let (code, err) = interrupt_sweep(&study, &out, "INT", 1);
+    assert_eq!(code, Some(130), "{err}");
+    assert!(err.contains("interrupted by SIGINT"), "{err}");
+    assert!(
+        err.contains("run the same command again to resume"),
+        "{err}"
+    );
+    assert!(leftovers(&out).is_empty(), "{:?}", leftovers(&out));
+    let first = records(&out);
+    assert!(!first.is_empty() && first.len() < 6, "{}", first.len());
+    let done = |out: &Path| {
+        results(out)
+            .iter()
+            .filter(|r| r["status"] == "completed")
+            .count()
+    };
+    assert_eq!(
+        done(&out),
+        first.len(),
+        "results.csv holds the finished runs"
+    );
+    // SIGTERM (a scheduler's stop) after one more: exit 143, the same guarantees.
+    let (code, err) = interrupt_sweep(&study, &out, "TERM", 1);
+    assert_eq!(code, Some(143), "{err}");
+    assert!(err.contains("interrupted by SIGTERM"), "{err}");
+    assert!(leftovers(&out).is_empty(), "{:?}", leftovers(&out));
+    let second = records(&out);
+    assert!(
+        second.len() > first.len() && second.len() < 6,
+        "{}",
+        second.len()
+    );
+    for s in &first {
+        assert!(second.contains(s), "run {} was redone or changed", s.0);
+    }
+    // Resumed: the finished runs come from the store, the rest run once.
+    let o = sweep(&study, &out, &[]);
+    assert_ok(&o);
+    let (total, cached, ran, failed) = counts(&o);
+    assert_eq!((total, failed), (6, 0), "{}", stderr(&o));
+    assert_eq!(
+        (cached, ran),
+        (second.len(), 6 - second.len()),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(done(&out), 6);
+}

@@ -184,7 +184,12 @@ pub fn execute(
     let done = AtomicUsize::new(0);
     let failed_now = AtomicUsize::new(0);
     let run_one = |i: usize, per_run: usize| -> Result<Record> {
+        // After Ctrl-C or SIGTERM no run starts, and a stopped run is no failure.
+        crate::interrupt::check()?;
         let r = store.execute(&jobs[i], per_run);
+        if r.as_ref().err().and_then(crate::interrupt::of).is_some() {
+            return r;
+        }
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
         if !matches!(&r, Ok(rec) if rec.status == RunStatus::Completed) {
             failed_now.fetch_add(1, Ordering::Relaxed);

@@ -36,6 +36,7 @@
 
 pub mod bench;
 pub mod exec;
+pub mod interrupt;
 pub mod lock;
 pub mod output;
 pub mod plan;

@@ -569,6 +569,8 @@ impl Gathered {
         let mut next_thermo = thermo_every;
         let mut next_dump = if dump_every > 0 { dump_every } else { u64::MAX };
         while sim.step < d.steps {
+            // Ctrl-C or SIGTERM: stop here (the caller removes what the run wrote).
+            crate::interrupt::check()?;
             let next = self.next_landing(sim.step, d.steps, energy_every);
             if let Err(e) = sim.step_until(next) {
                 self.failure = Some(e);

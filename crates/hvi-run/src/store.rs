@@ -427,6 +427,14 @@ impl Store {
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             pool.install(|| run_scene(&job.scene, &opts).map(|_| ()))
         }));
+        if let Ok(Err(e)) = &outcome {
+            if let Some(stop) = crate::interrupt::of(e) {
+                // Stopped by a signal: nothing of it is kept, and it is not a failure (the
+                // study runs it again when resumed).
+                let _ = fs::remove_dir_all(&tmp);
+                return Err(stop.into());
+            }
+        }
         let error = match outcome {
             Ok(Ok(())) => None,
             // The run wrote into the temporary directory; its message names the final one.

@@ -201,6 +201,20 @@ pub struct StoreArgs {
     pub quiet: bool,
 }
 
+impl StudyArgs {
+    /// The store these flags select, for `status` and `collect`.
+    pub fn to_store(&self) -> StoreArgs {
+        StoreArgs {
+            study: self.study.clone(),
+            tier: self.tier.clone(),
+            particles: self.particles,
+            sets: self.sets.clone(),
+            out: self.out.clone(),
+            quiet: true,
+        }
+    }
+}
+
 impl StoreArgs {
     /// The same selection as the study flags a running command takes.
     pub fn to_study(&self) -> StudyArgs {

@@ -8,7 +8,10 @@ use anyhow::{Context, Result};
 use hvi_run::run::{run_scene, RunOptions};
 use hvi_run::scene_file::load_scene;
 
-use crate::cli::{AccuracyArgs, BenchArgs, Command, KeysArgs, RunArgs, RunUnitArgs, SubmitArgs};
+use crate::cli::{
+    AccuracyArgs, BenchArgs, CollectArgs, CollectAs, Command, KeysArgs, RunArgs, RunUnitArgs,
+    StudyArgs, SubmitArgs,
+};
 
 /// Runs one subcommand.
 pub fn dispatch(command: Command) -> Result<()> {
@@ -36,9 +39,18 @@ pub fn dispatch(command: Command) -> Result<()> {
             );
         }),
         Command::Plan(args) => crate::study::sweep::plan(&args),
-        Command::Sweep(args) => crate::study::sweep::sweep(&args),
-        Command::Calibrate(args) => crate::study::calibrate::calibrate(&args).map(|_| ()),
-        Command::ValidityMap(args) => crate::study::validity::validity_map(&args).map(|_| ()),
+        Command::Sweep(args) => {
+            let r = crate::study::sweep::sweep(&args);
+            tables_if_interrupted(&args, CollectAs::Sweep, r)
+        }
+        Command::Calibrate(args) => {
+            let r = crate::study::calibrate::calibrate(&args).map(|_| ());
+            tables_if_interrupted(&args.study, CollectAs::Calibrate, r)
+        }
+        Command::ValidityMap(args) => {
+            let r = crate::study::validity::validity_map(&args).map(|_| ());
+            tables_if_interrupted(&args.study, CollectAs::ValidityMap, r)
+        }
         Command::Submit(args) => submit(&args),
         Command::Status(args) => crate::study::collect::status(&args),
         Command::Collect(args) => crate::study::collect::collect(&args),
@@ -58,6 +70,23 @@ fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
         .num_threads(threads.unwrap_or(0))
         .build()
         .context("cannot start worker threads")
+}
+
+/// After Ctrl-C or SIGTERM stopped a study command: its tables from the runs that finished
+/// (as `collect --as KIND` writes them), then the interruption again.
+fn tables_if_interrupted(study: &StudyArgs, kind: CollectAs, r: Result<()>) -> Result<()> {
+    if r.as_ref().err().and_then(hvi_run::interrupt::of).is_some() {
+        let args = CollectArgs {
+            store: study.to_store(),
+            kind: Some(kind),
+            cutoff: None,
+        };
+        match crate::study::collect::collect(&args) {
+            Ok(()) => eprintln!("the tables of the runs that finished are written"),
+            Err(e) => eprintln!("the tables could not be written: {e:#}"),
+        }
+    }
+    r
 }
 
 /// `hvi-study man`: hvi-study.1 and hvi-study-SUBCOMMAND.1 into `--out`.

@@ -9,8 +9,19 @@ use hvi_study::cli::Cli;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Err(e) = hvi_run::interrupt::install() {
+        eprintln!("warning: Ctrl-C and SIGTERM will end the process at once: {e}");
+    }
     match hvi_study::commands::dispatch(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if hvi_run::interrupt::of(&e).is_some() => {
+            let stop = hvi_run::interrupt::of(&e).expect("checked");
+            eprintln!(
+                "{stop}: runs in progress stopped and removed, finished runs kept in the store; \
+                 run the same command again to resume (nothing finished runs again)"
+            );
+            ExitCode::from(stop.exit_code())
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::from(2)
