@@ -339,7 +339,7 @@ fn parse_tiers(
         );
     }
     if tiers.is_empty() {
-        bail!("study has no tiers: add at least [tiers.{DEFAULT_TIER}] with its resolution");
+        bail!("study has no `[tiers]`: add at least `[tiers.{DEFAULT_TIER}]` with its resolution");
     }
     Ok(tiers)
 }

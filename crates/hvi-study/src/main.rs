@@ -17,8 +17,9 @@ fn main() -> ExitCode {
         Err(e) if hvi_run::interrupt::of(&e).is_some() => {
             let stop = hvi_run::interrupt::of(&e).expect("checked");
             eprintln!(
-                "{stop}: runs in progress stopped and removed, finished runs kept in the store; \
-                 run the same command again to resume (nothing finished runs again)"
+                "{stop}: the runs in progress stopped and left nothing; a study's finished runs \
+                 are kept in its store: run the same command again to resume (nothing finished \
+                 runs again)"
             );
             ExitCode::from(stop.exit_code())
         }
