@@ -778,3 +778,67 @@ fn ctrl_c_and_sigterm_stop_a_study_cleanly_and_it_resumes() {
     );
     assert_eq!(done(&out), 6);
 }
+
+#[test]
+fn a_full_disk_gives_an_error_naming_the_file_and_leaves_a_consistent_store() {
+    // A 700 kB tmpfs holds one tiny run with its pictures, not two. Mounting needs root; where
+    // it cannot be mounted the test says so and skips.
+    let dir = scratch("full");
+    let disk = dir.join("disk");
+    std::fs::create_dir_all(&disk).expect("dir");
+    let mounted = std::process::Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=700k", "tmpfs"])
+        .arg(&disk)
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("skipped: cannot mount a tmpfs here (needs root)");
+        return;
+    }
+    let study = write_study(
+        &dir,
+        "full",
+        "[[axes]]\nkey = \"run.seed\"\nvalues = [1, 2, 3, 4]\n",
+        TINY,
+    );
+    let out = disk.join("out");
+    let o = sweep(&study, &out, &["--jobs", "1", "--quiet"]);
+    // Completed runs (a run the full disk stopped mid-way may be recorded as failed; it runs
+    // again on resume, as any failed run does).
+    let kept: Vec<_> = records(&out)
+        .into_iter()
+        .filter(|r| String::from_utf8_lossy(&r.1).contains("\"status\": \"completed\""))
+        .collect();
+    let left = if out.join("runs").exists() {
+        leftovers(&out)
+    } else {
+        vec!["no runs/".into()]
+    };
+    // Move the store to a disk with room before unmounting, then resume there.
+    let moved = dir.join("moved");
+    let copy = std::process::Command::new("cp")
+        .arg("-a")
+        .arg(&out)
+        .arg(&moved)
+        .status();
+    let _ = std::process::Command::new("umount").arg(&disk).status();
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("No space left on device"), "{err}");
+    assert!(
+        err.contains(&format!("cannot write {}", out.join("runs").display())),
+        "{err}"
+    );
+    assert!(left.is_empty(), "half-written directories left: {left:?}");
+    assert!(!kept.is_empty() && kept.len() < 4, "{}", kept.len());
+    assert!(copy.is_ok_and(|s| s.success()));
+    let o = sweep(&study, &moved, &[]);
+    assert_ok(&o);
+    let (total, cached, ran, failed) = counts(&o);
+    assert_eq!(
+        (total, cached, ran, failed),
+        (4, kept.len(), 4 - kept.len(), 0),
+        "{}",
+        stderr(&o)
+    );
+}

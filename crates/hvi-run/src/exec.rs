@@ -183,12 +183,21 @@ pub fn execute(
     }
     let done = AtomicUsize::new(0);
     let failed_now = AtomicUsize::new(0);
+    // After a store error (a full disk, an unwritable directory) no further run starts: it
+    // would fail the same way.
+    let store_failed = std::sync::atomic::AtomicBool::new(false);
     let run_one = |i: usize, per_run: usize| -> Result<Record> {
         // After Ctrl-C or SIGTERM no run starts, and a stopped run is no failure.
         crate::interrupt::check()?;
+        if store_failed.load(Ordering::Relaxed) {
+            return Err(anyhow::Error::new(NotStarted));
+        }
         let r = store.execute(&jobs[i], per_run);
         if r.as_ref().err().and_then(crate::interrupt::of).is_some() {
             return r;
+        }
+        if r.is_err() {
+            store_failed.store(true, Ordering::Relaxed);
         }
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
         if !matches!(&r, Ok(rec) if rec.status == RunStatus::Completed) {
@@ -370,6 +379,18 @@ fn finished_line(
     }
 }
 
+/// A run not started because an earlier run hit a store error.
+#[derive(Debug)]
+struct NotStarted;
+
+impl std::fmt::Display for NotStarted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "not started after an earlier run's store error")
+    }
+}
+
+impl std::error::Error for NotStarted {}
+
 /// Runs the phases in order and returns every run's result with its job index. Per phase, one
 /// plain OS thread per concurrent run, each taking the phase's next run; the run itself goes
 /// to its own rayon pool. (Outer rayon workers would, while waiting for a run's pool, steal
@@ -421,6 +442,8 @@ fn gather_records(
     for (i, r) in results {
         match r {
             Ok(rec) => records[i] = Some(rec),
+            // Runs not started after another run's store error: that error is the one to say.
+            Err(e) if e.downcast_ref::<NotStarted>().is_some() => {}
             Err(e) => {
                 first_error.get_or_insert(e.context(format!("run {i}")));
             }

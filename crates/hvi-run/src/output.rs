@@ -17,13 +17,18 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.tmp.{}", std::process::id()));
-    {
-        let file =
-            fs::File::create(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
+    let written = (|| -> Result<()> {
+        let file = fs::File::create(&tmp)?;
         let mut w = BufWriter::new(file);
         write(&mut w)?;
         w.flush()?;
         w.get_ref().sync_all()?;
+        Ok(())
+    })();
+    if let Err(e) = written {
+        // A full disk, say: no partial file stays, and the error names the file.
+        let _ = fs::remove_file(&tmp);
+        return Err(e.context(format!("cannot write {}", path.display())));
     }
     fs::rename(&tmp, path).with_context(|| format!("cannot move {} into place", path.display()))?;
     Ok(())

@@ -411,6 +411,17 @@ impl Store {
         if tmp.exists() {
             fs::remove_dir_all(&tmp)?;
         }
+        let outcome = self.execute_in(job, threads, &tmp);
+        if outcome.is_err() {
+            // A store error (a full disk, say) or an interrupt: nothing half-written stays.
+            let _ = fs::remove_dir_all(&tmp);
+        }
+        outcome
+    }
+
+    /// Runs `job` in the temporary directory `tmp` and moves it into place with its record.
+    fn execute_in(&self, job: &Job, threads: usize, tmp: &Path) -> Result<Record> {
+        let tmp = tmp.to_path_buf();
         fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
         let t0 = Instant::now();
         let pool = rayon::ThreadPoolBuilder::new()
