@@ -124,27 +124,13 @@ fn man(args: &crate::cli::ManArgs) -> Result<()> {
 
 /// `hvi-study keys`: the key registry as a table (aligned text, or Markdown).
 fn keys(args: &KeysArgs) {
-    use hvi_engine::scene::keys::{markdown, KEYS};
-    if args.markdown && args.filter.is_none() {
-        print!("{}", markdown());
-        return;
-    }
+    use hvi_engine::scene::keys::{markdown_of, KEYS};
     let keys: Vec<_> = KEYS
         .iter()
         .filter(|k| args.filter.as_deref().is_none_or(|f| k.name.contains(f)))
         .collect();
     if args.markdown {
-        println!("| key | unit | allowed | default | meaning |\n|---|---|---|---|---|");
-        for k in keys {
-            println!(
-                "| `{}` | {} | {} | {} | {} |",
-                k.name,
-                k.unit(),
-                k.allowed.describe(),
-                k.default,
-                k.meaning
-            );
-        }
+        print!("{}", markdown_of(keys));
         return;
     }
     let width = keys.iter().map(|k| k.name.len()).max().unwrap_or(0);

@@ -447,9 +447,14 @@ pub fn check(name: &str, value: f64) -> Result<f64> {
 
 /// The keys table as Markdown: key, unit, allowed values, default, meaning.
 pub fn markdown() -> String {
+    markdown_of(KEYS.iter())
+}
+
+/// The table of `keys` as Markdown, in the columns of [`markdown`].
+pub fn markdown_of<'a>(keys: impl IntoIterator<Item = &'a Key>) -> String {
     let mut s =
         String::from("| key | unit | allowed | default | meaning |\n|---|---|---|---|---|\n");
-    for k in KEYS {
+    for k in keys {
         s.push_str(&format!(
             "| `{}` | {} | {} | {} | {} |\n",
             k.name,
