@@ -784,6 +784,15 @@ pub struct CloudObserver {
     pub elapsed: Duration,
 }
 
+/// What a [`CloudObserver`] has gathered during a run ([`CloudObserver::save_state`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ObserverState {
+    track: Vec<TrackRow>,
+    front: [Option<FrontSample>; 2],
+    front_states: [Option<CloudState>; 2],
+    elapsed: Duration,
+}
+
 /// What a measurement depends on besides the particles: the quantile, the camera and the
 /// witness plate of `[analysis]`.
 #[derive(Debug, Clone, Copy)]
@@ -827,6 +836,26 @@ impl CloudObserver {
     /// The reference the observer measures against.
     pub fn reference(&self) -> &CloudReference {
         &self.reference
+    }
+
+    /// What the observer has gathered so far (the track, the front samples and the states
+    /// kept at the front times), for a checkpoint: an observer made by [`Self::new`] for the
+    /// same scene and given it back ([`Self::restore_state`]) goes on as this one would.
+    pub fn save_state(&self) -> ObserverState {
+        ObserverState {
+            track: self.track.clone(),
+            front: self.front,
+            front_states: self.front_states.clone(),
+            elapsed: self.elapsed,
+        }
+    }
+
+    /// Takes over what a saved observer had gathered ([`Self::save_state`]).
+    pub fn restore_state(&mut self, s: ObserverState) {
+        self.track = s.track;
+        self.front = s.front;
+        self.front_states = s.front_states;
+        self.elapsed = s.elapsed;
     }
 
     /// The first step after `step` at which something is due (a track sample or a front
@@ -1129,7 +1158,7 @@ pub struct CloudResult {
 /// the cloud labelling of that instant, and the reference numbers it is measured against.
 /// Enough to measure the cloud again, with other settings, without re-simulating
 /// ([`remeasure`]).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CloudState {
     /// Base step of the sample.
     pub step: u64,

@@ -34,6 +34,7 @@ use std::collections::HashMap;
 use glam::DVec3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
+use serde::{Deserialize, Serialize};
 
 use crate::state::{Particles, PermuteScratch, BONDS_PER_PARTICLE, BROKEN_FLAG};
 
@@ -117,7 +118,77 @@ fn forward_rows() -> [i64; FORWARD_ROWS] {
     [0, row, plane - row, plane, plane + row]
 }
 
+/// What of a neighbour list lasts from one build to the next: the lists, the positions and
+/// frames of the rebuild rule and the counters. The rest of [`NeighbourList`] is scratch space
+/// of a build (a build depends only on the particles), so a list restored from this is the list
+/// it was saved from (see [`crate::sim::SimState`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NeighbourState {
+    start: Vec<u32>,
+    neighbours: Vec<u32>,
+    pos_at_build: Vec<DVec3>,
+    frame_vel: Vec<DVec3>,
+    near_dv: f64,
+    far_dv: f64,
+    block: f64,
+    radius: f64,
+    builds: u64,
+    pair_speed: f64,
+    out_of_range: usize,
+}
+
+impl NeighbourState {
+    /// Whether the state is a list of `n` particles (every array its length, every index in
+    /// range): the check before it is restored.
+    pub(crate) fn fits(&self, n: usize) -> std::result::Result<(), String> {
+        if self.start.len() != n + 1 || self.pos_at_build.len() != n || self.frame_vel.len() != n {
+            return Err(format!("its neighbour list is not of {n} particles"));
+        }
+        let ordered = self.start.windows(2).all(|w| w[0] <= w[1]);
+        let last = self.start.last().map_or(0, |&s| s as usize);
+        if !ordered || last != self.neighbours.len() {
+            return Err("its neighbour list is not well formed".into());
+        }
+        if self.neighbours.iter().any(|&j| j as usize >= n) {
+            return Err("its neighbour list names particles beyond the count".into());
+        }
+        Ok(())
+    }
+}
+
 impl NeighbourList {
+    /// What lasts between builds ([`NeighbourState`]).
+    pub fn save_state(&self) -> NeighbourState {
+        NeighbourState {
+            start: self.start.clone(),
+            neighbours: self.neighbours.clone(),
+            pos_at_build: self.pos_at_build.clone(),
+            frame_vel: self.frame_vel.clone(),
+            near_dv: self.near_dv,
+            far_dv: self.far_dv,
+            block: self.block,
+            radius: self.radius,
+            builds: self.builds,
+            pair_speed: self.pair_speed,
+            out_of_range: self.out_of_range,
+        }
+    }
+
+    /// Puts back a saved [`NeighbourState`] (checked with [`NeighbourState::fits`] first).
+    pub(crate) fn restore_state(&mut self, s: NeighbourState) {
+        self.start = s.start;
+        self.neighbours = s.neighbours;
+        self.pos_at_build = s.pos_at_build;
+        self.frame_vel = s.frame_vel;
+        self.near_dv = s.near_dv;
+        self.far_dv = s.far_dv;
+        self.block = s.block;
+        self.radius = s.radius;
+        self.builds = s.builds;
+        self.pair_speed = s.pair_speed;
+        self.out_of_range = s.out_of_range;
+    }
+
     /// Whether the list may miss a contact now or, with `ahead_s` > 0, by the end of a step of
     /// `ahead_s` taken at particle speeds at most `max_s` relative to their frames: `max_e` is
     /// the largest displacement of a particle relative to its frame since the build,

@@ -22,6 +22,9 @@ use crate::step::{stiffness_step_s, LOOKAHEAD_SKIN_FRACTION};
 // The adaptive step's raise delay, also at the path it had when it was defined here.
 pub use crate::step::STRIDE_RAISE_AFTER;
 
+mod saved;
+pub use saved::SimState;
+
 /// Particles per work unit and per partial sum.
 pub const CHUNK: usize = 1024;
 

@@ -32,7 +32,7 @@ pub enum Body {
 /// All particles. Index `i` is the particle's current storage slot; particles are re-sorted
 /// along the cell grid at every neighbour-list build, so `id[i]` is the stable identity
 /// (its index at t = 0).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Particles {
     /// Positions, m.
     pub pos: Vec<DVec3>,

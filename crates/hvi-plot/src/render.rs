@@ -46,8 +46,9 @@ pub use crate::theme::{fonts, FAMILY};
 /// Smallest drawn particle, pixels: a lone particle in a sparse cloud stays visible.
 const MIN_DOT_PX: i32 = 2;
 
-/// The particles at one instant, as pictures need them (f32 is plenty for pixels).
-#[derive(Debug, Clone)]
+/// The particles at one instant, as pictures need them (f32 is plenty for pixels). Serialisable
+/// so that a run's checkpoint keeps the frames it has captured.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Frame {
     /// Time since first contact, s.
     pub tau_s: f64,

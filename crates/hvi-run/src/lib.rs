@@ -3,8 +3,9 @@
 //! Runs scenes and studies and keeps their results: scene files with `--set` overrides
 //! ([`scene_file`]), one run and its files ([`run`], [`output`]), the cloud's kept state for
 //! re-analysis ([`state`]), study files and their validated plans ([`spec`], [`plan`]), the
-//! run store that keeps each result once ([`store`]), parallel execution ([`exec`]), results
-//! tables ([`table`]), Slurm job arrays ([`slurm`]) and the engine benchmark ([`mod@bench`]).
+//! run store that keeps each result once ([`store`]), checkpoints of runs in progress
+//! ([`checkpoint`]), parallel execution ([`exec`]), results tables ([`table`]), Slurm job
+//! arrays ([`slurm`]) and the engine benchmark ([`mod@bench`]).
 //!
 //! ```
 //! use hvi_run::run::{run_scene, RunOptions};
@@ -35,6 +36,7 @@
 //! ```
 
 pub mod bench;
+pub mod checkpoint;
 pub mod exec;
 pub mod interrupt;
 pub mod lock;

@@ -34,6 +34,32 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()
     Ok(())
 }
 
+/// Removes the temporary files [`write_atomic`] left in `dir` when a process was killed during
+/// a write (`.<name>.tmp.<pid>` of another process than this one), where the caller knows no
+/// other process writes (a resumed run's own directory, a checkpoint under its run lock).
+/// `only` restricts it to the temporaries of one file name. Returns how many.
+pub fn remove_stale_partials(dir: &Path, only: Option<&str>) -> Result<usize> {
+    let own = format!(".tmp.{}", std::process::id());
+    let mut n = 0;
+    let Ok(entries) = fs::read_dir(dir) else {
+        return Ok(0);
+    };
+    for e in entries.filter_map(|e| e.ok()) {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let Some((target, pid)) = name.strip_prefix('.').and_then(|r| r.rsplit_once(".tmp."))
+        else {
+            continue;
+        };
+        let ours = only.is_none_or(|o| o == target);
+        if ours && pid.parse::<u32>().is_ok() && !name.ends_with(&own) && e.path().is_file() {
+            fs::remove_file(e.path())
+                .with_context(|| format!("cannot remove {}", e.path().display()))?;
+            n += 1;
+        }
+    }
+    Ok(n)
+}
+
 /// Writes bytes atomically.
 pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic(path, |w| {
@@ -129,6 +155,15 @@ pub struct Trajectory {
     initial_bonds: Vec<u8>,
 }
 
+/// Where a [`Trajectory`] stands ([`Trajectory::save_state`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrajectoryState {
+    extxyz_bytes: Option<u64>,
+    vtk: Option<Vec<(f64, String)>>,
+    frames: usize,
+    initial_bonds: Vec<u8>,
+}
+
 /// Intact bonds of each particle, by id.
 fn intact_bonds_by_id(p: &Particles) -> Vec<u8> {
     let mut n = vec![0u8; p.len()];
@@ -201,6 +236,67 @@ impl Trajectory {
     /// Frames written so far.
     pub fn frames(&self) -> usize {
         self.frames
+    }
+
+    /// Where the trajectory stands, for a checkpoint: the extended XYZ file is flushed and its
+    /// length recorded, so that a resumed run cuts off what was written after the checkpoint.
+    pub fn save_state(&mut self) -> Result<TrajectoryState> {
+        let extxyz_bytes = match self.w.as_mut() {
+            Some(w) => {
+                w.flush()
+                    .with_context(|| format!("cannot write {}", self.partial.display()))?;
+                Some(w.get_ref().metadata()?.len())
+            }
+            None => None,
+        };
+        Ok(TrajectoryState {
+            extxyz_bytes,
+            vtk: self.vtk.clone(),
+            frames: self.frames,
+            initial_bonds: self.initial_bonds.clone(),
+        })
+    }
+
+    /// The trajectory of a resumed run in `dir`, as [`Self::save_state`] left it: the partial
+    /// extended XYZ file cut back to its length then (an error when it is shorter or missing:
+    /// the frames before the checkpoint are gone, and the run must start again).
+    pub fn resume(dir: &Path, s: TrajectoryState) -> Result<Self> {
+        let path = dir.join(TRAJECTORY_FILE);
+        let partial = dir.join(format!(".{TRAJECTORY_FILE}.partial"));
+        let w = match s.extxyz_bytes {
+            Some(bytes) => {
+                let f = fs::OpenOptions::new()
+                    .write(true)
+                    .open(&partial)
+                    .with_context(|| format!("cannot reopen {}", partial.display()))?;
+                let have = f.metadata()?.len();
+                if have < bytes {
+                    anyhow::bail!(
+                        "{} holds {have} bytes, fewer than the {bytes} of the checkpoint",
+                        partial.display()
+                    );
+                }
+                f.set_len(bytes)?;
+                let mut w = BufWriter::new(f);
+                std::io::Seek::seek(&mut w, std::io::SeekFrom::End(0))?;
+                Some(w)
+            }
+            None => None,
+        };
+        if let Some(vtk) = &s.vtk {
+            if let Some((_, missing)) = vtk.iter().find(|(_, f)| !dir.join(f).is_file()) {
+                anyhow::bail!("the VTK frame {} is missing", dir.join(missing).display());
+            }
+        }
+        Ok(Trajectory {
+            dir: dir.to_path_buf(),
+            partial,
+            path,
+            w,
+            vtk: s.vtk,
+            frames: s.frames,
+            initial_bonds: s.initial_bonds,
+        })
     }
 
     /// Syncs the extended XYZ file and moves it into place as `trajectory.extxyz`; writes the
@@ -463,6 +559,7 @@ fn is_run_file(name: &str) -> bool {
         || (name.starts_with("dump_") && name.ends_with(".xyz")) // earlier versions' dumps
         || name == format!(".{TRAJECTORY_FILE}.partial")
         || name == PVD_FILE
+        || name == crate::checkpoint::CHECKPOINT_FILE
         || (name.starts_with('.') && name.contains(".tmp."))
 }
 

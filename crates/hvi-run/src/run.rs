@@ -11,16 +11,19 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use hvi_engine::cloud::{
-    size_distribution, step_at_tau, CloudObserver, CloudReport, CloudResult, TrackRow,
+    size_distribution, step_at_tau, CloudObserver, CloudReport, CloudResult, ObserverState,
+    TrackRow,
 };
 use hvi_engine::scene::{Derived, RunSettings, SceneSpec};
-use hvi_engine::sim::{Energy, Simulation, Timing};
+use hvi_engine::sim::{Energy, SimState, Simulation, Timing};
 use hvi_engine::EngineError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::{Deserialize, Serialize};
 
+use crate::checkpoint::{self, CheckpointOptions, Every, Found};
 use crate::output::{
     write_atomic_bytes, write_csv_atomic, write_lammps_data, DumpFormat, Trajectory,
+    TrajectoryState,
 };
 use hvi_analysis::observable::{Observable, Observables};
 use hvi_plot::render::{self, Frame, SceneInfo};
@@ -42,10 +45,13 @@ pub struct RunOptions {
     /// Write pictures: the cloud's side view at the end, the 3-D series at
     /// `analysis.render_times_s`, the fragment histogram and the cloud track.
     pub render: bool,
+    /// Write checkpoints there, this often, and resume from one left by the same run
+    /// ([`crate::checkpoint`]); `None`: neither.
+    pub checkpoint: Option<CheckpointOptions>,
 }
 
 /// One row of `energy.csv`.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct EnergyRow {
     /// Simulated time since t = 0, s.
     pub time_s: f64,
@@ -276,6 +282,8 @@ pub struct RunOutcome {
     pub track: Vec<TrackRow>,
     /// The full cloud measurement with every fragment and the labels by id.
     pub cloud: Option<CloudResult>,
+    /// The base step of the checkpoint the run resumed from, if it did.
+    pub resumed_from_step: Option<u64>,
 }
 
 fn row(sim: &Simulation, e: &Energy) -> EnergyRow {
@@ -370,7 +378,7 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     let wall0 = Instant::now();
     let (mut sim, counts) = set_up(spec, opts)?;
     let d = sim.derived;
-    let mut run = Gathered::start(&sim, spec, opts)?;
+    let mut run = Gathered::begin(&mut sim, spec, opts, wall0)?;
     let step_wall = run.step_to_end(&mut sim, spec, opts, counts.particles)?;
     let final_energy = final_energy_row(&mut run.rows, &mut sim, &d);
     let momentum = momentum_summary(&sim, &d);
@@ -381,7 +389,7 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         let n = counts.particles;
         run.render_time += render_pictures(spec, opts, &sim, n, frames, &track, cloud.as_ref())?;
     }
-    let total = wall0.elapsed();
+    let total = run.wall_before + wall0.elapsed();
     let (timing, table) = timing_table(
         &sim.timing,
         analysis_time,
@@ -406,6 +414,10 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     if opts.progress {
         print_end(&summary, &sim, &table);
     }
+    // The run has ended (completed or failed: both are results): its checkpoint is spent.
+    if let Some(c) = &opts.checkpoint {
+        checkpoint::remove(&c.path)?;
+    }
     if let Some(e) = run.failure {
         return Err(anyhow::Error::new(e).context(format!(
             "run stopped early; what it had is in {}",
@@ -418,6 +430,7 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         sim,
         track,
         cloud,
+        resumed_from_step: run.resumed_from,
     })
 }
 
@@ -485,8 +498,8 @@ fn at_multiple(s: u64, every: u64) -> bool {
 }
 
 /// What a run gathers while it steps, besides the simulation's own state: the energy series
-/// and its drift, the cloud observer, the frames to render, the first failure, and the time
-/// spent on files and pictures.
+/// and its drift, the cloud observer, the frames to render, the dumps, the first failure, the
+/// checkpoints and the time spent on files and pictures.
 struct Gathered {
     /// The energy series, `energy.csv`.
     rows: Vec<EnergyRow>,
@@ -502,6 +515,10 @@ struct Gathered {
     capture: bool,
     /// The captured frames.
     frames: Vec<Frame>,
+    /// The dumps (`--dump-every`).
+    trajectory: Option<Trajectory>,
+    /// The base step at or after which the next dump is taken.
+    next_dump: u64,
     /// Ballistic cut-off bookkeeping: broken-bond counts at the energy samples, (tau, count).
     break_history: Vec<(f64, u64)>,
     /// The instability that stopped the run.
@@ -510,21 +527,67 @@ struct Gathered {
     output_time: Duration,
     /// Frame captures and pictures.
     render_time: Duration,
+    /// Checkpoints, when the run writes them.
+    checkpoint: Option<Checkpointer>,
+    /// When this process started the run.
+    wall0: Instant,
+    /// Wall time of the run before the checkpoint it resumed from.
+    wall_before: Duration,
+    /// Wall time of the stepping loop before that checkpoint.
+    loop_before: Duration,
+    /// The base step of the checkpoint the run resumed from.
+    resumed_from: Option<u64>,
+}
+
+/// When a run writes its next checkpoint, and where.
+struct Checkpointer {
+    opts: CheckpointOptions,
+    key: [u8; 32],
+    /// Wall time of the last checkpoint (or of the start).
+    since: Instant,
+    /// With [`Every::Steps`]: the base step at or after which the next one is due.
+    next_step: u64,
+    /// The base step of the last checkpoint written or resumed from.
+    last_step: Option<u64>,
+}
+
+/// What a checkpoint holds ([`crate::checkpoint`]): the simulation's state and everything the
+/// run has gathered up to it.
+#[derive(Serialize, Deserialize)]
+struct Saved {
+    sim: SimState,
+    rows: Vec<EnergyRow>,
+    max_drift: f64,
+    observer: Option<ObserverState>,
+    frames: Vec<Frame>,
+    trajectory: Option<TrajectoryState>,
+    next_dump: u64,
+    break_history: Vec<(f64, u64)>,
+    output_time: Duration,
+    render_time: Duration,
+    wall: Duration,
+    loop_wall: Duration,
+}
+
+/// The key of a run's checkpoint ([`crate::checkpoint::key`]): the scene and the output
+/// choices that shape what the run gathers (frames captured, dumps). A command compares it
+/// with [`crate::checkpoint::key_of`] to know that a run will resume before it clears a
+/// directory.
+pub fn checkpoint_key(spec: &SceneSpec, opts: &RunOptions) -> Result<[u8; 32]> {
+    Ok(checkpoint::key(&serde_json::json!({
+        "scene": serde_json::to_value(spec)?,
+        "render": opts.render,
+        "dump_every": opts.dump_every,
+        "dump_format": format!("{:?}", opts.dump_format),
+    })))
 }
 
 impl Gathered {
-    /// The state at t = 0: the LAMMPS data file when asked for, the first energy sample, the
-    /// cloud's first observation and a frame if one is due at step 0.
-    fn start(sim: &Simulation, spec: &SceneSpec, opts: &RunOptions) -> Result<Self> {
-        let mut output_time = Duration::ZERO;
-        if let Some(path) = &opts.lammps_data {
-            let t = Instant::now();
-            write_lammps_data(path, sim)?;
-            output_time += t.elapsed();
-        }
+    /// Nothing gathered yet: the series empty, the observer and the schedules set up.
+    fn new(sim: &Simulation, spec: &SceneSpec, opts: &RunOptions, wall0: Instant) -> Self {
         let analysis = &spec.analysis;
-        let mut run = Gathered {
-            rows: vec![row(sim, &sim.energy_initial)],
+        Gathered {
+            rows: Vec::new(),
             e0: sim.energy_initial.total_j(),
             max_drift: 0.0,
             observer: (analysis.cloud || analysis.track_every > 0)
@@ -532,20 +595,193 @@ impl Gathered {
             render_steps: render_steps(spec, &sim.derived, opts),
             capture: opts.render,
             frames: Vec::new(),
+            trajectory: None,
+            next_dump: opts.dump_every.unwrap_or(u64::MAX),
             break_history: Vec::new(),
             failure: None,
-            output_time,
+            output_time: Duration::ZERO,
             render_time: Duration::ZERO,
-        };
+            checkpoint: None,
+            wall0,
+            wall_before: Duration::ZERO,
+            loop_before: Duration::ZERO,
+            resumed_from: None,
+        }
+    }
+
+    /// The run's start: from its checkpoint when it left one ([`Self::resume`]), else at
+    /// t = 0: the LAMMPS data file when asked for, the first energy sample, the cloud's first
+    /// observation, a frame if one is due at step 0 and the first dump.
+    fn begin(
+        sim: &mut Simulation,
+        spec: &SceneSpec,
+        opts: &RunOptions,
+        wall0: Instant,
+    ) -> Result<Self> {
+        let mut run = Gathered::new(sim, spec, opts, wall0);
+        if let Some(c) = &opts.checkpoint {
+            let every = c.every;
+            run.checkpoint = Some(Checkpointer {
+                opts: c.clone(),
+                key: checkpoint_key(spec, opts)?,
+                since: Instant::now(),
+                next_step: match every {
+                    Every::Steps(k) => k,
+                    _ => u64::MAX,
+                },
+                last_step: None,
+            });
+            if run.resume(sim, opts)? {
+                return Ok(run);
+            }
+        }
+        let t = Instant::now();
+        if let Some(path) = &opts.lammps_data {
+            write_lammps_data(path, sim)?;
+        }
+        run.rows.push(row(sim, &sim.energy_initial));
+        if let Some(every) = opts.dump_every {
+            let mut trajectory = Trajectory::create(&opts.out_dir, sim, opts.dump_format)?;
+            trajectory.frame(sim, 0)?;
+            run.trajectory = Some(trajectory);
+            run.next_dump = every;
+        }
+        run.output_time += t.elapsed();
         run.observe(sim);
         Ok(run)
+    }
+
+    /// Takes up the run from its checkpoint, if it left one: true when it did. A checkpoint of
+    /// another run, a damaged one, or one whose dumps are gone is reported on stderr and
+    /// removed, and the run starts from t = 0 (`sim` untouched).
+    fn resume(&mut self, sim: &mut Simulation, opts: &RunOptions) -> Result<bool> {
+        let Some(c) = self.checkpoint.as_mut() else {
+            return Ok(false);
+        };
+        let path = c.opts.path.clone();
+        let start_over = |why: String| -> Result<bool> {
+            eprintln!(
+                "checkpoint {}: {why}; the run starts from t = 0",
+                path.display()
+            );
+            checkpoint::remove(&path)?;
+            Ok(false)
+        };
+        // What killed processes left half-written beside the checkpoint.
+        if let Some(parent) = path.parent() {
+            let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+            crate::output::remove_stale_partials(parent, name.as_deref())?;
+        }
+        let (step, saved) = match checkpoint::read::<Saved>(&path, &c.key)? {
+            Found::Nothing => return Ok(false),
+            Found::OtherRun => {
+                return start_over(
+                    "it is another run's (another scene, hvi-study version or output flags)".into(),
+                )
+            }
+            Found::Damaged(why) => return start_over(format!("damaged ({why})")),
+            Found::Resume { step, payload } => (step, payload),
+        };
+        let trajectory = match saved.trajectory {
+            Some(t) => match Trajectory::resume(&opts.out_dir, t) {
+                Ok(t) => Some(t),
+                Err(e) => return start_over(format!("its dumps cannot be continued ({e:#})")),
+            },
+            None => None,
+        };
+        if let Err(e) = sim.restore_state(saved.sim) {
+            return start_over(e.to_string());
+        }
+        // The run's own files that a kill left half-written (dumps, pictures, tables).
+        crate::output::remove_stale_partials(&opts.out_dir, None)?;
+        crate::output::remove_stale_partials(&opts.out_dir.join(crate::output::VTK_DIR), None)?;
+        if let Every::Steps(k) = c.opts.every {
+            c.next_step = next_multiple(step, k);
+        }
+        c.last_step = Some(step);
+        self.rows = saved.rows;
+        self.e0 = sim.energy_initial.total_j();
+        self.max_drift = saved.max_drift;
+        if let (Some(o), Some(state)) = (self.observer.as_mut(), saved.observer) {
+            o.restore_state(state);
+        }
+        self.frames = saved.frames;
+        self.trajectory = trajectory;
+        self.next_dump = saved.next_dump;
+        self.break_history = saved.break_history;
+        self.output_time = saved.output_time;
+        self.render_time = saved.render_time;
+        self.wall_before = saved.wall;
+        self.loop_before = saved.loop_wall;
+        self.resumed_from = Some(step);
+        if opts.progress {
+            eprintln!(
+                "resuming from checkpoint {} at base step {step} of {} (tau = {:.3} us)",
+                path.display(),
+                sim.derived.steps,
+                sim.tau_s() * 1e6
+            );
+        }
+        Ok(true)
+    }
+
+    /// Writes a checkpoint of the run now (a landing), unless it has one of this step.
+    fn save(&mut self, sim: &Simulation, loop_wall: Duration) -> Result<()> {
+        let Some(c) = self.checkpoint.as_ref() else {
+            return Ok(());
+        };
+        if sim.step == 0 || c.last_step == Some(sim.step) {
+            return Ok(());
+        }
+        let t = Instant::now();
+        let trajectory = match self.trajectory.as_mut() {
+            Some(t) => Some(t.save_state()?),
+            None => None,
+        };
+        let saved = Saved {
+            sim: sim.save_state(),
+            rows: self.rows.clone(),
+            max_drift: self.max_drift,
+            observer: self.observer.as_ref().map(CloudObserver::save_state),
+            frames: self.frames.clone(),
+            trajectory,
+            next_dump: self.next_dump,
+            break_history: self.break_history.clone(),
+            output_time: self.output_time,
+            render_time: self.render_time,
+            wall: self.wall_before + self.wall0.elapsed(),
+            loop_wall: self.loop_before + loop_wall,
+        };
+        checkpoint::write(&c.opts.path, &c.key, sim.step, &saved)?;
+        if let Some(c) = self.checkpoint.as_mut() {
+            c.since = Instant::now();
+            c.last_step = Some(sim.step);
+            if let Every::Steps(k) = c.opts.every {
+                c.next_step = next_multiple(sim.step, k);
+            }
+        }
+        self.output_time += t.elapsed();
+        Ok(())
+    }
+
+    /// Whether a checkpoint is due at base step `s` by the interval.
+    fn checkpoint_due(&self, s: u64) -> bool {
+        self.checkpoint
+            .as_ref()
+            .is_some_and(|c| match c.opts.every {
+                Every::Off => false,
+                Every::Wall(d) => c.since.elapsed() >= d,
+                Every::Steps(_) => s >= c.next_step,
+            })
     }
 
     /// Steps `sim` to the end of the run, landing on every time the scene samples (energy
     /// samples, cloud samples, render times), and stops at the first instability (kept in
     /// `failure`). Dumps (`--dump-every K`) are taken at the first step at or after each
-    /// multiple of K, never landed on, so asking for them does not change the trajectory. Returns the stepping wall time without the cloud observation and frame
-    /// captures, s: the engine's throughput.
+    /// multiple of K, never landed on, so asking for them does not change the trajectory.
+    /// Checkpoints are written between steps when due, and when a signal stops the run.
+    /// Returns the stepping wall time without the cloud observation and frame captures, s:
+    /// the engine's throughput.
     fn step_to_end(
         &mut self,
         sim: &mut Simulation,
@@ -559,18 +795,18 @@ impl Gathered {
         let dump_every = opts.dump_every.unwrap_or(0);
         let energy_every = spec.run.energy_every;
         let step_wall0 = Instant::now();
-        let mut trajectory = match dump_every {
-            0 => None,
-            _ => Some(Trajectory::create(&opts.out_dir, sim, opts.dump_format)?),
-        };
-        if let Some(t) = trajectory.as_mut() {
-            self.dump(t, sim, 0)?;
-        }
-        let mut next_thermo = thermo_every;
-        let mut next_dump = if dump_every > 0 { dump_every } else { u64::MAX };
+        let from = (sim.step, sim.steps_taken);
+        let mut next_thermo = next_multiple(sim.step, thermo_every);
         while sim.step < d.steps {
-            // Ctrl-C or SIGTERM: stop here (the caller removes what the run wrote).
-            crate::interrupt::check()?;
+            // Ctrl-C or SIGTERM: stop here, after a checkpoint when the run writes them (the
+            // caller removes what else the run wrote).
+            if let Some(sig) = crate::interrupt::requested() {
+                self.save(sim, step_wall0.elapsed())?;
+                return Err(crate::interrupt::Interrupted(sig).into());
+            }
+            if self.checkpoint_due(sim.step) {
+                self.save(sim, step_wall0.elapsed())?;
+            }
             let next = self.next_landing(sim.step, d.steps, energy_every);
             if let Err(e) = sim.step_until(next) {
                 self.failure = Some(e);
@@ -587,29 +823,25 @@ impl Gathered {
                 self.consider_cutoff(sim, &spec.run, opts.progress);
             }
             self.observe(sim);
-            if let Some(t) = trajectory
-                .as_mut()
-                .filter(|_| s >= next_dump || s == d.steps)
-            {
-                next_dump = next_multiple(s, dump_every);
-                self.dump(t, sim, s)?;
+            if self.trajectory.is_some() && (s >= self.next_dump || s == d.steps) {
+                self.next_dump = next_multiple(s, dump_every);
+                self.dump(sim, s)?;
             }
             if opts.progress && (s >= next_thermo || s == d.steps) {
                 next_thermo = next_multiple(s, thermo_every);
-                self.output_time += thermo(bar.as_ref(), sim, n, d.steps, step_wall0);
+                self.output_time += thermo(bar.as_ref(), sim, n, from, step_wall0);
             }
         }
         if let Some(b) = &bar {
             b.finish_and_clear();
         }
-        if let Some(t) = trajectory {
+        if let Some(t) = self.trajectory.take() {
             let t0 = Instant::now();
             t.finish()?;
             self.output_time += t0.elapsed();
         }
         let observed_in_loop = self.observer.as_ref().map_or(Duration::ZERO, |o| o.elapsed);
-        Ok(step_wall0
-            .elapsed()
+        Ok((self.loop_before + step_wall0.elapsed())
             .saturating_sub(observed_in_loop + self.render_time)
             .as_secs_f64())
     }
@@ -695,9 +927,11 @@ impl Gathered {
     }
 
     /// Appends the state at base step `step` to the trajectory.
-    fn dump(&mut self, trajectory: &mut Trajectory, sim: &Simulation, step: u64) -> Result<()> {
+    fn dump(&mut self, sim: &Simulation, step: u64) -> Result<()> {
         let t = Instant::now();
-        trajectory.frame(sim, step)?;
+        if let Some(trajectory) = self.trajectory.as_mut() {
+            trajectory.frame(sim, step)?;
+        }
         self.output_time += t.elapsed();
         Ok(())
     }
@@ -731,20 +965,21 @@ fn progress_bar(opts: &RunOptions, steps: u64) -> Option<ProgressBar> {
     }
 }
 
-/// One thermo line (time, throughput since `since`, bonds broken) on the progress bar when
+/// One thermo line (time, throughput since `since`, when the run stood at `from` = (base
+/// step, steps taken), bonds broken) on the progress bar when
 /// there is one, else on stderr; returns the time it took.
 fn thermo(
     bar: Option<&ProgressBar>,
     sim: &Simulation,
     n: usize,
-    steps: u64,
+    from: (u64, u64),
     since: Instant,
 ) -> Duration {
-    let s = sim.step;
+    let (s, steps) = (sim.step, sim.derived.steps);
     let t = Instant::now();
     let el = since.elapsed().as_secs_f64();
-    let rate = n as f64 * sim.steps_taken as f64 / el.max(1e-9);
-    let eta = (steps - s) as f64 * el / (s as f64).max(1.0);
+    let rate = n as f64 * (sim.steps_taken - from.1) as f64 / el.max(1e-9);
+    let eta = (steps - s) as f64 * el / ((s - from.0) as f64).max(1.0);
     let msg = format!(
         "tau {:7.3} us  {:6.2} M particle-steps/s  bonds broken {}  ",
         sim.tau_s() * 1e6,

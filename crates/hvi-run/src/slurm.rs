@@ -35,6 +35,10 @@ use crate::plan::describe_values;
 use crate::plan::Plan;
 use crate::store::{RunStatus, Store};
 
+/// Seconds before a task's time limit at which Slurm sends it SIGTERM (`--signal`), so that
+/// its run writes a checkpoint ([`crate::checkpoint`]).
+pub const SIGNAL_BEFORE_LIMIT_S: u32 = 120;
+
 /// How `submit --slurm` asks Slurm to run a study's missing runs.
 #[derive(Debug, Clone, Default)]
 pub struct SlurmOptions {
@@ -356,6 +360,8 @@ pub struct ScriptSpec {
     pub time: Option<String>,
     /// Further `#SBATCH` options.
     pub extra: Vec<String>,
+    /// The runs' checkpoint interval (`run-unit --checkpoint-every`).
+    pub checkpoint_every: crate::checkpoint::Every,
     /// The study directory (absolute): the run store, and the tasks' working directory.
     pub study_dir: PathBuf,
     /// The submission's directory (absolute): tasks file, plan, logs.
@@ -385,6 +391,11 @@ impl ScriptSpec {
             sbatch_path(&self.submission_dir.join("task-%a.log"))
         ));
         o.push(format!("--chdir={}", sbatch_path(&self.study_dir)));
+        // SIGTERM to the task (the batch shell execs run-unit) two minutes before its time
+        // limit: the run writes a checkpoint and the next submission resumes from it.
+        if self.checkpoint_every != crate::checkpoint::Every::Off {
+            o.push(format!("--signal=B:TERM@{SIGNAL_BEFORE_LIMIT_S}"));
+        }
         o.extend(self.extra.iter().cloned());
         o
     }
@@ -408,13 +419,14 @@ if [ -z "$index" ]; then
     exit 2
 fi
 echo "job ${{SLURM_ARRAY_JOB_ID:-?}} task $SLURM_ARRAY_TASK_ID: run $index on $(hostname)"
-exec {exe} run-unit {plan} "$index" --study-dir {dir} --threads "${{SLURM_CPUS_PER_TASK:-{cpus}}}"
+exec {exe} run-unit {plan} "$index" --study-dir {dir} --threads "${{SLURM_CPUS_PER_TASK:-{cpus}}}" --checkpoint-every {every}
 "#,
             tasks = sh_quote(&tasks.display().to_string()),
             exe = sh_quote(&self.exe.display().to_string()),
             plan = sh_quote(&plan.display().to_string()),
             dir = sh_quote(&self.study_dir.display().to_string()),
             cpus = self.cpus_per_task,
+            every = self.checkpoint_every,
         );
         s
     }
@@ -697,6 +709,7 @@ pub fn submit(plan: &Plan, out: &Path, opts: &SlurmOptions) -> Result<()> {
         partition: opts.partition.clone(),
         time: opts.time.clone(),
         extra: opts.sbatch_options.clone(),
+        checkpoint_every: crate::checkpoint::interval(),
         study_dir: study_dir.clone(),
         submission_dir: sub_dir.clone(),
         exe,
@@ -854,6 +867,7 @@ mod tests {
             partition: Some("short".into()),
             time: Some("1:00:00".into()),
             extra: vec!["--account=p42".into()],
+            checkpoint_every: crate::checkpoint::Every::Wall(std::time::Duration::from_secs(300)),
             study_dir: PathBuf::from("/scratch/it's here"),
             submission_dir: PathBuf::from("/scratch/it's here/slurm/submission-001"),
             exe: PathBuf::from("/opt/hvi/bin/hvi-study"),
@@ -866,9 +880,10 @@ mod tests {
             "#SBATCH --partition=short",
             "#SBATCH --time=1:00:00",
             "#SBATCH --account=p42",
+            "#SBATCH --signal=B:TERM@120",
             "#SBATCH --output=\"/scratch/it's here/slurm/submission-001/task-%a.log\"",
             "tasks='/scratch/it'\\''s here/slurm/submission-001/tasks.txt'",
-            "exec '/opt/hvi/bin/hvi-study' run-unit '/scratch/it'\\''s here/slurm/submission-001/plan.json' \"$index\" --study-dir '/scratch/it'\\''s here' --threads \"${SLURM_CPUS_PER_TASK:-3}\"",
+            "exec '/opt/hvi/bin/hvi-study' run-unit '/scratch/it'\\''s here/slurm/submission-001/plan.json' \"$index\" --study-dir '/scratch/it'\\''s here' --threads \"${SLURM_CPUS_PER_TASK:-3}\" --checkpoint-every 300s",
         ] {
             assert!(s.lines().any(|l| l == line), "no line {line} in\n{s}");
         }

@@ -9,6 +9,8 @@
 //!     energy.csv, cloud_track.csv, fragments.csv, cloud_side.png and the other pictures
 //!     state.bin        the cloud's kept state (hvi_run::state), for `hvi-study reanalyse`
 //! runs/.tmp-<digits>-<pid>-<n>-<host>/   a run in progress
+//! runs/.lock-<digits>                     its lock (hvi_run::lock)
+//! runs/.checkpoint-<digits>.bin           its last checkpoint (hvi_run::checkpoint)
 //! ```
 //!
 //! A run works in a temporary directory and, once `record.json` is written and synced, renames
@@ -18,6 +20,11 @@
 //! process id only means something on the host that made the directory, so only that host's
 //! leftovers are judged and removed. A directory whose `record.json` names another fingerprint
 //! is refused, never reused.
+//!
+//! A long run also writes checkpoints beside its lock ([`crate::checkpoint`], every
+//! [`crate::checkpoint::interval`] and when a signal stops it): a run killed mid-way resumes
+//! from its last checkpoint in a new temporary directory and ends as it would have, and the
+//! checkpoint is removed once the run is stored.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -301,6 +308,31 @@ impl Store {
             .join(&fingerprint[..DIR_DIGITS.min(fingerprint.len())])
     }
 
+    /// The checkpoint file of a run in progress ([`crate::checkpoint`]).
+    pub fn checkpoint_path(&self, fingerprint: &str) -> PathBuf {
+        self.runs.join(format!(
+            ".checkpoint-{}.bin",
+            &fingerprint[..DIR_DIGITS.min(fingerprint.len())]
+        ))
+    }
+
+    /// The runs with a checkpoint (killed or stopped mid-way, or in progress): their
+    /// fingerprints' first digits.
+    pub fn checkpointed(&self) -> Result<Vec<String>> {
+        let mut v = Vec::new();
+        for entry in fs::read_dir(&self.runs)? {
+            let name = entry?.file_name().to_string_lossy().into_owned();
+            if let Some(d) = name
+                .strip_prefix(".checkpoint-")
+                .and_then(|r| r.strip_suffix(".bin"))
+            {
+                v.push(d.to_string());
+            }
+        }
+        v.sort();
+        Ok(v)
+    }
+
     /// The record of a finished run, if there is one. A damaged run (a directory without
     /// `record.json`, a record that does not parse, or one whose checksum does not match its
     /// content) is moved aside to `runs/damaged-<digits>-<time>-<pid>` (kept for inspection,
@@ -429,15 +461,33 @@ impl Store {
             .build()
             .context("cannot start worker threads")?;
         // Pictures too (cloud_side.png feeds the snapshot matrices): about 1 % of a run.
+        let every = crate::checkpoint::interval();
+        let checkpoint = (every != crate::checkpoint::Every::Off).then(|| {
+            crate::checkpoint::CheckpointOptions {
+                path: self.checkpoint_path(&job.fingerprint),
+                every,
+            }
+        });
         let opts = RunOptions {
             out_dir: tmp.clone(),
             progress: false,
             render: true,
+            checkpoint,
             ..RunOptions::default()
         };
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            pool.install(|| run_scene(&job.scene, &opts).map(|_| ()))
+            pool.install(|| run_scene(&job.scene, &opts).map(|o| o.resumed_from_step))
         }));
+        if let Ok(Ok(Some(step))) = &outcome {
+            eprintln!(
+                "run store: run {} resumed from its checkpoint at base step {step}",
+                &job.fingerprint[..DIR_DIGITS.min(job.fingerprint.len())]
+            );
+        }
+        if outcome.is_err() {
+            // A panic: its checkpoint may hold what caused it; the run starts afresh.
+            let _ = crate::checkpoint::remove(&self.checkpoint_path(&job.fingerprint));
+        }
         if let Ok(Err(e)) = &outcome {
             if let Some(stop) = crate::interrupt::of(e) {
                 // Stopped by a signal: nothing of it is kept, and it is not a failure (the
@@ -447,7 +497,7 @@ impl Store {
             }
         }
         let error = match outcome {
-            Ok(Ok(())) => None,
+            Ok(Ok(_)) => None,
             // The run wrote into the temporary directory; its message names the final one.
             Ok(Err(e)) => Some(format!("{e:#}").replace(
                 &tmp.display().to_string(),

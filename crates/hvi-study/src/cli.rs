@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use hvi_run::checkpoint::Every;
 use hvi_run::exec::ExecOptions;
 use hvi_run::plan::{build_plan, Plan, PlanRequest};
 use hvi_run::slurm::SlurmOptions;
@@ -105,6 +106,11 @@ pub struct StudyArgs {
     /// Runs at once (default: as many as threads; the rest of the threads go inside runs).
     #[arg(long)]
     pub jobs: Option<usize>,
+    /// Each run writes a checkpoint this often (wall time: 90s, 10m, 2h; or base steps:
+    /// 5000steps; or `off`) and when Ctrl-C or SIGTERM stops it; a run killed mid-way resumes
+    /// from its last one, bit-identical.
+    #[arg(long, value_name = "EVERY", default_value = "10m")]
+    pub checkpoint_every: Every,
     /// No progress output.
     #[arg(long)]
     pub quiet: bool,
@@ -226,6 +232,7 @@ impl StoreArgs {
             out: self.out.clone(),
             threads: None,
             jobs: None,
+            checkpoint_every: Every::default(),
             quiet: self.quiet,
         }
     }
@@ -467,6 +474,11 @@ pub struct RunArgs {
     /// (3-D views at analysis.render_times_s, Fig. 12), fragments.png, cloud_track.png.
     #[arg(long)]
     pub render: bool,
+    /// Write --out/checkpoint.bin this often (wall time: 90s, 10m, 2h; or base steps:
+    /// 5000steps; or `off`) and when Ctrl-C or SIGTERM stops the run. The same command again
+    /// resumes from it and ends bit-identical to a run never stopped.
+    #[arg(long, value_name = "EVERY", default_value = "10m")]
+    pub checkpoint_every: Every,
 }
 
 /// `hvi-study completions` arguments.
@@ -584,4 +596,8 @@ pub struct RunUnitArgs {
     /// directory; `submit --slurm` runs frozen copies of the plan kept beside its scripts).
     #[arg(long, value_name = "DIR")]
     pub study_dir: Option<PathBuf>,
+    /// The run writes a checkpoint this often (as for `sweep`) and when SIGTERM stops it
+    /// (Slurm's `--signal` before a time limit); a task run again resumes from it.
+    #[arg(long, value_name = "EVERY", default_value = "10m")]
+    pub checkpoint_every: Every,
 }

@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use hvi_run::checkpoint::{CheckpointOptions, Every};
 use hvi_run::run::{run_scene, RunOptions};
 use hvi_run::scene_file::load_scene;
 
@@ -15,6 +16,18 @@ use crate::cli::{
 
 /// Runs one subcommand.
 pub fn dispatch(command: Command) -> Result<()> {
+    // The checkpoint interval of every run a study store computes in this process.
+    let every = match &command {
+        Command::Plan(a) | Command::Sweep(a) => Some(a.checkpoint_every),
+        Command::Calibrate(a) => Some(a.study.checkpoint_every),
+        Command::ValidityMap(a) => Some(a.study.checkpoint_every),
+        Command::Submit(a) => Some(a.study.checkpoint_every),
+        Command::RunUnit(a) => Some(a.checkpoint_every),
+        _ => None,
+    };
+    if let Some(every) = every {
+        hvi_run::checkpoint::set_interval(every);
+    }
     match command {
         Command::Run(args) => run(args),
         Command::Keys(args) => {
@@ -168,7 +181,29 @@ fn run(args: RunArgs) -> Result<()> {
         .filter(|p| p.parent() == Some(args.out.as_path()))
         .filter_map(|p| p.file_name())
         .collect();
-    let removed = hvi_run::output::clear_run_dir(&args.out, &keep)?;
+    let opts = RunOptions {
+        out_dir: args.out.clone(),
+        dump_every: args.dump_every,
+        dump_format: args.dump_format.into(),
+        lammps_data: args.lammps_data.clone(),
+        progress: !args.quiet,
+        render: args.render,
+        checkpoint: (args.checkpoint_every != Every::Off).then(|| CheckpointOptions {
+            path: args.out.join(hvi_run::checkpoint::CHECKPOINT_FILE),
+            every: args.checkpoint_every,
+        }),
+    };
+    // A run that left a checkpoint here resumes: what it wrote stays (run_scene checks the
+    // checkpoint whole and starts from t = 0 if it is not).
+    let key = hvi_run::run::checkpoint_key(&spec, &opts)?;
+    let resumes = opts
+        .checkpoint
+        .as_ref()
+        .is_some_and(|c| hvi_run::checkpoint::key_of(&c.path) == Some(key));
+    let removed = match resumes {
+        true => Vec::new(),
+        false => hvi_run::output::clear_run_dir(&args.out, &keep)?,
+    };
     if !removed.is_empty() && !args.quiet {
         eprintln!(
             "{} held an earlier run: removed its {} files ({})",
@@ -177,14 +212,6 @@ fn run(args: RunArgs) -> Result<()> {
             removed.join(", ")
         );
     }
-    let opts = RunOptions {
-        out_dir: args.out.clone(),
-        dump_every: args.dump_every,
-        dump_format: args.dump_format.into(),
-        lammps_data: args.lammps_data,
-        progress: !args.quiet,
-        render: args.render,
-    };
     pool.install(|| run_scene(&spec, &opts))?;
     println!("{}", args.out.join("summary.json").display());
     Ok(())

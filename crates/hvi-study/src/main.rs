@@ -17,9 +17,10 @@ fn main() -> ExitCode {
         Err(e) if hvi_run::interrupt::of(&e).is_some() => {
             let stop = hvi_run::interrupt::of(&e).expect("checked");
             eprintln!(
-                "{stop}: the runs in progress stopped and left nothing; a study's finished runs \
-                 are kept in its store: run the same command again to resume (nothing finished \
-                 runs again)"
+                "{stop}: the runs in progress stopped at a checkpoint (unless \
+                 --checkpoint-every off) and left no partial result; finished runs are kept: run \
+                 the same command again to resume (nothing finished runs again, a checkpointed \
+                 run continues where it stopped)"
             );
             ExitCode::from(stop.exit_code())
         }

@@ -138,6 +138,7 @@ fn run_slice(args: &StabilityArgs, file: &Path) -> Result<Slice> {
         out: Some(args.store.join(&stem)),
         threads: args.threads,
         jobs: None,
+        checkpoint_every: hvi_run::checkpoint::interval(),
         quiet: args.quiet,
     };
     let (study, plan, out) = study_args.plan()?;

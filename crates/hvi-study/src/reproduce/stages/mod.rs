@@ -90,6 +90,7 @@ impl Ctx {
             out: Some(dir.to_path_buf()),
             threads: self.threads,
             jobs: self.jobs,
+            checkpoint_every: hvi_run::checkpoint::interval(),
             quiet: self.quiet,
         }
     }
