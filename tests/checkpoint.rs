@@ -357,6 +357,21 @@ fn a_study_run_killed_or_stopped_mid_way_resumes_from_its_checkpoint() {
         );
         assert_eq!(store_checkpoints(&out).len(), 1, "the checkpoint stays");
     }
+    // `status` says where the run stands.
+    let o = bin()
+        .arg("status")
+        .arg(&study)
+        .arg("--out")
+        .arg(&out)
+        .arg("--verbose")
+        .output()
+        .expect("runs");
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        text.contains("stopped mid-way; resumes from its checkpoint at base step"),
+        "{text}"
+    );
     let o = sweep(&study, &out)
         .stderr(Stdio::piped())
         .output()

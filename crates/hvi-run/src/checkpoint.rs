@@ -200,14 +200,23 @@ pub fn write<T: Serialize>(path: &Path, key: &[u8; 32], step: u64, payload: &T) 
     write_atomic_bytes(path, &bytes)
 }
 
-/// The header's key, if `path` is a checkpoint of this format (cheap: reads 64 bytes).
-pub fn key_of(path: &Path) -> Option<[u8; 32]> {
+/// The header of the checkpoint at `path`, if it is one of this format: (key, base step).
+/// Cheap (64 bytes read); the content is checked only by [`read`].
+pub fn header_of(path: &Path) -> Option<([u8; 32], u64)> {
     use std::io::Read;
     let mut head = [0u8; HEADER_BYTES];
     std::fs::File::open(path).ok()?.read_exact(&mut head).ok()?;
-    (head[..8] == MAGIC && head[8..12] == FORMAT_VERSION.to_le_bytes())
-        .then(|| head[16..48].try_into().ok())
-        .flatten()
+    if head[..8] != MAGIC || head[8..12] != FORMAT_VERSION.to_le_bytes() {
+        return None;
+    }
+    let key = head[16..48].try_into().ok()?;
+    let step = u64::from_le_bytes(head[48..56].try_into().ok()?);
+    Some((key, step))
+}
+
+/// The header's key, if `path` is a checkpoint of this format ([`header_of`]).
+pub fn key_of(path: &Path) -> Option<[u8; 32]> {
+    header_of(path).map(|h| h.0)
 }
 
 /// Reads the checkpoint at `path` for the run with `key`: checked whole (length, checksum,
@@ -304,6 +313,7 @@ mod tests {
         let payload = vec![0.1, f64::NAN, -0.0, 1e-300];
         write(&path, &k, 42, &payload).expect("writes");
         assert_eq!(key_of(&path), Some(k));
+        assert_eq!(header_of(&path), Some((k, 42)));
         match read::<Vec<f64>>(&path, &k).expect("reads") {
             Found::Resume { step, payload: p } => {
                 assert_eq!(step, 42);

@@ -136,14 +136,24 @@ pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
         } else if let Some(r) = &record {
             RunState::Failed(r.error.clone().unwrap_or_default())
         } else {
+            let checkpoint = hvi_run::checkpoint::header_of(
+                &store.checkpoint_path(&run.fingerprint),
+            )
+            .map(|(_, step)| {
+                format!("stopped mid-way; resumes from its checkpoint at base step {step}")
+            });
+            let ended = queue.ended_task(&run.fingerprint).map(|(job, task, log)| {
+                format!(
+                    "Slurm job {job} task {task} ended without a result: see {}",
+                    log.display()
+                )
+            });
             RunState::Pending {
                 queued: None,
-                note: queue.ended_task(&run.fingerprint).map(|(job, task, log)| {
-                    format!(
-                        "Slurm job {job} task {task} ended without a result: see {}",
-                        log.display()
-                    )
-                }),
+                note: match (ended, checkpoint) {
+                    (Some(e), Some(c)) => Some(format!("{e}; {c}")),
+                    (e, c) => e.or(c),
+                },
             }
         };
         runs.push((record, state));
