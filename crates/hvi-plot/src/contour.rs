@@ -13,11 +13,14 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::render::round_ticks;
 use crate::save::{encode_png, write_atomic_bytes};
 use crate::theme::{
-    font, fonts, line_key, series_legend, subtitle, LegendStyle, ThemedAxes, AXIS_TEXT, FAMILY,
+    font, fonts, line_key, series_legend, subtitle, text_style, LegendStyle, ThemedAxes, AXIS_TEXT,
+    FAMILY,
 };
 use hvi_analysis::contour::{Field, Point};
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 /// The legend of a contour map: a lighter box with a black border over the field.
 const MAP_LEGEND: LegendStyle = LegendStyle {
@@ -423,7 +426,7 @@ where
 }
 
 /// The colour bar beside the map: the colours from the smallest value (bottom) to the
-/// largest, five value labels, the highlighted level in red, the value's name on top.
+/// largest, labels at round values, the highlighted level in red, the value's name on top.
 fn colour_bar<DB: DrawingBackend>(
     bar: &DrawingArea<DB, Shift>,
     p: &ContourPlot,
@@ -446,10 +449,17 @@ where
         ))?;
     }
     bar.draw(&Rectangle::new([(left, top), (left + 28, bottom)], BLACK))?;
-    for k in 0..=4 {
-        let z = frame.zmin + frame.zspan * k as f64 / 4.0;
-        let y = bottom - ((bottom - top) as f64 * k as f64 / 4.0) as i32;
-        bar.draw(&Text::new(tick(z, false), (left + 34, y - 8), font(15)))?;
+    for z in round_ticks(frame.zmin, frame.zmax, 4.0) {
+        let y = bottom - ((bottom - top) as f64 * frame.norm(z)) as i32;
+        bar.draw(&PathElement::new(
+            vec![(left + 28, y), (left + 33, y)],
+            BLACK,
+        ))?;
+        bar.draw(&Text::new(
+            tick(z, false),
+            (left + 37, y),
+            text_style(15.0).pos(Pos::new(HPos::Left, VPos::Center)),
+        ))?;
     }
     if let Some((level, _)) = &p.highlight {
         if *level >= frame.zmin && *level <= frame.zmax {

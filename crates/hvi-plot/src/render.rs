@@ -142,8 +142,8 @@ fn thousands(n: usize) -> String {
     out
 }
 
-/// A length for a scale bar: 1, 2 or 5 times a power of ten, near `target`.
-fn nice_length(target: f64) -> f64 {
+/// A length for a scale bar or a tick step: 1, 2 or 5 times a power of ten, near `target`.
+pub(crate) fn nice_length(target: f64) -> f64 {
     if !(target > 0.0 && target.is_finite()) {
         return 1.0;
     }
@@ -158,6 +158,18 @@ fn nice_length(target: f64) -> f64 {
     } else {
         10.0
     }
+}
+
+/// Round tick values within `[lo, hi]`: multiples of a step of 1, 2 or 5 times a power of ten,
+/// about `n` of them.
+pub(crate) fn round_ticks(lo: f64, hi: f64, n: f64) -> Vec<f64> {
+    if !(hi > lo && lo.is_finite() && hi.is_finite()) {
+        return vec![lo];
+    }
+    let step = nice_length((hi - lo) / n);
+    let first = (lo / step - 1e-9).ceil() as i64;
+    let last = (hi / step + 1e-9).floor() as i64;
+    (first..=last).map(|k| k as f64 * step).collect()
 }
 
 fn format_mm(mm: f64) -> String {
@@ -291,5 +303,17 @@ mod tests {
         assert_eq!(nice_length(0.9), 1.0);
         assert_eq!(nice_length(42.0), 50.0);
         assert_eq!(nice_length(130.0), 100.0);
+    }
+
+    #[test]
+    fn ticks_are_round_and_inside() {
+        assert_eq!(
+            round_ticks(-12.0, 230.0, 5.0),
+            vec![0.0, 50.0, 100.0, 150.0, 200.0]
+        );
+        assert_eq!(round_ticks(-64.0, 64.0, 6.0).len(), 7);
+        let t = round_ticks(1.516, 6.36, 4.0);
+        assert_eq!(t, vec![2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(round_ticks(1.0, 1.0, 4.0), vec![1.0]);
     }
 }

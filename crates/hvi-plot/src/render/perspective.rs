@@ -1,5 +1,6 @@
-//! The 3-D perspective series (Fig. 12): one view per frame, each framed on its particles,
-//! with the original plate, a scale bar and the impact direction.
+//! The 3-D perspective series (Fig. 12): one view per frame, all from the same camera at the
+//! same scale (framed on every frame's particles, so the cloud visibly grows), with the
+//! original plate, a scale bar and the impact direction.
 
 use std::path::Path;
 
@@ -62,53 +63,71 @@ struct View {
 }
 
 impl View {
-    /// The view of `f` in panel (col, row) of panels `pw` x `ph` px under a title band
-    /// `title_h` high: the camera looks at the middle of 0.1 % .. 99.9 % of the particles
-    /// along each axis, and the screen box of the same share fills the panel.
-    fn framing(
-        f: &Frame,
-        (col, row): (u32, u32),
-        (pw, ph): (u32, u32),
-        title_h: u32,
-        info: &SceneInfo,
-    ) -> View {
-        let n = f.pos.len();
-        let axis = |a: usize| {
-            let v: Vec<f64> = (0..n).map(|i| f.pos[i][a] as f64).collect();
-            trimmed_range(v, 0.001, 0.999).unwrap_or((0.0, 1.0))
-        };
-        let (bx, by, bz) = (axis(0), axis(1), axis(2));
-        let lo = DVec3::new(bx.0, by.0, bz.0);
-        let hi = DVec3::new(bx.1, by.1, bz.1);
-        let centre = 0.5 * (lo + hi);
-        let radius = (0.5 * (hi - lo).length()).max(info.r_eq_m);
-        let camera = Camera::new(centre, 3.2 * radius, VIEW_AZIMUTH_DEG, VIEW_ELEVATION_DEG);
-        let mut sx = Vec::with_capacity(n);
-        let mut sy = Vec::with_capacity(n);
-        for i in 0..n {
-            if let Some((x, y, _)) = camera.project(f.point(i)) {
-                sx.push(x);
-                sy.push(y);
+    /// One view per frame in panels (col, row) of `pw` x `ph` px under a title band
+    /// `title_h` high, all with the same camera and scale so that the cloud visibly grows from
+    /// panel to panel: the camera looks at the middle of the box that holds 0.1 % .. 99.9 % of
+    /// every frame's particles along each axis, and the screen box of the same share of every
+    /// frame fills a panel.
+    fn common(frames: &[Frame], (pw, ph): (u32, u32), title_h: u32, info: &SceneInfo) -> Vec<View> {
+        let union = |a: (f64, f64), b: (f64, f64)| (a.0.min(b.0), a.1.max(b.1));
+        let empty = (f64::INFINITY, f64::NEG_INFINITY);
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for f in frames {
+            for a in 0..3 {
+                let v: Vec<f64> = f.pos.iter().map(|p| p[a] as f64).collect();
+                if let Some((l, h)) = trimmed_range(v, 0.001, 0.999) {
+                    lo[a] = lo[a].min(l);
+                    hi[a] = hi[a].max(h);
+                }
             }
         }
-        let (x0, x1) = trimmed_range(sx, 0.001, 0.999).unwrap_or((-1.0, 1.0));
-        let (y0, y1) = trimmed_range(sy, 0.001, 0.999).unwrap_or((-1.0, 1.0));
-        let rect = PixelRect {
-            x0: (col * pw + 20) as i32,
-            x1: ((col + 1) * pw - 20) as i32,
-            y0: (title_h + row * ph + 56) as i32,
-            y1: (title_h + (row + 1) * ph - 64) as i32,
-        };
-        let scale =
-            0.94 * (rect.width() / (x1 - x0).max(1e-12)).min(rect.height() / (y1 - y0).max(1e-12));
-        let centre_depth = camera.project(centre).map_or(1.0, |p| p.2);
-        View {
-            camera,
-            rect,
-            scale,
-            offset: (0.5 * (x0 + x1), 0.5 * (y0 + y1)),
-            centre_depth,
+        if !(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z) {
+            (lo, hi) = (DVec3::ZERO, DVec3::ONE);
         }
+        let centre = 0.5 * (lo + hi);
+        let radius = (0.5 * (hi - lo).length()).max(info.r_eq_m);
+        let camera = || Camera::new(centre, 3.2 * radius, VIEW_AZIMUTH_DEG, VIEW_ELEVATION_DEG);
+        let probe = camera();
+        let (mut sx, mut sy) = (empty, empty);
+        for f in frames {
+            let (mut x, mut y) = (
+                Vec::with_capacity(f.pos.len()),
+                Vec::with_capacity(f.pos.len()),
+            );
+            for i in 0..f.pos.len() {
+                if let Some((a, b, _)) = probe.project(f.point(i)) {
+                    x.push(a);
+                    y.push(b);
+                }
+            }
+            sx = trimmed_range(x, 0.001, 0.999).map_or(sx, |r| union(sx, r));
+            sy = trimmed_range(y, 0.001, 0.999).map_or(sy, |r| union(sy, r));
+        }
+        let (x0, x1) = if sx.0 <= sx.1 { sx } else { (-1.0, 1.0) };
+        let (y0, y1) = if sy.0 <= sy.1 { sy } else { (-1.0, 1.0) };
+        let centre_depth = probe.project(centre).map_or(1.0, |p| p.2);
+        let cols = frames.len().min(2) as u32;
+        (0..frames.len() as u32)
+            .map(|k| {
+                let (col, row) = (k % cols, k / cols);
+                let rect = PixelRect {
+                    x0: (col * pw + 20) as i32,
+                    x1: ((col + 1) * pw - 20) as i32,
+                    y0: (title_h + row * ph + 56) as i32,
+                    y1: (title_h + (row + 1) * ph - 64) as i32,
+                };
+                let scale = 0.94
+                    * (rect.width() / (x1 - x0).max(1e-12))
+                        .min(rect.height() / (y1 - y0).max(1e-12));
+                View {
+                    camera: camera(),
+                    rect,
+                    scale,
+                    offset: (0.5 * (x0 + x1), 0.5 * (y0 + y1)),
+                    centre_depth,
+                }
+            })
+            .collect()
     }
 
     /// Pixel position of the screen coordinates (tangents) `sx`, `sy`.
@@ -122,7 +141,7 @@ impl View {
     }
 }
 
-/// 3-D perspective views at the frames' times (Fig. 12), each framed on its particles.
+/// 3-D perspective views at the frames' times (Fig. 12), one camera and scale for all.
 pub fn series(path: &Path, frames: &[Frame], info: &SceneInfo) -> Result<()> {
     fonts()?;
     if frames.is_empty() {
@@ -134,17 +153,7 @@ pub fn series(path: &Path, frames: &[Frame], info: &SceneInfo) -> Result<()> {
     let title_h = 84u32;
     let (w, h) = (pw * cols, ph * rows + title_h);
     let mut rgb = vec![255u8; (w * h * 3) as usize];
-    let views: Vec<View> = (0..frames.len() as u32)
-        .map(|k| {
-            View::framing(
-                &frames[k as usize],
-                (k % cols, k / cols),
-                (pw, ph),
-                title_h,
-                info,
-            )
-        })
-        .collect();
+    let views = View::common(frames, (pw, ph), title_h, info);
     // Pass 1: title, the original plate as a grey box (behind everything).
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();

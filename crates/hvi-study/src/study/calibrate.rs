@@ -788,21 +788,19 @@ fn calibration_snapshots(
             ),
         )
     })?;
-    let tau = records
-        .iter()
-        .find_map(|r| r.observables.get(Observable::Tau))
-        .map_or("the end".to_string(), |t| {
-            format!("\u{3c4} = {:.1} \u{b5}s", t * 1e6)
-        });
     let path = out.join("snapshots.png");
+    let title = format!(
+        "Debris clouds over ({}, {}) (Fig. 7); red frame: the best grid point",
+        plan.axes[axes.0].label, plan.axes[axes.1].label
+    );
     hvi_plot::snapshots::snapshot_matrix(
         &path,
-        &format!(
-            "Debris clouds at {tau} over ({}, {}) (Fig. 7), tier `{}`; red frame: best grid point",
-            plan.axes[axes.0].label, plan.axes[axes.1].label, plan.tier
-        ),
-        (&plan.axes[axes.0].label, &cols),
-        (&plan.axes[axes.1].label, &rows),
+        hvi_plot::snapshots::MatrixText {
+            title: &title,
+            columns: &cols,
+            rows: &rows,
+            footer: &super::figures::conditions(plan, records),
+        },
         &tiles,
     )?;
     Ok(path)

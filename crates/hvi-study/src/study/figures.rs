@@ -10,9 +10,11 @@ use plotters::style::RGBColor;
 use super::calibration::{CalibrationResult, Evaluation};
 use hvi_analysis::contour::{Field, Point};
 use hvi_analysis::score::{objective, Target};
+use hvi_engine::state::Body;
 use hvi_plot::contour::{contour_plot, ContourPlot, Marker};
-use hvi_plot::snapshots::Tile;
+use hvi_plot::snapshots::{Tile, TileCloud};
 use hvi_run::plan::Plan;
+use hvi_run::state::STATE_FILE;
 use hvi_run::store::{Record, RunStatus};
 
 /// The two axes a map is drawn over: the first two with more than one value (the others are
@@ -297,7 +299,9 @@ fn objective_map(f: &MapFrame) -> Result<ContourPlot> {
     })
 }
 
-/// The tiles of a plan's runs over axes (ax, ay) at run `slice_run`'s other axis values.
+/// The tiles of a plan's runs over axes (ax, ay) at run `slice_run`'s other axis values, with
+/// the column and row headers: each tile the run's cloud at the analysis time from its kept
+/// state (`state.bin`; none for a run without one).
 pub fn plan_tiles(
     plan: &Plan,
     dir: &Path,
@@ -314,7 +318,7 @@ pub fn plan_tiles(
         idx
     };
     let (xs, ys) = (sorted(ax), sorted(ay));
-    let label = |k: usize, i: usize| format!("{}", plan.axes[k].values[i]);
+    let label = |k: usize, i: usize| value_label(&plan.axes[k], &plan.axes[k].values[i]);
     let cols = xs.iter().map(|&i| label(ax, i)).collect();
     let rows = ys.iter().map(|&i| label(ay, i)).collect();
     let slice = &plan.run(slice_run)?.coords;
@@ -331,13 +335,110 @@ pub fn plan_tiles(
         let col = xs.iter().position(|&i| i == run.coords[ax]).unwrap_or(0);
         let row = ys.iter().position(|&i| i == run.coords[ay]).unwrap_or(0);
         let (frame, caption) = verdict(run.index);
+        let kept = hvi_run::state::read_state(&dir.join(&run.dir).join(STATE_FILE))?;
         tiles.push(Tile {
             col,
             row,
-            picture: Some(dir.join(&run.dir).join("cloud_side.png")),
+            cloud: kept.map(|k| tile_cloud(&k.end)),
             frame,
             caption,
         });
     }
     Ok((cols, rows, tiles))
+}
+
+/// A kept cloud state as a tile draws it: every particle projected along y, in mm.
+fn tile_cloud(state: &hvi_engine::cloud::CloudState) -> TileCloud {
+    TileCloud {
+        points: state
+            .pos
+            .iter()
+            .map(|p| [(p.z * 1e3) as f32, (p.x * 1e3) as f32])
+            .collect(),
+        impactor: state.body.iter().map(|b| *b == Body::Impactor).collect(),
+        rear_face_z_mm: state.plate_rear_z_m * 1e3,
+    }
+}
+
+/// A number in few characters: three significant digits, `9.12e6` for large and small ones.
+pub fn short_number(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    if !(1e-2..1e4).contains(&a) {
+        let s = format!("{v:.2e}");
+        let (m, e) = s.split_once('e').unwrap_or((&s, "0"));
+        let m = if m.contains('.') {
+            m.trim_end_matches('0').trim_end_matches('.')
+        } else {
+            m
+        };
+        return format!("{m}e{e}");
+    }
+    let s = format!("{v:.3}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// An axis value with its symbol and unit, as a figure's header shows it: `ε = 0.01 J`,
+/// `κ = 9.12e6 N/m`, `v0 = 6.7 km/s`, `t/D = 0.425`; other keys as `label = value`.
+pub fn value_label(axis: &hvi_run::spec::Axis, value: &serde_json::Value) -> String {
+    let Some(v) = value.as_f64() else {
+        return format!("{} = {value}", axis.label);
+    };
+    match axis.key.as_str() {
+        "material.eps_j" => format!("\u{3b5} = {} J", short_number(v)),
+        "material.kappa_n_m" => format!("\u{3ba} = {} N/m", short_number(v)),
+        "scene.v0_m_s" => format!("v0 = {} km/s", short_number(v / 1e3)),
+        "scene.t_over_d" => format!("t/D = {}", short_number(v)),
+        "run.seed" => format!("seed {value}"),
+        _ => format!("{} = {}", axis.label, short_number(v)),
+    }
+}
+
+/// How a figure shows an axis: its label and the factor from the study's unit to the shown
+/// one (impact velocities in km/s, as impact engineers quote them; the study keeps m/s).
+pub fn shown_axis(axis: &hvi_run::spec::Axis) -> (String, f64) {
+    match axis.key.as_str() {
+        "scene.v0_m_s" => ("v0 (km/s)".to_string(), 1e-3),
+        _ => (axis.label.clone(), 1.0),
+    }
+}
+
+/// The conditions of a plan's runs, for a figure's footer, so that a figure of one tier is not
+/// taken for another's: the tier, the particle count, the target and impactor, and the time the
+/// cloud is measured at (from the records).
+pub fn conditions(plan: &Plan, records: &[Record]) -> String {
+    let particles = records
+        .iter()
+        .find_map(|r| r.observables.get(Observable::Particles));
+    let tau = records
+        .iter()
+        .find_map(|r| r.observables.get(Observable::Tau));
+    let mut s = format!("tier `{}`", plan.tier);
+    if let Some(n) = particles {
+        s.push_str(&format!(", {} particles", short_number(n)));
+    }
+    if let Some(run) = plan.runs.first() {
+        if let hvi_engine::scene::Geometry::SphereOnPlate {
+            diameter_m,
+            width_over_d,
+            ..
+        } = run.scene.scene
+        {
+            s.push_str(&format!(
+                ", sphere D = {:.2} mm on a plate {:.1} mm square (W = {} D)",
+                diameter_m * 1e3,
+                width_over_d * diameter_m * 1e3,
+                short_number(width_over_d)
+            ));
+        }
+    }
+    if let Some(t) = tau {
+        s.push_str(&format!(
+            ", cloud at \u{3c4} = {:.1} \u{b5}s after first contact",
+            t * 1e6
+        ));
+    }
+    s
 }

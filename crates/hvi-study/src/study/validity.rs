@@ -16,14 +16,14 @@ use anyhow::{anyhow, bail, Result};
 use serde::Deserialize;
 use serde_json::Value;
 
-use super::figures::plan_tiles;
 use super::figures::{field_of, map_axes};
+use super::figures::{plan_tiles, shown_axis};
 use super::sweep::print_failures;
 use crate::cli::ValidityArgs;
 use hvi_analysis::contour::{Field, Point};
 use hvi_analysis::observable::Observable;
 use hvi_plot::contour::{contour_plot, ContourPlot};
-use hvi_plot::snapshots::snapshot_matrix;
+use hvi_plot::snapshots::{snapshot_matrix, MatrixText};
 use hvi_run::output::write_atomic;
 use hvi_run::plan::Plan;
 use hvi_run::store::{Record, RunStatus};
@@ -229,23 +229,30 @@ fn map_plot(
             (lo.min(n), hi.max(n))
         });
     let fragmentation = observable == Observable::Fragmentation;
+    let ((x_label, fx), (y_label, fy)) = (
+        shown_axis(&plan.axes[axes.0]),
+        shown_axis(&plan.axes[axes.1]),
+    );
+    let field = Field {
+        x: field.x.iter().map(|x| x * fx).collect(),
+        y: field.y.iter().map(|y| y * fy).collect(),
+        z: field.z,
+    };
     ContourPlot {
         title: format!(
-            "{} over ({}, {}) (Fig. 16b)",
+            "{} over ({x_label}, {y_label}) (Fig. 16b)",
             if fragmentation {
                 "Fragmentation F"
             } else {
                 observable.name()
             },
-            plan.axes[axes.0].label,
-            plan.axes[axes.1].label
         ),
         subtitle: format!(
             "tier `{}`, {}-{} particles; red: {} = {cutoff} (validity cut-off; the paper's is {PAPER_CUTOFF}); {valid} runs valid, {invalid} not",
             plan.tier, particles.0, particles.1, observable
         ),
-        x_label: plan.axes[axes.0].label.clone(),
-        y_label: plan.axes[axes.1].label.clone(),
+        x_label,
+        y_label,
         x_log: false,
         y_log: false,
         field,
@@ -280,14 +287,20 @@ fn draw_snapshots(
         )
     })?;
     let snapshots = out.join("snapshots.png");
+    let title = format!(
+        "Debris clouds over ({}, {}) (Fig. 17): red {} >= {cutoff} (valid), blue below",
+        shown_axis(&plan.axes[axes.0]).0,
+        shown_axis(&plan.axes[axes.1]).0,
+        observable
+    );
     snapshot_matrix(
         &snapshots,
-        &format!(
-            "Debris clouds over ({}, {}) (Fig. 17), tier `{}`: red {} >= {cutoff} (valid), blue below",
-            plan.axes[axes.0].label, plan.axes[axes.1].label, plan.tier, observable
-        ),
-        (&plan.axes[axes.0].label, &cols),
-        (&plan.axes[axes.1].label, &rows),
+        MatrixText {
+            title: &title,
+            columns: &cols,
+            rows: &rows,
+            footer: &super::figures::conditions(plan, records),
+        },
         &tiles,
     )?;
     Ok(snapshots)
