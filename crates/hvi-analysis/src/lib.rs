@@ -2,11 +2,13 @@
 //!
 //! Pure functions from run observables to the numbers a study decides on: the typed
 //! observables ([`observable`]), the objective against experiments ([`score`]), contours on a
-//! grid ([`contour`]) and the reproduction's deciding numbers ([`decide`]). Nothing here reads
-//! or writes a file or parses a command line.
+//! grid ([`contour`]), the reproduction's deciding numbers ([`decide`]) and the calibration's
+//! surrogate search ([`surrogate`]). Nothing here reads or writes a file or parses a command
+//! line.
 
 pub mod contour;
 pub mod decide;
 pub mod number;
 pub mod observable;
 pub mod score;
+pub mod surrogate;
