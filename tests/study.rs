@@ -396,7 +396,7 @@ fn calibrate_scores_the_grid_refines_through_the_store_and_compares_with_the_pap
     let dir = scratch("calibrate");
     let targets = repo().join("experiments_data/calibration-shot.toml");
     let axes = format!(
-        "{GRID_2X2}\n[calibrate]\ntargets = \"{}\"\nmax_iters = 2\nsd_tolerance = 0\n",
+        "{GRID_2X2}\n[calibrate]\ntargets = \"{}\"\nmethod = \"nelder-mead\"\nmax_iters = 2\nsd_tolerance = 0\n",
         targets.display()
     );
     let study = write_study(&dir, "cal", &axes, TINY);
@@ -479,6 +479,102 @@ fn calibrate_scores_the_grid_refines_through_the_store_and_compares_with_the_pap
     assert_eq!(without_cached(&c2["best"]), without_cached(&c["best"]));
     assert_eq!(c2["best"]["cached"], true);
     assert_eq!(counts(&o).2, 0, "{}", stderr(&o));
+}
+
+#[test]
+fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_new_runs() {
+    let dir = scratch("calibrate-ego");
+    let targets = repo().join("experiments_data/calibration-shot.toml");
+    // Three eps values so the box has an inside; a zero noise floor so that the seeds' scatter
+    // alone decides when to stop.
+    let axes = format!(
+        "[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01, 0.1, 1.0]\n\n[[axes]]\nkey = \"material.kappa_n_m\"\nvalues = [2.28e6, 4.56e6]\n\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nbatch = 2\nmax_batches = 2\nnoise_floor = 0\n",
+        targets.display()
+    );
+    let study = write_study(&dir, "ego", &axes, TINY);
+    let out = dir.join("out");
+    let run = || {
+        bin()
+            .arg("calibrate")
+            .arg(&study)
+            .arg("--out")
+            .arg(&out)
+            .args(["--threads", "2"])
+            .output()
+            .expect("runs")
+    };
+    let o = run();
+    assert_ok(&o);
+    let read = || -> serde_json::Value {
+        serde_json::from_str(
+            &std::fs::read_to_string(out.join("calibration.json")).expect("calibration.json"),
+        )
+        .expect("json")
+    };
+    let c = read();
+    assert_eq!(c["method"], "ego");
+    let termination = c["termination"].as_str().expect("termination");
+    let converged = c["converged"].as_bool().expect("converged");
+    assert_eq!(
+        converged,
+        termination.starts_with("converged"),
+        "{termination}"
+    );
+    if !converged {
+        assert!(termination.contains("max_batches = 2"), "{termination}");
+    }
+    // Every point after the grid ran at both seeds, and each is scored.
+    let evals = c["refinement"].as_array().expect("evaluations");
+    let grid_seeds = evals.iter().filter(|e| e["stage"] == "grid-seeds").count();
+    assert_eq!(grid_seeds, 6, "the grid at the seeds");
+    for e in evals {
+        assert_eq!(e["seeds"], serde_json::json!([1, 2]), "{e}");
+        assert_eq!(
+            e["seed_objectives"].as_array().map(Vec::len),
+            Some(2),
+            "{e}"
+        );
+    }
+    // Runs: the grid (6 at seed 1) + the grid at seed 2 (6) + 2 per point of each batch.
+    let batches = evals
+        .iter()
+        .filter(|e| e["stage"].as_str().is_some_and(|s| s.starts_with("ego-")))
+        .count();
+    assert!(batches <= 4, "{batches} points in at most 2 batches of 2");
+    assert_eq!(c["runs_made"].as_u64(), Some((12 + 2 * batches) as u64));
+    assert!(
+        c["noise"].as_f64().is_some_and(|n| n > 0.0),
+        "{}",
+        c["noise"]
+    );
+    // A region, one interval per searched axis, holding the chosen point.
+    for key in ["material.eps_j", "material.kappa_n_m"] {
+        let iv = &c["region"]["intervals"][key];
+        let (lo, hi) = (iv[0].as_f64().expect("lo"), iv[1].as_f64().expect("hi"));
+        let best = c["best"]["params"][key].as_f64().expect("best");
+        assert!(lo <= hi, "{key}: {iv}");
+        assert!(best > 0.0);
+    }
+    assert_eq!(c["best_spread"].as_array().map(Vec::len), Some(3));
+    let md = std::fs::read_to_string(out.join("calibration.md")).expect("calibration.md");
+    assert!(md.contains("CONVERGED"), "{md}");
+    assert!(md.contains("| `material.eps_j` |"), "{md}");
+    let csv = std::fs::read_to_string(out.join("evaluations.csv")).expect("evaluations.csv");
+    let header = csv.lines().next().unwrap_or("");
+    assert!(header.contains(",seeds,status,cached,dir"), "{header}");
+    // The first time nothing after the grid came from the store.
+    assert!(evals.iter().all(|e| e["cached"] == false), "{evals:?}");
+
+    // Again: the same proposals, every run from the store, the same answer.
+    let o = run();
+    assert_ok(&o);
+    let c2 = read();
+    assert_eq!(c2["runs_made"], 0, "{}", stderr(&o));
+    assert_eq!(c2["best"]["params"], c["best"]["params"]);
+    assert_eq!(c2["region"], c["region"]);
+    let evals2 = c2["refinement"].as_array().expect("evaluations");
+    assert_eq!(evals2.len(), evals.len());
+    assert!(evals2.iter().all(|e| e["cached"] == true), "{evals2:?}");
 }
 
 #[test]

@@ -38,8 +38,10 @@ pub enum Command {
     Plan(StudyArgs),
     /// Run every run of a study (in parallel, finished runs reused) and write results.csv/json.
     Sweep(StudyArgs),
-    /// Calibrate: the study's grid scored against experiments_data, then a Nelder-Mead
-    /// refinement from the best grid point; writes calibration.json and evaluations.csv.
+    /// Calibrate: the study's grid scored against experiments_data, then a surrogate search
+    /// (batches of runs in parallel, at the study's seeds, until the expected improvement is
+    /// below the noise) or Nelder-Mead; writes calibration.json, calibration.md and
+    /// evaluations.csv.
     Calibrate(CalibrateArgs),
     /// Validity map: the study's grid over (v0, t/D), F contour with the cut-off in red
     /// (Fig. 16b), the boundary as validity_boundary.csv, runs marked valid in results.csv.
@@ -165,12 +167,18 @@ pub struct CalibrateArgs {
     /// The study, tier, output and threads.
     #[command(flatten)]
     pub study: StudyArgs,
-    /// Only the grid stage: score the grid, no refinement.
+    /// Only the grid stage: score the grid, no search after it.
     #[arg(long)]
     pub no_refine: bool,
+    /// The search after the grid (overrides calibrate.method).
+    #[arg(long, value_enum)]
+    pub method: Option<crate::study::calibrate::Method>,
     /// Nelder-Mead iterations at most (overrides calibrate.max_iters).
     #[arg(long)]
     pub max_iters: Option<u64>,
+    /// Surrogate-search batches at most (overrides calibrate.max_batches).
+    #[arg(long)]
+    pub max_batches: Option<usize>,
 }
 
 /// `hvi-study validity-map` arguments.

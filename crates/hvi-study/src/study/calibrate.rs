@@ -64,6 +64,37 @@ fn default_max_iters() -> u64 {
 fn default_sd_tolerance() -> f64 {
     0.02
 }
+fn default_batch() -> usize {
+    2
+}
+fn default_max_batches() -> usize {
+    8
+}
+fn default_noise_floor() -> f64 {
+    0.02
+}
+
+/// The search after the grid.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Efficient global optimisation: a kriging model, batches by expected improvement
+    /// ([`super::ego`]).
+    #[default]
+    Ego,
+    /// Nelder-Mead (argmin) from the best grid point, one run at a time.
+    NelderMead,
+}
+
+impl Method {
+    /// The name as the study file and calibration.json spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Ego => "ego",
+            Method::NelderMead => "nelder-mead",
+        }
+    }
+}
 
 /// `[calibrate]` of a study file.
 #[derive(Debug, Clone, Deserialize)]
@@ -86,6 +117,22 @@ pub struct CalibrateConfig {
     /// Stop when the objective's standard deviation over the simplex falls below this.
     #[serde(default = "default_sd_tolerance")]
     pub sd_tolerance: f64,
+    /// The search after the grid: `ego` (default) or `nelder-mead`.
+    #[serde(default)]
+    pub method: Method,
+    /// ego: points per batch (run together; a batch of runs x seeds keeps every core busy).
+    #[serde(default = "default_batch")]
+    pub batch: usize,
+    /// ego: the seeds every point runs at (empty: the scene's seed only).
+    #[serde(default)]
+    pub seeds: Vec<u64>,
+    /// ego: batches at most.
+    #[serde(default = "default_max_batches")]
+    pub max_batches: usize,
+    /// ego: the least noise assumed for log10 of the objective (a seed mean's standard error);
+    /// with one seed it is the noise.
+    #[serde(default = "default_noise_floor")]
+    pub noise_floor: f64,
 }
 
 impl CalibrateConfig {
@@ -108,6 +155,33 @@ impl CalibrateConfig {
             bail!(
                 "study key `calibrate.sd_tolerance`: {} (allowed: a number >= 0)",
                 cfg.sd_tolerance
+            );
+        }
+        if !(1..=64).contains(&cfg.batch) {
+            bail!(
+                "study key `calibrate.batch`: {} (allowed: 1 to 64 points per batch)",
+                cfg.batch
+            );
+        }
+        if cfg.max_batches > 1000 {
+            bail!(
+                "study key `calibrate.max_batches`: {} (allowed: 0 to 1000)",
+                cfg.max_batches
+            );
+        }
+        if !(cfg.noise_floor.is_finite() && cfg.noise_floor >= 0.0) {
+            bail!(
+                "study key `calibrate.noise_floor`: {} (allowed: a number >= 0)",
+                cfg.noise_floor
+            );
+        }
+        let mut seeds = cfg.seeds.clone();
+        seeds.sort_unstable();
+        seeds.dedup();
+        if seeds.len() != cfg.seeds.len() {
+            bail!(
+                "study key `calibrate.seeds`: {:?} names a seed twice (allowed: distinct seeds)",
+                cfg.seeds
             );
         }
         Ok(cfg)
@@ -148,23 +222,24 @@ pub fn score_table(table: &mut Table, records: &[Record], targets: &Targets) -> 
 
 /// The refinement's problem: parameters in transformed coordinates -> objective, each point a
 /// run through the store.
-struct Refinement<'a> {
-    study: &'a Study,
-    plan: &'a Plan,
-    store: &'a Store,
-    targets: &'a Targets,
+pub(super) struct Refinement<'a> {
+    pub(super) study: &'a Study,
+    pub(super) plan: &'a Plan,
+    pub(super) store: &'a Store,
+    pub(super) targets: &'a Targets,
     /// Fixed overrides: the plan's common ones plus the non-refined axes at the best point.
-    fixed: Vec<String>,
+    pub(super) fixed: Vec<String>,
     /// Refined keys, whether each is in log10, and the box in transformed coordinates.
-    dims: Vec<Dim>,
-    threads: usize,
-    progress: bool,
-    log: RefCell<Vec<Evaluation>>,
-    ran: RefCell<usize>,
+    pub(super) dims: Vec<Dim>,
+    pub(super) threads: usize,
+    pub(super) progress: bool,
+    pub(super) log: RefCell<Vec<Evaluation>>,
+    pub(super) ran: RefCell<usize>,
 }
 
 impl Refinement<'_> {
-    fn values(&self, x: &[f64]) -> BTreeMap<String, f64> {
+    /// Parameter values (by key) of a point in the search's coordinates.
+    pub(super) fn values(&self, x: &[f64]) -> BTreeMap<String, f64> {
         self.dims
             .iter()
             .zip(x)
@@ -173,6 +248,38 @@ impl Refinement<'_> {
                 (k.clone(), round_sig(v, 6))
             })
             .collect()
+    }
+
+    /// The run of a parameter point (by key), at `seed` (None: the scene's), or why there is
+    /// none (its scene is invalid).
+    pub(super) fn job(
+        &self,
+        params: &BTreeMap<String, f64>,
+        seed: Option<u64>,
+    ) -> Result<std::result::Result<Job, String>> {
+        let mut set = self.fixed.clone();
+        for (k, v) in params {
+            set.push(format!("{k}={}", json_to_override(&serde_json::json!(v))?));
+        }
+        let mut job_params: serde_json::Map<String, Value> = params
+            .iter()
+            .map(|(k, v)| (k.clone(), serde_json::json!(v)))
+            .collect();
+        if let Some(seed) = seed {
+            set.push(format!("run.seed={seed}"));
+            job_params.insert("run.seed".into(), serde_json::json!(seed));
+        }
+        let scene = match validated_scene(self.study, &set) {
+            Ok(s) => s,
+            Err(e) => return Ok(Err(format!("invalid scene: {e:#}"))),
+        };
+        Ok(Ok(Job {
+            fingerprint: fingerprint(&scene, &self.plan.tier)?,
+            scene,
+            study: self.plan.study.clone(),
+            tier: self.plan.tier.clone(),
+            params: job_params,
+        }))
     }
 
     /// Evaluates a parameter point (by key), running it if the store lacks it.
@@ -192,26 +299,14 @@ impl Refinement<'_> {
             status,
             cached: false,
             dir: None,
+            seeds: Vec::new(),
+            seed_objectives: Vec::new(),
         };
-        let mut set = self.fixed.clone();
-        for (k, v) in params {
-            set.push(format!("{k}={}", json_to_override(&serde_json::json!(v))?));
-        }
-        let scene = match validated_scene(self.study, &set) {
-            Ok(s) => s,
-            Err(e) => return Ok(outside(format!("invalid scene: {e:#}"))),
+        let job = match self.job(params, None)? {
+            Ok(job) => job,
+            Err(why) => return Ok(outside(why)),
         };
-        let fp = fingerprint(&scene, &self.plan.tier)?;
-        let job = Job {
-            fingerprint: fp.clone(),
-            scene,
-            study: self.plan.study.clone(),
-            tier: self.plan.tier.clone(),
-            params: params
-                .iter()
-                .map(|(k, v)| (k.clone(), serde_json::json!(v)))
-                .collect(),
-        };
+        let fp = job.fingerprint.clone();
         let (record, cached) = match self.store.lookup(&fp)? {
             Some(r) if r.status == RunStatus::Completed => (r, true),
             _ => {
@@ -235,6 +330,8 @@ impl Refinement<'_> {
             },
             cached,
             dir: Some(hvi_run::plan::run_dir_name(&fp)),
+            seeds: Vec::new(),
+            seed_objectives: Vec::new(),
         };
         Ok(e)
     }
@@ -279,6 +376,8 @@ impl Refinement<'_> {
                 status: "outside the grid's box: not run".into(),
                 cached: false,
                 dir: None,
+                seeds: Vec::new(),
+                seed_objectives: Vec::new(),
             }
         };
         if self.progress {
@@ -302,7 +401,7 @@ impl Refinement<'_> {
     }
 }
 
-fn fmt_params(p: &BTreeMap<String, f64>) -> String {
+pub(super) fn fmt_params(p: &BTreeMap<String, f64>) -> String {
     p.iter()
         .map(|(k, v)| format!("{}={v:.4e}", k.rsplit('.').next().unwrap_or(k)))
         .collect::<Vec<_>>()
@@ -325,9 +424,11 @@ fn describe_eval(e: &Evaluation) -> String {
     s
 }
 
-/// `hvi-study calibrate`: the grid scored, the refinement from its best point, the paper's
-/// fit at this tier, then calibration.json, evaluations.csv, the maps and the snapshots.
+/// `hvi-study calibrate`: the grid scored, the search after it (ego or Nelder-Mead), the
+/// paper's fit at this tier, then calibration.json, calibration.md, evaluations.csv, the maps
+/// and the snapshots.
 pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
+    let t0 = std::time::Instant::now();
     let (study, plan, out) = args.study.plan()?;
     let cfg = CalibrateConfig::of(&study)?;
     let base = study.path.parent().unwrap_or_else(|| Path::new("."));
@@ -351,12 +452,15 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
         progress,
     };
     let problem = stage.problem(fixed, dims);
-    let termination = refine_stage(&problem, &cfg, args, &best_grid, &refine_keys)?;
-    let refinement = problem.log.take();
-    let refinement_runs = *problem.ran.borrow();
+    let method = args.method.unwrap_or(cfg.method);
+    let search = search_stage(&problem, &cfg, args, method, &grid, &refine_keys)?;
     let (paper_params, paper) = paper_point(&stage, &best_run.values)?;
+    let paper_runs = usize::from(!paper.cached && paper.dir.is_some());
 
-    let best = best_of(&best_grid, &refinement);
+    let best = search
+        .best
+        .clone()
+        .unwrap_or_else(|| best_of(&best_grid, &search.evaluations));
     let ratio_to_paper = best
         .params
         .iter()
@@ -373,9 +477,16 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
         best_grid,
         paper,
         ratio_to_paper,
-        termination,
-        refinement_runs,
-        refinement,
+        termination: search.termination,
+        refinement_runs: search.runs,
+        refinement: search.evaluations,
+        method: search.method.into(),
+        converged: search.converged,
+        noise: search.noise,
+        region: search.region,
+        best_spread: search.spread,
+        runs_made: grid.ran + search.runs + paper_runs,
+        wall_seconds: t0.elapsed().as_secs_f64(),
     };
     write_outputs(&out, &result, &grid.evaluations)?;
     draw_figures(&out, &plan, &grid.records, &result, &cfg.log_axes, progress);
@@ -386,9 +497,109 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
     Ok(result)
 }
 
+/// What the search after the grid found.
+struct SearchOutcome {
+    method: &'static str,
+    evaluations: Vec<Evaluation>,
+    /// The chosen point, when the search chooses it (ego); else the best evaluated.
+    best: Option<Evaluation>,
+    termination: String,
+    converged: bool,
+    noise: Option<f64>,
+    region: Option<super::ego::ParamRegion>,
+    spread: Vec<super::ego::Spread>,
+    runs: usize,
+}
+
+/// Stage 2: the search after the grid (none with `--no-refine`, no axis or a zero budget).
+fn search_stage(
+    problem: &Refinement,
+    cfg: &CalibrateConfig,
+    args: &CalibrateArgs,
+    method: Method,
+    grid: &Grid,
+    refine_keys: &[String],
+) -> Result<SearchOutcome> {
+    let none = |why: &str| SearchOutcome {
+        method: "none",
+        evaluations: Vec::new(),
+        best: None,
+        termination: why.to_string(),
+        converged: false,
+        noise: None,
+        region: None,
+        spread: Vec::new(),
+        runs: 0,
+    };
+    if args.no_refine {
+        return Ok(none("skipped (--no-refine)"));
+    }
+    if problem.dims.is_empty() {
+        return Ok(none("skipped: no axis to refine"));
+    }
+    match method {
+        Method::NelderMead => {
+            let best_grid = &grid.evaluations[grid.best];
+            let termination = refine_stage(problem, cfg, args, best_grid, refine_keys)?;
+            Ok(SearchOutcome {
+                method: method.name(),
+                evaluations: problem.log.take(),
+                best: None,
+                converged: termination.starts_with("Solver converged"),
+                termination,
+                noise: None,
+                region: None,
+                spread: Vec::new(),
+                runs: *problem.ran.borrow(),
+            })
+        }
+        Method::Ego => {
+            let settings = super::ego::EgoSettings {
+                batch: cfg.batch,
+                seeds: cfg.seeds.clone(),
+                max_batches: args.max_batches.unwrap_or(cfg.max_batches),
+                noise_floor: cfg.noise_floor,
+            };
+            if problem.progress {
+                eprintln!(
+                    "search: efficient global optimisation over {} (log10 for {:?}), batches of {} at seeds {:?}, at most {} batches, noise floor {}",
+                    refine_keys.join(", "),
+                    problem.dims.iter().filter(|d| d.1).map(|d| d.0.as_str()).collect::<Vec<_>>(),
+                    settings.batch,
+                    settings.seeds,
+                    settings.max_batches,
+                    settings.noise_floor
+                );
+            }
+            let pairs: Vec<(Evaluation, Record)> = grid
+                .evaluations
+                .iter()
+                .cloned()
+                .zip(grid.records.iter().cloned())
+                .collect();
+            let o = super::ego::search(problem, &settings, &pairs, &args.study.exec_options())?;
+            Ok(SearchOutcome {
+                method: method.name(),
+                evaluations: o
+                    .evaluations
+                    .into_iter()
+                    .filter(|e| e.stage != "grid")
+                    .collect(),
+                best: Some(o.best),
+                termination: o.termination,
+                converged: o.converged,
+                noise: Some(o.noise),
+                region: o.region,
+                spread: o.spread,
+                runs: o.runs,
+            })
+        }
+    }
+}
+
 /// A refined axis: its key, whether it is refined in log10, and the grid's box on it in
 /// those coordinates (lowest, highest).
-type Dim = (String, bool, f64, f64);
+pub(super) type Dim = (String, bool, f64, f64);
 
 /// The axes the refinement moves (`calibrate.refine`, default every axis with more than one
 /// value) and their coordinates.
@@ -428,6 +639,8 @@ fn refined_axes(plan: &Plan, cfg: &CalibrateConfig) -> Result<(Vec<String>, Vec<
 
 /// The grid stage's outcome.
 struct Grid {
+    /// Runs simulated by this invocation.
+    ran: usize,
     /// Every grid run as an evaluation, in plan order.
     evaluations: Vec<Evaluation>,
     /// The runs' records, in plan order.
@@ -445,6 +658,7 @@ fn grid_stage(
     targets: &Targets,
     progress: bool,
 ) -> Result<Grid> {
+    let stored = stored_before(plan, out)?;
     let (mut table, report) = execute_plan(plan, out, &args.study.exec_options())?;
     if progress {
         eprintln!("grid: {}", report.line());
@@ -452,7 +666,7 @@ fn grid_stage(
     print_failures(&report.records);
     let scores = score_table(&mut table, &report.records, targets);
     table.write(out, "results")?;
-    let evaluations = grid_evaluations(plan, &report.records, &scores);
+    let evaluations = grid_evaluations(plan, &report.records, &scores, &stored);
     let best = (0..evaluations.len())
         .filter(|&i| evaluations[i].objective.is_finite())
         .min_by(|&a, &b| {
@@ -468,19 +682,42 @@ fn grid_stage(
         );
     }
     Ok(Grid {
+        ran: report.ran,
         evaluations,
         records: report.records,
         best,
     })
 }
 
-/// The grid runs as evaluations: their numeric axis values, scores and status.
-fn grid_evaluations(plan: &Plan, records: &[Record], scores: &[Score]) -> Vec<Evaluation> {
+/// Whether each run of the plan was finished in the store before this invocation.
+fn stored_before(plan: &Plan, out: &Path) -> Result<Vec<bool>> {
+    let Ok(store) = Store::existing(out) else {
+        return Ok(vec![false; plan.runs.len()]);
+    };
+    plan.runs
+        .iter()
+        .map(|r| {
+            // A damaged record counts as not stored (the sweep repairs and re-runs it).
+            Ok(matches!(store.lookup(&r.fingerprint),
+                Ok(Some(rec)) if rec.status == RunStatus::Completed))
+        })
+        .collect()
+}
+
+/// The grid runs as evaluations: their numeric axis values, scores and status (`cached`: the
+/// run was in the store before this invocation).
+fn grid_evaluations(
+    plan: &Plan,
+    records: &[Record],
+    scores: &[Score],
+    stored: &[bool],
+) -> Vec<Evaluation> {
     plan.runs
         .iter()
         .zip(records)
         .zip(scores)
-        .map(|((run, rec), score)| {
+        .zip(stored)
+        .map(|(((run, rec), score), &cached)| {
             let params = plan
                 .axes
                 .iter()
@@ -497,8 +734,10 @@ fn grid_evaluations(plan: &Plan, records: &[Record], scores: &[Score]) -> Vec<Ev
                     RunStatus::Completed => "completed".into(),
                     RunStatus::Failed => "failed".into(),
                 },
-                cached: true,
+                cached,
                 dir: Some(run.dir.clone()),
+                seeds: Vec::new(),
+                seed_objectives: Vec::new(),
             }
         })
         .collect()
@@ -689,18 +928,65 @@ fn draw_figures(
     }
 }
 
-/// The human-readable report: best point, every term, the paper's point, the gaps.
+/// The verdict of a calibration in one line: converged or not, and why.
+fn verdict_line(r: &CalibrationResult) -> String {
+    let state = match (r.method.as_str(), r.converged) {
+        ("none", _) => "GRID ONLY",
+        (_, true) => "CONVERGED",
+        (_, false) => "NOT CONVERGED",
+    };
+    format!("{state} ({}): {}", r.method, r.termination)
+}
+
+/// The confidence region as one line per parameter: `key in [lo, hi]` (with a note where it
+/// reaches the searched box's edge).
+fn interval_lines(r: &CalibrationResult) -> Vec<String> {
+    let Some(region) = &r.region else {
+        return Vec::new();
+    };
+    region
+        .intervals
+        .iter()
+        .map(|(k, (lo, hi))| {
+            let edge = if region.at_boundary.get(k).copied().unwrap_or(false) {
+                " (reaches the searched box's edge: the interval may be wider)"
+            } else {
+                ""
+            };
+            format!(
+                "{k} in [{lo:.4e}, {hi:.4e}], best {:.4e}{edge}",
+                r.best.params.get(k).copied().unwrap_or(f64::NAN)
+            )
+        })
+        .collect()
+}
+
+/// The human-readable report: the verdict, best point with its interval, every term, the
+/// paper's point, the gaps, runs and wall time.
 pub fn report_text(r: &CalibrationResult) -> String {
     let mut s = String::new();
     s.push_str(&format!(
-        "calibration of `{}` at tier `{}` ({} particles): refinement {} ({} new runs)\n",
+        "calibration of `{}` at tier `{}` ({} particles): {}\n",
         r.study,
         r.tier,
         r.particles.map_or("?".into(), |n| format!("{n}")),
-        r.termination,
-        r.refinement_runs
+        verdict_line(r),
     ));
     s.push_str(&format!("  best:        {}\n", describe_eval(&r.best)));
+    for line in interval_lines(r) {
+        s.push_str(&format!("  interval:    {line}\n"));
+    }
+    if let Some(noise) = r.noise {
+        s.push_str(&format!(
+            "  noise:       {noise:.4} in log10 J (a seed mean's standard error, or the floor)\n"
+        ));
+    }
+    for sp in &r.best_spread {
+        s.push_str(&format!(
+            "  at the best point: {} = {:.4} +- {:.4} (sd over {} seed(s))\n",
+            sp.target, sp.mean, sp.sd, sp.seeds
+        ));
+    }
     s.push_str(&format!("  best grid:   {}\n", describe_eval(&r.best_grid)));
     s.push_str(&format!("  paper's fit: {}\n", describe_eval(&r.paper)));
     for (k, v) in &r.ratio_to_paper {
@@ -709,6 +995,91 @@ pub fn report_text(r: &CalibrationResult) -> String {
     for g in &r.gaps {
         s.push_str(&format!("  not scored (gap): {}: {}\n", g.name, g.source));
     }
+    s.push_str(&format!(
+        "  runs: {} simulated now ({} in the search), wall time {:.1} s\n",
+        r.runs_made, r.refinement_runs, r.wall_seconds
+    ));
+    s
+}
+
+/// calibration.md: what a reader needs from calibration.json, in prose and tables.
+pub fn report_md(r: &CalibrationResult) -> String {
+    let mut s = format!(
+        "# Calibration of `{}` at tier `{}`\n\nWritten by `hvi-study calibrate` from calibration.json (regenerate it with the command; do not edit). {} particles.\n\n**{}**\n\n",
+        r.study,
+        r.tier,
+        r.particles.map_or("?".into(), |n| format!("{n}")),
+        verdict_line(r)
+    );
+    s.push_str("## The calibrated point\n\n| parameter | best | interval (low) | interval (high) | the paper's fit | best / paper |\n|---|---|---|---|---|---|\n");
+    for (k, v) in &r.best.params {
+        let (lo, hi) = r
+            .region
+            .as_ref()
+            .and_then(|g| g.intervals.get(k))
+            .map_or(("n/a".to_string(), "n/a".to_string()), |(a, b)| {
+                (format!("{a:.4e}"), format!("{b:.4e}"))
+            });
+        s.push_str(&format!(
+            "| `{k}` | {v:.4e} | {lo} | {hi} | {} | {} |\n",
+            r.paper
+                .params
+                .get(k)
+                .map_or("n/a".to_string(), |p| format!("{p:.4e}")),
+            r.ratio_to_paper
+                .get(k)
+                .map_or("n/a".to_string(), |q| format!("{q:.3}"))
+        ));
+    }
+    if let Some(g) = &r.region {
+        s.push_str(&format!(
+            "\nThe interval is the confidence region of the minimum: every point the surrogate predicts within {} noise standard errors of its lowest prediction (J < {:.4}); it covers {:.1} % of the searched box.{}\n",
+            hvi_analysis::surrogate::REGION_NOISE_MULTIPLE,
+            g.threshold,
+            100.0 * g.share_of_box,
+            if g.at_boundary.values().any(|&b| b) {
+                " It reaches the box's edge on at least one axis: the parameter may lie outside what was searched."
+            } else {
+                ""
+            }
+        ));
+    }
+    s.push_str("\n## Every target at the best point\n\n| target | observed (seed mean) | sd over seeds | term | weight |\n|---|---|---|---|---|\n");
+    if let Some(score) = &r.best.score {
+        for t in &score.terms {
+            let sp = r.best_spread.iter().find(|x| x.target == t.name);
+            s.push_str(&format!(
+                "| {} | {} | {} | {:.4} | {} |\n",
+                t.name,
+                t.observed.map_or("n/a".into(), |v| format!("{v:.4}")),
+                sp.map_or("n/a".into(), |x| format!("{:.4} ({} seeds)", x.sd, x.seeds)),
+                t.term,
+                t.weight
+            ));
+        }
+    }
+    s.push_str(&format!(
+        "\nObjective J = {:.4} at the best point, {:.4} at the best grid point, {:.4} at the paper's fit.\n",
+        r.best.objective, r.best_grid.objective, r.paper.objective
+    ));
+    if let Some(noise) = r.noise {
+        s.push_str(&format!(
+            "The noise the search worked with: {noise:.4} in log10 J (a seed mean's standard error, at least calibrate.noise_floor).\n"
+        ));
+    }
+    for g in &r.gaps {
+        s.push_str(&format!(
+            "\nNot scored (a gap in experiments_data): {}: {}\n",
+            g.name, g.source
+        ));
+    }
+    s.push_str(&format!(
+        "\n## Cost\n\n{} runs simulated by this invocation ({} in the search after the grid); {} points evaluated after the grid; wall time {:.1} s. Every evaluation is in evaluations.csv.\n",
+        r.runs_made,
+        r.refinement_runs,
+        r.refinement.len(),
+        r.wall_seconds
+    ));
     s
 }
 
@@ -718,6 +1089,7 @@ fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluation]) -> Resu
         &out.join("calibration.json"),
         serde_json::to_string_pretty(r)?.as_bytes(),
     )?;
+    write_atomic_bytes(&out.join("calibration.md"), report_md(r).as_bytes())?;
     let keys: Vec<String> = {
         let mut k: Vec<String> = grid
             .iter()
@@ -735,7 +1107,7 @@ fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluation]) -> Resu
         header.extend(keys.iter().cloned());
         header.push("objective".into());
         header.extend(names.iter().map(|n| format!("score_{n}")));
-        header.extend(["status", "cached", "dir"].map(String::from));
+        header.extend(["seeds", "status", "cached", "dir"].map(String::from));
         csv.write_record(&header)?;
         for e in grid
             .iter()
@@ -747,7 +1119,12 @@ fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluation]) -> Resu
                 keys.iter()
                     .map(|k| e.params.get(k).map_or(String::new(), |v| v.to_string())),
             );
-            row.push(e.objective.to_string());
+            // A point not run (outside the box, invalid scene, failed) has no objective.
+            row.push(if e.score.is_some() && e.objective.is_finite() {
+                e.objective.to_string()
+            } else {
+                String::new()
+            });
             for k in 0..names.len() {
                 row.push(
                     e.score
@@ -755,6 +1132,13 @@ fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluation]) -> Resu
                         .map_or(String::new(), |s| s.terms[k].term.to_string()),
                 );
             }
+            row.push(
+                e.seeds
+                    .iter()
+                    .map(|x| x.to_string())
+                    .collect::<Vec<_>>()
+                    .join(" "),
+            );
             row.push(e.status.clone());
             row.push(e.cached.to_string());
             row.push(e.dir.clone().unwrap_or_default());

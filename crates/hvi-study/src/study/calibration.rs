@@ -10,7 +10,8 @@ use serde::{Deserialize, Serialize};
 /// One evaluated point: a grid run or a refinement step.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Evaluation {
-    /// `grid`, `refine` or `paper`.
+    /// `grid`, `grid-seeds` (a grid point at the search's seeds), `ego-<batch>`, `refine`
+    /// (Nelder-Mead) or `paper`.
     pub stage: String,
     /// Sequence number within the stage.
     pub step: usize,
@@ -24,8 +25,14 @@ pub struct Evaluation {
     pub status: String,
     /// Whether the run was found in the store.
     pub cached: bool,
-    /// The run's directory, relative to the study directory.
+    /// The run's directory, relative to the study directory (the first seed's).
     pub dir: Option<String>,
+    /// The seeds the point ran at (empty: the scene's own seed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub seeds: Vec<u64>,
+    /// The objective at each seed (the point's `objective` scores the seed-mean observables).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub seed_objectives: Vec<f64>,
 }
 
 /// What `calibrate` writes into calibration.json.
@@ -57,4 +64,25 @@ pub struct CalibrationResult {
     pub refinement_runs: usize,
     /// Every refinement evaluation in order.
     pub refinement: Vec<Evaluation>,
+    /// The search after the grid: `ego`, `nelder-mead` or `none`.
+    #[serde(default)]
+    pub method: String,
+    /// Whether the search met its convergence rule (see `termination`).
+    #[serde(default)]
+    pub converged: bool,
+    /// The noise the search worked with: a seed mean's standard error of log10 J.
+    #[serde(default)]
+    pub noise: Option<f64>,
+    /// The calibrated parameters' confidence region (ego).
+    #[serde(default)]
+    pub region: Option<super::ego::ParamRegion>,
+    /// At the best point, each target's observable over the seeds.
+    #[serde(default)]
+    pub best_spread: Vec<super::ego::Spread>,
+    /// Runs simulated by this invocation (grid, search and the paper's point).
+    #[serde(default)]
+    pub runs_made: usize,
+    /// Wall time of this invocation, s.
+    #[serde(default)]
+    pub wall_seconds: f64,
 }

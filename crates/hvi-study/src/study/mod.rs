@@ -4,6 +4,7 @@
 pub mod calibrate;
 pub mod calibration;
 pub mod collect;
+pub mod ego;
 pub mod figures;
 pub mod reanalyse;
 pub mod stability;

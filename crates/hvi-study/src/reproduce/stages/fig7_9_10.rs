@@ -88,7 +88,9 @@ pub fn fig7_9_10(
     let calibration = calibrate(&CalibrateArgs {
         study: ctx.study_args(study_path, sref, &dir),
         no_refine: true,
+        method: None,
         max_iters: None,
+        max_batches: None,
     })?;
     // `calibrate` returns its result but not the grid's records: those are the store's.
     let records = plan_records(plan, &dir)?;

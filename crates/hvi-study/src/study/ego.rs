@@ -1,0 +1,466 @@
+//! The calibration's surrogate search (`calibrate.method = "ego"`, the default): efficient
+//! global optimisation over the refined axes ([`hvi_analysis::surrogate`]), every point run at
+//! the study's seeds through the run store, a batch of points at once.
+//!
+//! 1. The grid's points are the first observations (at every seed when `calibrate.seeds` names
+//!    several; the runs at the scene's own seed are the grid's).
+//! 2. Each batch: the model is of log10 J (J spans decades over a grid); its noise is the
+//!    standard error of a seed mean's log10 J (pooled over the points, at least
+//!    `calibrate.noise_floor`); the kriging model proposes
+//!    `calibrate.batch` points by expected improvement; they run together (each at every
+//!    seed) through the store and are scored on their seed-mean observables.
+//! 3. The search stops converged when the largest expected improvement left is below the
+//!    noise, or not converged after `calibrate.max_batches` batches (or when no candidate is
+//!    left).
+//! 4. The answer: the evaluated point with the lowest *predicted* objective (a single lucky
+//!    seed does not win), the confidence region of the minimum as one interval per axis, and
+//!    each target's observable at that point over the seeds.
+//!
+//! A killed calibration resumes with nothing lost: the proposals are a deterministic function
+//! of the observations, so a second invocation proposes the same points and finds their runs
+//! in the store.
+
+use std::collections::BTreeMap;
+
+use anyhow::{anyhow, Result};
+use hvi_analysis::observable::{Observable, Observables};
+use hvi_analysis::score::objective;
+use hvi_analysis::surrogate::{
+    self, converged, propose, seed_mean_noise, Observation, SearchBox, Surrogate,
+};
+use hvi_run::exec::{execute, ExecOptions};
+use hvi_run::store::{Job, Record, RunStatus};
+use serde::{Deserialize, Serialize};
+
+use super::calibrate::{fmt_params, Refinement};
+use super::calibration::Evaluation;
+
+/// The search's settings (`[calibrate]`).
+#[derive(Debug, Clone)]
+pub(super) struct EgoSettings {
+    /// Points per batch.
+    pub batch: usize,
+    /// Seeds each point runs at (empty: the scene's seed only).
+    pub seeds: Vec<u64>,
+    /// Batches at most.
+    pub max_batches: usize,
+    /// The least noise assumed for the objective (a seed mean's standard error).
+    pub noise_floor: f64,
+}
+
+/// The calibrated parameters' confidence region, in the parameters' own units.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ParamRegion {
+    /// Per refined key, the lowest and highest value of the region.
+    pub intervals: BTreeMap<String, (f64, f64)>,
+    /// Per refined key, whether the region reaches the search box's edge there (the interval
+    /// may extend beyond what was searched).
+    pub at_boundary: BTreeMap<String, bool>,
+    /// The surrogate's minimum.
+    pub predicted_minimum: BTreeMap<String, f64>,
+    /// The predicted objective J at the minimum and the standard deviation of its log10.
+    pub predicted_objective: (f64, f64),
+    /// The region holds every point predicted below this objective J.
+    pub threshold: f64,
+    /// The share of the searched box inside the region.
+    pub share_of_box: f64,
+}
+
+/// A target's observable over the seeds at the best point.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Spread {
+    /// The target.
+    pub target: String,
+    /// The observable's seed mean.
+    pub mean: f64,
+    /// Its standard deviation over the seeds (0 with one seed).
+    pub sd: f64,
+    /// Seeds with a value.
+    pub seeds: usize,
+}
+
+/// What the search found.
+#[derive(Debug, Clone)]
+pub(super) struct EgoOutcome {
+    /// The grid points at every seed, then the search's points, in order.
+    pub evaluations: Vec<Evaluation>,
+    /// The point chosen (the evaluated point with the lowest predicted objective).
+    pub best: Evaluation,
+    /// Whether the stopping rule held.
+    pub converged: bool,
+    /// Why the search stopped.
+    pub termination: String,
+    /// The noise the search worked with (of log10 J).
+    pub noise: f64,
+    /// The confidence region.
+    pub region: Option<ParamRegion>,
+    /// The targets' observables over the seeds at the best point.
+    pub spread: Vec<Spread>,
+    /// Runs simulated.
+    pub runs: usize,
+}
+
+/// An evaluated point with its runs' observables, one per seed.
+type Scored = (Evaluation, Vec<Observables>);
+
+/// One point's runs at every seed, scored on the seed means.
+struct PointRuns {
+    params: BTreeMap<String, f64>,
+    /// One job per seed (None: the scene is invalid, with why).
+    jobs: Vec<std::result::Result<Job, String>>,
+}
+
+/// Runs the search from the grid's `grid` evaluations (each with its record).
+pub(super) fn search(
+    problem: &Refinement,
+    settings: &EgoSettings,
+    grid: &[(Evaluation, Record)],
+    opts: &ExecOptions,
+) -> Result<EgoOutcome> {
+    let space = SearchBox::new(problem.dims.iter().map(|d| (d.2, d.3)).collect())?;
+    let seeds: Vec<Option<u64>> = if settings.seeds.is_empty() {
+        vec![None]
+    } else {
+        settings.seeds.iter().copied().map(Some).collect()
+    };
+    let mut evaluations = Vec::new();
+    let mut runs = 0;
+    let grid_points: Vec<BTreeMap<String, f64>> = grid
+        .iter()
+        .filter(|(e, r)| r.status == RunStatus::Completed && e.score.is_some())
+        .map(|(e, _)| refined(problem, &e.params))
+        .collect();
+    if settings.seeds.is_empty() {
+        for (e, r) in grid {
+            if r.status == RunStatus::Completed && e.score.is_some() {
+                let mut e = e.clone();
+                e.seed_objectives = vec![e.objective];
+                evaluations.push((e, vec![r.observables]));
+            }
+        }
+    } else {
+        let (evs, n) = run_points(problem, "grid-seeds", &grid_points, &seeds, opts)?;
+        evaluations.extend(evs);
+        runs += n;
+    }
+    let mut batch = 0;
+    let (converged_now, termination, noise) = loop {
+        let obs = observations(problem, &evaluations);
+        let noise = noise_of(&evaluations, settings.noise_floor);
+        if obs.len() < 2 {
+            return Err(anyhow!(
+                "the surrogate search needs at least 2 scored points, the grid gave {}",
+                obs.len()
+            ));
+        }
+        let proposal = propose(&space, &obs, noise, settings.batch)?;
+        let ei = proposal.max_expected_improvement;
+        if problem.progress {
+            eprintln!(
+                "ego: {} points scored, noise {noise:.4}, largest expected improvement {ei:.4}",
+                obs.len()
+            );
+        }
+        if converged(ei, noise) {
+            break (true, format!("converged after {batch} batch(es): the largest expected improvement left ({ei:.3e}) is below the noise of log10 J ({noise:.3e})"), noise);
+        }
+        if proposal.points.is_empty() {
+            break (false, format!("not converged: no candidate left after {batch} batch(es) (largest expected improvement {ei:.3e}, noise {noise:.3e})"), noise);
+        }
+        if batch >= settings.max_batches {
+            break (false, format!("not converged: max_batches = {} reached; the largest expected improvement left ({ei:.3e}) is above the noise of log10 J ({noise:.3e}): raise calibrate.max_batches and run again (finished runs are reused)", settings.max_batches), noise);
+        }
+        let points: Vec<BTreeMap<String, f64>> =
+            proposal.points.iter().map(|x| problem.values(x)).collect();
+        let label = format!("ego-{batch}");
+        let (evs, n) = run_points(problem, &label, &points, &seeds, opts)?;
+        if problem.progress {
+            for (e, _) in &evs {
+                eprintln!("{label}: {}  J = {:.4}", fmt_params(&e.params), e.objective);
+            }
+        }
+        evaluations.extend(evs);
+        runs += n;
+        batch += 1;
+    };
+    let obs = observations(problem, &evaluations);
+    let best_index = best_predicted(&space, &obs, noise, problem, &evaluations)?;
+    let (best, observables) = evaluations[best_index].clone();
+    let region = surrogate::region(&space, &obs, noise)
+        .ok()
+        .map(|r| param_region(problem, &r));
+    let spread = spread_of(problem, &observables);
+    Ok(EgoOutcome {
+        evaluations: evaluations.into_iter().map(|(e, _)| e).collect(),
+        best,
+        converged: converged_now,
+        termination,
+        noise,
+        region,
+        spread,
+        runs,
+    })
+}
+
+/// The refined keys' values of a parameter point.
+fn refined(problem: &Refinement, params: &BTreeMap<String, f64>) -> BTreeMap<String, f64> {
+    problem
+        .dims
+        .iter()
+        .filter_map(|d| params.get(&d.0).map(|v| (d.0.clone(), *v)))
+        .collect()
+}
+
+/// A point in the search's coordinates.
+fn coords(problem: &Refinement, params: &BTreeMap<String, f64>) -> Option<Vec<f64>> {
+    problem
+        .dims
+        .iter()
+        .map(|(k, log, _, _)| params.get(k).map(|&v| if *log { v.log10() } else { v }))
+        .collect()
+}
+
+/// The scored evaluations as the surrogate's observations.
+fn observations(problem: &Refinement, evaluations: &[Scored]) -> Vec<Observation> {
+    evaluations
+        .iter()
+        .filter(|(e, _)| e.score.is_some() && e.objective.is_finite())
+        .filter_map(|(e, _)| {
+            coords(problem, &e.params).map(|x| Observation {
+                x,
+                y: log_objective(e.objective),
+            })
+        })
+        .collect()
+}
+
+/// The surrogate models log10 J: the objective spans decades over a grid (a squared
+/// deviation per target), and its seed scatter grows with it, so that in log10 the noise is
+/// about the same everywhere and the model is not ruled by the worst points. J is floored at
+/// 1e-6 (every target met exactly).
+fn log_objective(j: f64) -> f64 {
+    j.max(1e-6).log10()
+}
+
+/// The noise of a seed mean's log10 objective: pooled over the points, at least `floor`.
+fn noise_of(evaluations: &[Scored], floor: f64) -> f64 {
+    let groups: Vec<Vec<f64>> = evaluations
+        .iter()
+        .map(|(e, _)| {
+            e.seed_objectives
+                .iter()
+                .map(|&j| log_objective(j))
+                .collect()
+        })
+        .collect();
+    seed_mean_noise(&groups).map_or(floor, |n| n.max(floor))
+}
+
+/// Runs `points` at every seed together (in parallel through the store) and scores each on
+/// its seed-mean observables. Returns the evaluations (with the runs' observables) and the
+/// runs simulated.
+fn run_points(
+    problem: &Refinement,
+    stage: &str,
+    points: &[BTreeMap<String, f64>],
+    seeds: &[Option<u64>],
+    opts: &ExecOptions,
+) -> Result<(Vec<Scored>, usize)> {
+    let mut planned = Vec::new();
+    for p in points {
+        let jobs = seeds
+            .iter()
+            .map(|&s| problem.job(p, s))
+            .collect::<Result<Vec<_>>>()?;
+        planned.push(PointRuns {
+            params: p.clone(),
+            jobs,
+        });
+    }
+    let jobs: Vec<Job> = planned
+        .iter()
+        .flat_map(|p| p.jobs.iter().filter_map(|j| j.as_ref().ok().cloned()))
+        .collect();
+    let describe = |i: usize| fmt_params(&refined_of_job(&jobs[i]));
+    // Which runs the store held before this batch: a point is `cached` when all of its were.
+    let mut stored = Vec::with_capacity(jobs.len());
+    for j in &jobs {
+        stored.push(matches!(
+            problem.store.lookup(&j.fingerprint)?,
+            Some(r) if r.status == RunStatus::Completed
+        ));
+    }
+    let report = execute(problem.store, &jobs, &describe, opts)?;
+    let mut records = report.records.into_iter();
+    let mut stored = stored.into_iter();
+    let mut out = Vec::new();
+    for (step, p) in planned.into_iter().enumerate() {
+        let mut recs: Vec<Record> = Vec::new();
+        let mut why = None;
+        let mut dirs = Vec::new();
+        let mut cached = true;
+        for j in &p.jobs {
+            match j {
+                Ok(job) => {
+                    let r = records
+                        .next()
+                        .ok_or_else(|| anyhow!("a run of the batch has no record"))?;
+                    cached &= stored.next().unwrap_or(false);
+                    dirs.push(hvi_run::plan::run_dir_name(&job.fingerprint));
+                    recs.push(r);
+                }
+                Err(e) => why = Some(e.clone()),
+            }
+        }
+        let mut e = scored(problem, stage, step, p.params, seeds, recs, dirs, why);
+        e.0.cached = cached && e.0.dir.is_some();
+        out.push(e);
+    }
+    Ok((out, report.ran))
+}
+
+/// The refined parameters of a job, for its progress line.
+fn refined_of_job(job: &Job) -> BTreeMap<String, f64> {
+    job.params
+        .iter()
+        .filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x)))
+        .collect()
+}
+
+/// A point's evaluation from its runs: the score of the seed-mean observables, each seed's
+/// objective, the status (completed only when every seed completed).
+#[allow(clippy::too_many_arguments)]
+fn scored(
+    problem: &Refinement,
+    stage: &str,
+    step: usize,
+    params: BTreeMap<String, f64>,
+    seeds: &[Option<u64>],
+    recs: Vec<Record>,
+    dirs: Vec<String>,
+    invalid: Option<String>,
+) -> Scored {
+    let targets = &problem.targets.targets;
+    let complete = invalid.is_none()
+        && !recs.is_empty()
+        && recs.iter().all(|r| r.status == RunStatus::Completed);
+    let observables: Vec<_> = recs.iter().map(|r| r.observables).collect();
+    let mean = |o: Observable| -> Option<f64> {
+        let v: Option<Vec<f64>> = observables.iter().map(|x| x.get(o)).collect();
+        v.filter(|v| !v.is_empty())
+            .map(|v| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    let score = complete.then(|| objective(targets, mean));
+    let seed_objectives = if complete {
+        observables
+            .iter()
+            .map(|x| objective(targets, |o| x.get(o)).objective)
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let status = match (&invalid, complete) {
+        (Some(why), _) => why.clone(),
+        (None, true) => "completed".into(),
+        (None, false) => {
+            let failed: Vec<String> = recs
+                .iter()
+                .filter(|r| r.status != RunStatus::Completed)
+                .map(|r| r.error.clone().unwrap_or_else(|| "(no message)".into()))
+                .collect();
+            format!("failed: {}", failed.join("; "))
+        }
+    };
+    let e = Evaluation {
+        stage: stage.into(),
+        step,
+        params,
+        objective: score.as_ref().map_or(f64::NAN, |s| s.objective),
+        score,
+        status,
+        cached: false,
+        dir: dirs.first().cloned(),
+        seeds: seeds.iter().flatten().copied().collect(),
+        seed_objectives,
+    };
+    (e, observables)
+}
+
+/// The evaluated point with the lowest predicted objective.
+fn best_predicted(
+    space: &SearchBox,
+    obs: &[Observation],
+    noise: f64,
+    problem: &Refinement,
+    evaluations: &[Scored],
+) -> Result<usize> {
+    let model = Surrogate::fit(space, obs, noise)?;
+    let mut best = None;
+    for (i, (e, _)) in evaluations.iter().enumerate() {
+        if e.score.is_none() || !e.objective.is_finite() {
+            continue;
+        }
+        let Some(x) = coords(problem, &e.params) else {
+            continue;
+        };
+        let m = model.predict(&[x])?[0].0;
+        if best.is_none_or(|(_, b)| m < b) {
+            best = Some((i, m));
+        }
+    }
+    best.map(|b| b.0)
+        .ok_or_else(|| anyhow!("no point of the search has a score"))
+}
+
+/// The surrogate's region in the parameters' units.
+fn param_region(problem: &Refinement, r: &surrogate::Region) -> ParamRegion {
+    let value = |log: bool, u: f64| if log { 10f64.powf(u) } else { u };
+    let mut intervals = BTreeMap::new();
+    let mut at_boundary = BTreeMap::new();
+    let mut predicted_minimum = BTreeMap::new();
+    for (k, (key, log, _, _)) in problem.dims.iter().enumerate() {
+        let (lo, hi) = r.intervals[k];
+        intervals.insert(key.clone(), (value(*log, lo), value(*log, hi)));
+        at_boundary.insert(key.clone(), r.at_boundary[k]);
+        predicted_minimum.insert(key.clone(), value(*log, r.best[k]));
+    }
+    ParamRegion {
+        intervals,
+        at_boundary,
+        predicted_minimum,
+        predicted_objective: (10f64.powf(r.best_predicted.0), r.best_predicted.1),
+        threshold: 10f64.powf(r.threshold),
+        share_of_box: r.share_of_box,
+    }
+}
+
+/// Each target's observable over the seeds.
+fn spread_of(problem: &Refinement, observables: &[Observables]) -> Vec<Spread> {
+    problem
+        .targets
+        .targets
+        .iter()
+        .filter_map(|t| {
+            let v: Vec<f64> = observables
+                .iter()
+                .filter_map(|o| o.get(t.observable))
+                .collect();
+            if v.is_empty() {
+                return None;
+            }
+            let n = v.len() as f64;
+            let mean = v.iter().sum::<f64>() / n;
+            let sd = if v.len() > 1 {
+                (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+            } else {
+                0.0
+            };
+            Some(Spread {
+                target: t.name.clone(),
+                mean,
+                sd,
+                seeds: v.len(),
+            })
+        })
+        .collect()
+}
