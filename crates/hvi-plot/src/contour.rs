@@ -11,6 +11,7 @@ use anyhow::{anyhow, Result};
 use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
+use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
 use crate::render::round_ticks;
@@ -69,6 +70,9 @@ pub struct ContourPlot {
     pub extra_points: Vec<Point>,
     /// Marked points.
     pub markers: Vec<Marker>,
+    /// A box drawn dashed, with its legend text: (lowest corner, highest corner) in physical
+    /// units (the calibration's confidence region).
+    pub region: Option<(Point, Point, String)>,
 }
 
 fn tx(v: f64, log: bool) -> f64 {
@@ -251,6 +255,7 @@ where
     fill_field(&mut chart, &field, &frame)?;
     iso_lines(&mut chart, &field, p, &frame)?;
     run_points(&mut chart, &field, p)?;
+    region_box(&mut chart, p)?;
     markers(&mut chart, p)?;
     series_legend(&mut chart, SeriesLabelPosition::UpperRight, MAP_LEGEND)?;
     subtitle(&main, &p.subtitle, 26)?;
@@ -395,9 +400,38 @@ where
             .draw_series(p.extra_points.iter().map(|&(x, y)| {
                 Circle::new((tx(x, p.x_log), tx(y, p.y_log)), 4, WHITE.stroke_width(2))
             }))?
-            .label("refinement runs")
+            .label("runs after the grid")
             .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.stroke_width(2)));
     }
+    Ok(())
+}
+
+/// The region's box, dashed black over white so that it shows on any colour.
+fn region_box<DB: DrawingBackend>(chart: &mut MapChart<'_, DB>, p: &ContourPlot) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let Some(((x0, y0), (x1, y1), label)) = &p.region else {
+        return Ok(());
+    };
+    let (x0, x1) = (tx(*x0, p.x_log), tx(*x1, p.x_log));
+    let (y0, y1) = (tx(*y0, p.y_log), tx(*y1, p.y_log));
+    let ring = vec![(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)];
+    chart.draw_series(std::iter::once(PathElement::new(
+        ring.clone(),
+        WHITE.stroke_width(4),
+    )))?;
+    chart
+        .draw_series(std::iter::once(DashedPathElement::new(
+            ring,
+            8,
+            5,
+            BLACK.stroke_width(2),
+        )))?
+        .label(label.clone())
+        .legend(|(x, y)| {
+            DashedPathElement::new(vec![(x, y), (x + 20, y)], 5, 3, BLACK.stroke_width(2))
+        });
     Ok(())
 }
 
@@ -569,6 +603,7 @@ mod tests {
                 color: RED,
                 cross: true,
             }],
+            region: Some(((0.03, 1.5e6), (0.2, 4e6), "confidence region".into())),
         };
         let dir = std::env::temp_dir().join(format!("hvi-plot-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("dir");

@@ -179,6 +179,10 @@ pub struct CalibrateArgs {
     /// Surrogate-search batches at most (overrides calibrate.max_batches).
     #[arg(long)]
     pub max_batches: Option<usize>,
+    /// The seeds every point of the surrogate search runs at, e.g. `1,2,3` (overrides
+    /// calibrate.seeds; one seed: the noise is calibrate.noise_floor).
+    #[arg(long, value_delimiter = ',', value_name = "SEEDS")]
+    pub seeds: Option<Vec<u64>>,
 }
 
 /// `hvi-study validity-map` arguments.

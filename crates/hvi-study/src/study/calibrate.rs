@@ -175,16 +175,22 @@ impl CalibrateConfig {
                 cfg.noise_floor
             );
         }
-        let mut seeds = cfg.seeds.clone();
+        cfg.check_seeds("study key `calibrate.seeds`")?;
+        Ok(cfg)
+    }
+
+    /// The seeds are distinct (`what` names where they came from in the error).
+    fn check_seeds(&self, what: &str) -> Result<()> {
+        let mut seeds = self.seeds.clone();
         seeds.sort_unstable();
         seeds.dedup();
-        if seeds.len() != cfg.seeds.len() {
+        if seeds.len() != self.seeds.len() {
             bail!(
-                "study key `calibrate.seeds`: {:?} names a seed twice (allowed: distinct seeds)",
-                cfg.seeds
+                "{what}: {:?} names a seed twice (allowed: distinct seeds)",
+                self.seeds
             );
         }
-        Ok(cfg)
+        Ok(())
     }
 }
 
@@ -430,7 +436,11 @@ fn describe_eval(e: &Evaluation) -> String {
 pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
     let t0 = std::time::Instant::now();
     let (study, plan, out) = args.study.plan()?;
-    let cfg = CalibrateConfig::of(&study)?;
+    let mut cfg = CalibrateConfig::of(&study)?;
+    if let Some(seeds) = &args.seeds {
+        cfg.seeds = seeds.clone();
+        cfg.check_seeds("--seeds")?;
+    }
     let base = study.path.parent().unwrap_or_else(|| Path::new("."));
     let targets =
         hvi_run::output::load_targets(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;

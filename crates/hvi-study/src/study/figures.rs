@@ -130,6 +130,8 @@ struct MapFrame<'a> {
     /// The tier, the particles and the slice, for the subtitles.
     tier: String,
     markers: Vec<Marker>,
+    /// The calibration's confidence region over the map's axes, when it has one.
+    region: Option<(Point, Point, String)>,
 }
 
 impl<'a> MapFrame<'a> {
@@ -151,6 +153,7 @@ impl<'a> MapFrame<'a> {
             slice,
             tier: tier_note(plan, result, (ax, ay), slice),
             markers: markers(result, |e| point_of(plan, (ax, ay), e)),
+            region: region_of(result, (kx, ky)),
         })
     }
 
@@ -174,6 +177,7 @@ impl<'a> MapFrame<'a> {
             highlight: None,
             extra_points: Vec::new(),
             markers: self.markers.clone(),
+            region: self.region.clone(),
         }
     }
 
@@ -184,6 +188,17 @@ impl<'a> MapFrame<'a> {
             .iter()
             .find(|t| t.observable == observable && t.weight > 0.0)
     }
+}
+
+/// The confidence region's box over the keys `kx`, `ky`, when the calibration has one on both.
+fn region_of(result: &CalibrationResult, (kx, ky): (&str, &str)) -> Option<(Point, Point, String)> {
+    let r = result.region.as_ref()?;
+    let (x, y) = (r.intervals.get(kx)?, r.intervals.get(ky)?);
+    Some((
+        (x.0, y.0),
+        (x.1, y.1),
+        format!("confidence region (J < {:.3})", r.threshold),
+    ))
 }
 
 /// The start of the maps' subtitles: the tier, its particles and the other axes' values at
@@ -285,14 +300,20 @@ fn objective_map(f: &MapFrame) -> Result<ContourPlot> {
     Ok(ContourPlot {
         title: "Objective J over the grid, log10 (optimum marked)".into(),
         subtitle: format!(
-            "{}; J = weighted mean of the target terms (experiments_data/README.md); {}",
-            f.tier, result.termination
+            "{}; J = weighted mean of the target terms (experiments_data/README.md); search: {} ({})",
+            f.tier,
+            result.method,
+            if result.converged {
+                "converged"
+            } else {
+                "not converged"
+            }
         ),
         highlight: Some((0.0, "J = 1: every target within tolerance".into())),
         extra_points: result
             .refinement
             .iter()
-            .filter(|e| e.score.is_some())
+            .filter(|e| e.score.is_some() && e.stage != "grid-seeds")
             .filter_map(|e| point_of(f.plan, f.axes, e))
             .collect(),
         ..f.plot(field, "log10 J")

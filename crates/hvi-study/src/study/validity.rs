@@ -264,6 +264,7 @@ fn map_plot(
         levels: 6,
         highlight: Some((cutoff, format!("{} = {cutoff}", observable))),
         extra_points: Vec::new(),
+        region: None,
         markers: Vec::new(),
     }
 }

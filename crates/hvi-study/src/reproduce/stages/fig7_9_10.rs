@@ -91,6 +91,7 @@ pub fn fig7_9_10(
         method: None,
         max_iters: None,
         max_batches: None,
+        seeds: None,
     })?;
     // `calibrate` returns its result but not the grid's records: those are the store's.
     let records = plan_records(plan, &dir)?;
