@@ -78,8 +78,8 @@ fn default_noise_floor() -> f64 {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
-    /// Efficient global optimisation: a kriging model, batches by expected improvement
-    /// ([`super::ego`]).
+    /// Efficient global optimisation: a kriging model of the objective, batches of runs by
+    /// expected improvement, stopped when the improvement left is below the seed noise.
     #[default]
     Ego,
     /// Nelder-Mead (argmin) from the best grid point, one run at a time.
