@@ -865,8 +865,9 @@ mod tests {
 
     #[test]
     fn fig9_r_rising_with_eps_is_no_plateau_whatever_its_median() {
-        // The paper tier's map (reports/paper): R rises with eps; its median (1.43) is near
-        // 1.47 and the peak is at the paper's point, but the main claim fails.
+        // The paper tier's map under the 0.995 quantile (engine 0.5.0, before the 0.9
+        // quantile was adopted): R rises with eps; its median (1.43) is near 1.47 and the
+        // peak is at the paper's point, but the main claim fails.
         let rr = paper_grid([
             [1.1105, 1.4402, 1.9780],
             [1.1067, 1.4463, 1.9439],
