@@ -276,7 +276,7 @@ where
     let mut chart = ChartBuilder::on(main)
         .caption(&p.title, (FAMILY, 26))
         .margin(18)
-        .margin_bottom(44)
+        .margin_bottom(62)
         .x_label_area_size(70)
         .y_label_area_size(95)
         .build_cartesian_2d(

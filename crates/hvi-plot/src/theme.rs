@@ -190,10 +190,16 @@ where
     DB: DrawingBackend,
     DB::ErrorType: 'static,
 {
-    area.draw(&Text::new(
-        text.to_string(),
-        (20, area.dim_in_pixel().1 as i32 - from_bottom),
-        font(15).color(&SUBTITLE),
-    ))?;
+    // One line per `\n`, the last at `from_bottom`, the others above it.
+    let lines: Vec<&str> = text.lines().collect();
+    let h = area.dim_in_pixel().1 as i32;
+    for (i, line) in lines.iter().enumerate() {
+        let up = 19 * (lines.len() - 1 - i) as i32;
+        area.draw(&Text::new(
+            line.to_string(),
+            (20, h - from_bottom - up),
+            font(15).color(&SUBTITLE),
+        ))?;
+    }
     Ok(())
 }

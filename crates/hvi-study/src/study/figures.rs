@@ -151,7 +151,7 @@ impl<'a> MapFrame<'a> {
             axes: (ax, ay),
             logs: (log_axes.contains(kx), log_axes.contains(ky)),
             slice,
-            tier: tier_note(plan, result, (ax, ay), slice),
+            tier: tier_note(plan, records, (ax, ay), slice),
             markers: markers(result, |e| point_of(plan, (ax, ay), e)),
             region: region_of(result, (kx, ky)),
         })
@@ -203,12 +203,7 @@ fn region_of(result: &CalibrationResult, (kx, ky): (&str, &str)) -> Option<(Poin
 
 /// The start of the maps' subtitles: the tier, its particles and the other axes' values at
 /// the slice.
-fn tier_note(
-    plan: &Plan,
-    result: &CalibrationResult,
-    (ax, ay): (usize, usize),
-    slice: usize,
-) -> String {
+fn tier_note(plan: &Plan, records: &[Record], (ax, ay): (usize, usize), slice: usize) -> String {
     let sliced = plan
         .axes
         .iter()
@@ -217,9 +212,8 @@ fn tier_note(
         .map(|(k, a)| format!("{} = {}", a.key, plan.runs[slice].values[k]))
         .collect::<Vec<_>>();
     format!(
-        "tier `{}`, {} particles{}",
-        plan.tier,
-        result.particles.map_or("?".into(), |n| format!("{n}")),
+        "{}{}",
+        conditions(plan, records),
         if sliced.is_empty() {
             String::new()
         } else {
@@ -263,9 +257,9 @@ fn length_ratio_map(f: &MapFrame) -> Result<ContourPlot> {
     Ok(ContourPlot {
         title: "Debris-cloud length ratio R = La/Lr (Fig. 9)".into(),
         subtitle: format!(
-            "{}; red: the experiment's R = {}",
-            f.tier,
-            target.map_or("n/a".into(), |t| t.value.to_string())
+            "red: the experiment's R = {}\n{}",
+            target.map_or("n/a".into(), |t| t.value.to_string()),
+            f.tier
         ),
         highlight: target.map(|t| (t.value, format!("experiment R = {}", t.value))),
         ..f.plot(field, "R")
@@ -280,9 +274,9 @@ fn front_velocity_map(f: &MapFrame) -> Result<ContourPlot> {
     Ok(ContourPlot {
         title: "Axial front velocity va/v0 (Fig. 10)".into(),
         subtitle: match target {
-            Some(t) => format!("{tier}; red: the experiment's va/v0 = {}", t.value),
+            Some(t) => format!("red: the experiment's va/v0 = {}\n{tier}", t.value),
             None => format!(
-                "{tier}; the experiment's va/v0 is not available (experiments_data gap): no red line"
+                "the experiment's va/v0 is not available (experiments_data gap): no red line\n{tier}"
             ),
         },
         highlight: target.map(|t| (t.value, format!("experiment va/v0 = {}", t.value))),
@@ -300,14 +294,14 @@ fn objective_map(f: &MapFrame) -> Result<ContourPlot> {
     Ok(ContourPlot {
         title: "Objective J over the grid, log10 (optimum marked)".into(),
         subtitle: format!(
-            "{}; J = weighted mean of the target terms (experiments_data/README.md); search: {} ({})",
-            f.tier,
+            "J = weighted mean of the target terms (experiments_data/README.md); search: {} ({})\n{}",
             result.method,
             if result.converged {
                 "converged"
             } else {
                 "not converged"
-            }
+            },
+            f.tier
         ),
         highlight: Some((0.0, "J = 1: every target within tolerance".into())),
         extra_points: result
@@ -427,18 +421,27 @@ pub fn shown_axis(axis: &hvi_run::spec::Axis) -> (String, f64) {
 }
 
 /// The conditions of a plan's runs, for a figure's footer, so that a figure of one tier is not
-/// taken for another's: the tier, the particle count, the target and impactor, and the time the
-/// cloud is measured at (from the records).
+/// taken for another's: the tier, the particle count (its range where the runs differ), the
+/// target and impactor, and the time the cloud is measured at (from the records).
 pub fn conditions(plan: &Plan, records: &[Record]) -> String {
-    let particles = records
+    let (lo, hi) = records
         .iter()
-        .find_map(|r| r.observables.get(Observable::Particles));
+        .filter_map(|r| r.observables.get(Observable::Particles))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), n| {
+            (lo.min(n), hi.max(n))
+        });
     let tau = records
         .iter()
         .find_map(|r| r.observables.get(Observable::Tau));
     let mut s = format!("tier `{}`", plan.tier);
-    if let Some(n) = particles {
-        s.push_str(&format!(", {} particles", short_number(n)));
+    if lo == hi {
+        s.push_str(&format!(", {} particles", short_number(lo)));
+    } else if lo < hi {
+        s.push_str(&format!(
+            ", {}-{} particles",
+            short_number(lo),
+            short_number(hi)
+        ));
     }
     if let Some(run) = plan.runs.first() {
         if let hvi_engine::scene::Geometry::SphereOnPlate {

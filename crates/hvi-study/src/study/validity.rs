@@ -222,12 +222,6 @@ fn map_plot(
     Cut { observable, cutoff }: Cut,
     (valid, invalid): (usize, usize),
 ) -> ContourPlot {
-    let particles = records
-        .iter()
-        .filter_map(|r| r.observables.get(Observable::Particles))
-        .fold((f64::INFINITY, 0.0f64), |(lo, hi), n| {
-            (lo.min(n), hi.max(n))
-        });
     let fragmentation = observable == Observable::Fragmentation;
     let ((x_label, fx), (y_label, fy)) = (
         shown_axis(&plan.axes[axes.0]),
@@ -248,8 +242,9 @@ fn map_plot(
             },
         ),
         subtitle: format!(
-            "tier `{}`, {}-{} particles; red: {} = {cutoff} (validity cut-off; the paper's is {PAPER_CUTOFF}); {valid} runs valid, {invalid} not",
-            plan.tier, particles.0, particles.1, observable
+            "red: {} = {cutoff} (validity cut-off; the paper's is {PAPER_CUTOFF}); {valid} runs valid, {invalid} not\n{}",
+            observable,
+            super::figures::conditions(plan, records),
         ),
         x_label,
         y_label,
