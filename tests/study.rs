@@ -391,6 +391,26 @@ fn results_of_different_studies_never_mix() {
     assert!(stderr(&o).contains("refusing to mix"), "{}", stderr(&o));
 }
 
+/// `hvi-study calibrate STUDY --out OUT` on 2 threads.
+fn calibrate(study: &Path, out: &Path) -> Output {
+    bin()
+        .arg("calibrate")
+        .arg(study)
+        .arg("--out")
+        .arg(out)
+        .args(["--threads", "2"])
+        .output()
+        .expect("runs")
+}
+
+/// A calibration's calibration.json.
+fn calibration_json(out: &Path) -> serde_json::Value {
+    serde_json::from_str(
+        &std::fs::read_to_string(out.join("calibration.json")).expect("calibration.json"),
+    )
+    .expect("json")
+}
+
 #[test]
 fn calibrate_scores_the_grid_refines_through_the_store_and_compares_with_the_paper() {
     let dir = scratch("calibrate");
@@ -401,16 +421,7 @@ fn calibrate_scores_the_grid_refines_through_the_store_and_compares_with_the_pap
     );
     let study = write_study(&dir, "cal", &axes, TINY);
     let out = dir.join("out");
-    let run = || {
-        bin()
-            .arg("calibrate")
-            .arg(&study)
-            .arg("--out")
-            .arg(&out)
-            .args(["--threads", "2"])
-            .output()
-            .expect("runs")
-    };
+    let run = || calibrate(&study, &out);
     let o = run();
     assert_ok(&o);
     for needle in ["best:", "paper's fit:", "length_ratio", "not scored (gap)"] {
@@ -420,12 +431,7 @@ fn calibrate_scores_the_grid_refines_through_the_store_and_compares_with_the_pap
             stderr(&o)
         );
     }
-    let read = || -> serde_json::Value {
-        serde_json::from_str(
-            &std::fs::read_to_string(out.join("calibration.json")).expect("calibration.json"),
-        )
-        .expect("json")
-    };
+    let read = || calibration_json(&out);
     let c = read();
     let best = c["best"]["objective"].as_f64().expect("best objective");
     assert!(
@@ -493,24 +499,10 @@ fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_n
     );
     let study = write_study(&dir, "ego", &axes, TINY);
     let out = dir.join("out");
-    let run = || {
-        bin()
-            .arg("calibrate")
-            .arg(&study)
-            .arg("--out")
-            .arg(&out)
-            .args(["--threads", "2"])
-            .output()
-            .expect("runs")
-    };
+    let run = || calibrate(&study, &out);
     let o = run();
     assert_ok(&o);
-    let read = || -> serde_json::Value {
-        serde_json::from_str(
-            &std::fs::read_to_string(out.join("calibration.json")).expect("calibration.json"),
-        )
-        .expect("json")
-    };
+    let read = || calibration_json(&out);
     let c = read();
     assert_eq!(c["method"], "ego");
     let termination = c["termination"].as_str().expect("termination");

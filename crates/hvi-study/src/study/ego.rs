@@ -106,7 +106,7 @@ type Scored = (Evaluation, Vec<Observables>);
 /// One point's runs at every seed, scored on the seed means.
 struct PointRuns {
     params: BTreeMap<String, f64>,
-    /// One job per seed (None: the scene is invalid, with why).
+    /// One job per seed (Err: the scene is invalid, with why).
     jobs: Vec<std::result::Result<Job, String>>,
 }
 
@@ -125,20 +125,19 @@ pub(super) fn search(
     };
     let mut evaluations = Vec::new();
     let mut runs = 0;
-    let grid_points: Vec<BTreeMap<String, f64>> = grid
+    let scored_grid = grid
         .iter()
-        .filter(|(e, r)| r.status == RunStatus::Completed && e.score.is_some())
-        .map(|(e, _)| refined(problem, &e.params))
-        .collect();
+        .filter(|(e, r)| r.status == RunStatus::Completed && e.score.is_some());
     if settings.seeds.is_empty() {
-        for (e, r) in grid {
-            if r.status == RunStatus::Completed && e.score.is_some() {
-                let mut e = e.clone();
-                e.seed_objectives = vec![e.objective];
-                evaluations.push((e, vec![r.observables]));
-            }
+        for (e, r) in scored_grid {
+            let mut e = e.clone();
+            e.seed_objectives = vec![e.objective];
+            evaluations.push((e, vec![r.observables]));
         }
     } else {
+        let grid_points: Vec<BTreeMap<String, f64>> = scored_grid
+            .map(|(e, _)| refined(problem, &e.params))
+            .collect();
         let (evs, n) = run_points(problem, "grid-seeds", &grid_points, &seeds, opts)?;
         evaluations.extend(evs);
         runs += n;
@@ -312,9 +311,10 @@ fn run_points(
                 Err(e) => why = Some(e.clone()),
             }
         }
-        let mut e = scored(problem, stage, step, p.params, seeds, recs, dirs, why);
-        e.0.cached = cached && e.0.dir.is_some();
-        out.push(e);
+        let cached = cached && !dirs.is_empty();
+        out.push(scored(
+            problem, stage, step, p.params, seeds, recs, dirs, why, cached,
+        ));
     }
     Ok((out, report.ran))
 }
@@ -328,7 +328,8 @@ fn refined_of_job(job: &Job) -> BTreeMap<String, f64> {
 }
 
 /// A point's evaluation from its runs: the score of the seed-mean observables, each seed's
-/// objective, the status (completed only when every seed completed).
+/// objective, the status (completed only when every seed completed); `cached` when every run
+/// was in the store before.
 #[allow(clippy::too_many_arguments)]
 fn scored(
     problem: &Refinement,
@@ -339,6 +340,7 @@ fn scored(
     recs: Vec<Record>,
     dirs: Vec<String>,
     invalid: Option<String>,
+    cached: bool,
 ) -> Scored {
     let targets = &problem.targets.targets;
     let complete = invalid.is_none()
@@ -378,7 +380,7 @@ fn scored(
         objective: score.as_ref().map_or(f64::NAN, |s| s.objective),
         score,
         status,
-        cached: false,
+        cached,
         dir: dirs.first().cloned(),
         seeds: seeds.iter().flatten().copied().collect(),
         seed_objectives,
