@@ -296,6 +296,7 @@ fn wait_for_jobs(conf: &Path, jobs: &[&str], dirs: &[&Path], timeout: Duration) 
 
 #[test]
 fn a_job_array_gives_the_local_results_and_finishes_a_study_started_locally() {
+    let _turn = CLUSTER_TURN.lock().unwrap_or_else(|e| e.into_inner());
     let Some(cluster) = cluster_or_skip() else {
         return;
     };
@@ -433,6 +434,175 @@ fn a_job_array_gives_the_local_results_and_finishes_a_study_started_locally() {
     );
     drop(cluster);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Tests that need the cluster take turns: without SLURM_CONF each starts its own on the
+/// same ports.
+static CLUSTER_TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// The submissions' array tasks of a study directory: each submitted run's fingerprint.
+fn submitted_fingerprints(dir: &Path) -> Vec<String> {
+    let mut v = Vec::new();
+    for sub in std::fs::read_dir(dir.join("slurm"))
+        .into_iter()
+        .flatten()
+        .flatten()
+    {
+        let Ok(text) = std::fs::read_to_string(sub.path().join("submission.json")) else {
+            continue;
+        };
+        let s: serde_json::Value = serde_json::from_str(&text).expect("submission.json");
+        for r in s["runs"].as_array().expect("runs") {
+            v.push(r["fingerprint"].as_str().expect("fingerprint").to_string());
+        }
+    }
+    v
+}
+
+#[test]
+fn calibrate_runs_each_batch_as_a_job_array_and_a_killed_calibration_submits_nothing_twice() {
+    let _turn = CLUSTER_TURN.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(cluster) = cluster_or_skip() else {
+        return;
+    };
+    let conf = cluster.conf.as_path();
+    let env = [("SLURM_CONF", conf)];
+    let dir = scratch("calibrate");
+    let study = write_study(&dir);
+    let mut text = std::fs::read_to_string(&study).expect("study");
+    text.push_str(&format!(
+        "\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nbatch = 2\nmax_batches = 2\nnoise_floor = 0\n",
+        repo()
+            .join("experiments_data/calibration-shot.toml")
+            .display()
+    ));
+    std::fs::write(&study, text).expect("study");
+    let study_arg = study.to_str().expect("utf-8 path").to_string();
+    let arg = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let (local, cluster_dir) = (dir.join("local"), dir.join("cluster"));
+    let calibrate = |out: &Path, slurm: bool| {
+        let mut args = vec![
+            "calibrate".to_string(),
+            study_arg.clone(),
+            "--out".into(),
+            arg(out),
+        ];
+        if slurm {
+            args.extend(["--slurm", "--poll", "0.3", "--time", "5"].map(String::from));
+        } else {
+            args.extend(["--threads", "2"].map(String::from));
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        hvi(&args, &env)
+    };
+    let json = |out: &Path| -> serde_json::Value {
+        serde_json::from_str(
+            &std::fs::read_to_string(out.join("calibration.json")).expect("calibration.json"),
+        )
+        .expect("json")
+    };
+
+    // The reference: the same calibration here.
+    ok(calibrate(&local, false));
+    let reference = json(&local);
+
+    // On Slurm, killed as soon as its first job array is submitted, then run again.
+    let mut child = bin()
+        .args([
+            "calibrate",
+            &study_arg,
+            "--out",
+            &arg(&cluster_dir),
+            "--slurm",
+            "--poll",
+            "0.3",
+        ])
+        .env("SLURM_CONF", conf)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("calibrate starts");
+    let t0 = Instant::now();
+    while submitted_fingerprints(&cluster_dir).is_empty() {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "no job array submitted within a minute"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().expect("kill");
+    let _ = child.wait();
+    let o = ok(calibrate(&cluster_dir, true));
+    let c = json(&cluster_dir);
+    // The same answer as here: the runs are bit-identical wherever they ran.
+    for key in ["best", "region", "converged", "noise", "termination"] {
+        assert_eq!(c[key], reference[key], "`{key}` differs\n{}", stderr(&o));
+    }
+    assert_eq!(
+        c["refinement"].as_array().map(Vec::len),
+        reference["refinement"].as_array().map(Vec::len)
+    );
+    // Every run of the calibration went through Slurm, each submitted once, in several
+    // arrays (the grid, the grid at the seeds, each search batch, the paper's point).
+    let submitted = submitted_fingerprints(&cluster_dir);
+    let mut distinct = submitted.clone();
+    distinct.sort();
+    distinct.dedup();
+    assert_eq!(distinct.len(), submitted.len(), "a run was submitted twice");
+    let stored = records(&cluster_dir).len();
+    assert_eq!(
+        submitted.len(),
+        stored,
+        "every stored run came from an array"
+    );
+    let arrays = std::fs::read_dir(cluster_dir.join("slurm"))
+        .expect("slurm")
+        .count();
+    let mut stages: Vec<&str> = c["refinement"]
+        .as_array()
+        .expect("refinement")
+        .iter()
+        .filter_map(|e| e["stage"].as_str())
+        .collect();
+    stages.dedup();
+    assert!(stages.iter().any(|s| s.starts_with("ego-")), "{stages:?}");
+    assert_eq!(
+        arrays,
+        1 + stages.len(),
+        "one array for the grid, one per stage {stages:?}"
+    );
+    assert!(stderr(&o).contains("on Slurm"), "{}", stderr(&o));
+    // Again: nothing submitted, nothing run.
+    let o = ok(calibrate(&cluster_dir, true));
+    assert_eq!(json(&cluster_dir)["runs_made"], 0, "{}", stderr(&o));
+    assert_eq!(submitted_fingerprints(&cluster_dir).len(), submitted.len());
+    // Slurm options without --slurm are refused, naming them.
+    let o = hvi(
+        &[
+            "calibrate",
+            &study_arg,
+            "--out",
+            &arg(&local),
+            "--time",
+            "5",
+        ],
+        &env,
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--slurm"), "{}", stderr(&o));
+    let o = calibrate_with_poll(&study_arg, &arg(&local), "0");
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--poll"), "{}", stderr(&o));
+    drop(cluster);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `calibrate --slurm --poll P` (for the poll interval's check: refused before any run).
+fn calibrate_with_poll(study: &str, out: &str, poll: &str) -> Output {
+    hvi(
+        &["calibrate", study, "--out", out, "--slurm", "--poll", poll],
+        &[],
+    )
 }
 
 #[test]

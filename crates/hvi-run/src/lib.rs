@@ -4,7 +4,7 @@
 //! ([`scene_file`]), one run and its files ([`run`], [`output`]), the cloud's kept state for
 //! re-analysis ([`state`]), study files and their validated plans ([`spec`], [`plan`]), the
 //! run store that keeps each result once ([`store`]), checkpoints of runs in progress
-//! ([`checkpoint`]), parallel execution ([`exec`]), results tables ([`table`]), Slurm job
+//! ([`checkpoint`]), parallel execution ([`exec`]) or as Slurm batches ([`runner`]), results tables ([`table`]), Slurm job
 //! arrays ([`slurm`]) and the engine benchmark ([`mod@bench`]).
 //!
 //! ```
@@ -43,6 +43,7 @@ pub mod lock;
 pub mod output;
 pub mod plan;
 pub mod run;
+pub mod runner;
 pub mod scene_file;
 pub mod slurm;
 pub mod spec;

@@ -680,40 +680,20 @@ pub fn submit(plan: &Plan, out: &Path, opts: &SlurmOptions) -> Result<()> {
         return Ok(());
     }
     let study_dir = absolute(out)?;
-    let exe = std::env::current_exe()
-        .and_then(std::fs::canonicalize)
-        .context("cannot find the hvi-study binary's path for the job script")?;
     let sub_dir = if opts.dry_run {
         submission_dir(&study_dir, false)?
     } else {
         plan.write(out)?;
         submission_dir(&study_dir, true)?
     };
-    let spec = ScriptSpec {
-        job_name: format!(
-            "hvi-{}-{}",
-            job_name_part(&plan.study),
-            job_name_part(&plan.tier)
-        ),
-        what: format!(
-            "hvi-study submit: study `{}` at tier `{}`, {} runs of {} (array task k runs the plan index on line k + 1 of tasks.txt)",
-            plan.study,
-            plan.tier,
-            todo.len(),
-            study_dir.display()
-        )
-        .replace('\n', " "),
-        tasks: todo.len(),
-        array_limit: opts.array_limit,
-        cpus_per_task: opts.cpus_per_task,
-        partition: opts.partition.clone(),
-        time: opts.time.clone(),
-        extra: opts.sbatch_options.clone(),
-        checkpoint_every: crate::checkpoint::interval(),
-        study_dir: study_dir.clone(),
-        submission_dir: sub_dir.clone(),
-        exe,
-    };
+    let spec = script_spec(
+        plan,
+        todo.len(),
+        opts,
+        &study_dir,
+        &sub_dir,
+        "hvi-study submit",
+    )?;
     if opts.dry_run {
         print!("{}", spec.script());
         eprintln!(
@@ -735,6 +715,78 @@ pub fn submit(plan: &Plan, out: &Path, opts: &SlurmOptions) -> Result<()> {
     }
     println!("{job_id}");
     Ok(())
+}
+
+/// The job script of `tasks` runs of `plan` submitted from `sub_dir` by `who` (a command,
+/// for the script's comment line).
+fn script_spec(
+    plan: &Plan,
+    tasks: usize,
+    opts: &SlurmOptions,
+    study_dir: &Path,
+    sub_dir: &Path,
+    who: &str,
+) -> Result<ScriptSpec> {
+    let exe = std::env::current_exe()
+        .and_then(std::fs::canonicalize)
+        .context("cannot find the hvi-study binary's path for the job script")?;
+    Ok(ScriptSpec {
+        job_name: format!(
+            "hvi-{}-{}",
+            job_name_part(&plan.study),
+            job_name_part(&plan.tier)
+        ),
+        what: format!(
+            "{who}: study `{}` at tier `{}`, {tasks} runs of {} (array task k runs the plan index on line k + 1 of tasks.txt)",
+            plan.study,
+            plan.tier,
+            study_dir.display()
+        )
+        .replace('\n', " "),
+        tasks,
+        array_limit: opts.array_limit,
+        cpus_per_task: opts.cpus_per_task,
+        partition: opts.partition.clone(),
+        time: opts.time.clone(),
+        extra: opts.sbatch_options.clone(),
+        checkpoint_every: crate::checkpoint::interval(),
+        study_dir: study_dir.to_path_buf(),
+        submission_dir: sub_dir.to_path_buf(),
+        exe,
+    })
+}
+
+/// Submits the runs of a batch plan (a plan of some runs, e.g. one batch of a calibration's
+/// search, not written as the study's plan.json) that the store of `out` lacks and Slurm is
+/// not already running, as one job array. Returns the new job's id (None: nothing to submit)
+/// and the job ids of earlier submissions still running some of its runs.
+pub fn submit_batch(
+    plan: &Plan,
+    out: &Path,
+    opts: &SlurmOptions,
+    who: &str,
+) -> Result<(Option<String>, Vec<String>)> {
+    opts.validate()?;
+    let pending = pending(plan, out)?;
+    let earlier = pending.in_queue.0.clone();
+    if pending.todo.is_empty() {
+        return Ok((None, earlier));
+    }
+    let study_dir = absolute(out)?;
+    let sub_dir = submission_dir(&study_dir, true)?;
+    let spec = script_spec(plan, pending.todo.len(), opts, &study_dir, &sub_dir, who)?;
+    let job_id = submit_script(plan, &pending.todo, &spec)?;
+    if !opts.quiet {
+        eprintln!(
+            "submitted job {job_id}: {} runs as array 0-{}{}, {} CPU(s) each; logs in {}",
+            pending.todo.len(),
+            pending.todo.len() - 1,
+            array_suffix(opts.array_limit),
+            opts.cpus_per_task,
+            sub_dir.display()
+        );
+    }
+    Ok((Some(job_id), earlier))
 }
 
 /// Writes the submission's plan, tasks and script, submits it, and records `submission.json`;

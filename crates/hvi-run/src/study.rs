@@ -20,6 +20,8 @@ pub fn job_of(plan: &Plan, index: usize) -> Result<Job> {
         .axes
         .iter()
         .zip(&run.values)
+        // A batch plan's run without a key has `null` there (see `runner::batch_plan`).
+        .filter(|(_, v)| !v.is_null())
         .map(|(a, v)| (a.key.clone(), v.clone()))
         .collect();
     Ok(Job {

@@ -183,6 +183,17 @@ pub struct CalibrateArgs {
     /// calibrate.seeds; one seed: the noise is calibrate.noise_floor).
     #[arg(long, value_delimiter = ',', value_name = "SEEDS")]
     pub seeds: Option<Vec<u64>>,
+    /// Run every batch of runs (the grid, each search batch) as a Slurm job array and wait for
+    /// it; this process only proposes, submits and scores. Stopped and started again, it waits
+    /// for the arrays still running rather than submitting them twice.
+    #[arg(long)]
+    pub slurm: bool,
+    /// With --slurm: the job arrays' options.
+    #[command(flatten)]
+    pub slurm_flags: SlurmFlags,
+    /// With --slurm: seconds between looks at the queue while a batch runs (0.2 to 3600).
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    pub poll: f64,
 }
 
 /// `hvi-study validity-map` arguments.
@@ -410,6 +421,17 @@ pub struct SubmitArgs {
     /// command says where the runs go).
     #[arg(long, required = true)]
     pub slurm: bool,
+    /// The job array's options.
+    #[command(flatten)]
+    pub slurm_flags: SlurmFlags,
+    /// Print the script and what would be submitted; write nothing, submit nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+}
+
+/// The options of a Slurm job array (`submit --slurm`, `calibrate --slurm`).
+#[derive(Args, Debug, Clone)]
+pub struct SlurmFlags {
     /// Slurm partition (`#SBATCH --partition`); default: the cluster's default partition.
     #[arg(long, value_name = "P")]
     pub partition: Option<String>,
@@ -426,9 +448,44 @@ pub struct SubmitArgs {
     /// (repeatable).
     #[arg(long = "sbatch-option", value_name = "OPTION")]
     pub sbatch_options: Vec<String>,
-    /// Print the script and what would be submitted; write nothing, submit nothing.
-    #[arg(long)]
-    pub dry_run: bool,
+}
+
+impl Default for SlurmFlags {
+    fn default() -> Self {
+        SlurmFlags {
+            partition: None,
+            time: None,
+            cpus_per_task: 1,
+            array_limit: None,
+            sbatch_options: Vec::new(),
+        }
+    }
+}
+
+impl SlurmFlags {
+    /// The Slurm options these flags give, checked.
+    pub fn options(&self, dry_run: bool, quiet: bool) -> Result<SlurmOptions> {
+        let opts = SlurmOptions {
+            partition: self.partition.clone(),
+            time: self.time.clone(),
+            cpus_per_task: self.cpus_per_task,
+            array_limit: self.array_limit,
+            sbatch_options: self.sbatch_options.clone(),
+            dry_run,
+            quiet,
+        };
+        opts.validate()?;
+        Ok(opts)
+    }
+
+    /// Whether any flag differs from its default (they mean nothing without `--slurm`).
+    pub fn any_set(&self) -> bool {
+        self.partition.is_some()
+            || self.time.is_some()
+            || self.cpus_per_task != 1
+            || self.array_limit.is_some()
+            || !self.sbatch_options.is_empty()
+    }
 }
 
 impl SubmitArgs {
@@ -440,17 +497,7 @@ impl SubmitArgs {
         if self.study.jobs.is_some() {
             bail!("submit: --jobs is not used (--array-limit K caps the runs at once)");
         }
-        let opts = SlurmOptions {
-            partition: self.partition.clone(),
-            time: self.time.clone(),
-            cpus_per_task: self.cpus_per_task,
-            array_limit: self.array_limit,
-            sbatch_options: self.sbatch_options.clone(),
-            dry_run: self.dry_run,
-            quiet: self.study.quiet,
-        };
-        opts.validate()?;
-        Ok(opts)
+        self.slurm_flags.options(self.dry_run, self.study.quiet)
     }
 }
 

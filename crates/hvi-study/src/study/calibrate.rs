@@ -36,10 +36,13 @@ use super::sweep::print_failures;
 use hvi_analysis::score::{objective, Score, Targets, MISSING_TERM};
 use hvi_run::exec::thread_split;
 use hvi_run::output::{write_atomic, write_atomic_bytes};
+use hvi_run::plan::describe_values;
 use hvi_run::plan::{fingerprint, validated_scene, Plan};
+use hvi_run::runner::{Runner, SlurmBatches};
 use hvi_run::spec::{json_to_override, round_sig, Study};
 use hvi_run::store::{Job, Record, RunStatus, Store};
-use hvi_run::study::execute_plan;
+use hvi_run::study::job_of;
+use hvi_run::table::results_table;
 use hvi_run::table::Table;
 
 /// The cost of a point outside the grid's box or with an invalid scene (no run is made).
@@ -238,6 +241,10 @@ pub(super) struct Refinement<'a> {
     /// Refined keys, whether each is in log10, and the box in transformed coordinates.
     pub(super) dims: Vec<Dim>,
     pub(super) threads: usize,
+    /// Where batches of runs execute (here or as Slurm job arrays).
+    pub(super) runner: &'a Runner,
+    /// The study directory (the store's, and the Slurm submissions').
+    pub(super) out: &'a Path,
     pub(super) progress: bool,
     pub(super) log: RefCell<Vec<Evaluation>>,
     pub(super) ran: RefCell<usize>,
@@ -317,7 +324,26 @@ impl Refinement<'_> {
             Some(r) if r.status == RunStatus::Completed => (r, true),
             _ => {
                 *self.ran.borrow_mut() += 1;
-                (self.store.execute(&job, self.threads)?, false)
+                let record = match self.runner {
+                    Runner::Local(_) => self.store.execute(&job, self.threads)?,
+                    Runner::Slurm(_) => {
+                        let describe = |_: usize| fmt_params(params);
+                        let report = self.runner.execute(
+                            self.store,
+                            self.out,
+                            self.plan,
+                            std::slice::from_ref(&job),
+                            &describe,
+                            stage,
+                        )?;
+                        report
+                            .records
+                            .into_iter()
+                            .next()
+                            .ok_or_else(|| anyhow!("the run of {stage} has no record"))?
+                    }
+                };
+                (record, false)
             }
         };
         let score = objective(&self.targets.targets, |n| record.observables.get(n));
@@ -446,8 +472,9 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
         hvi_run::output::load_targets(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
     let progress = !args.study.quiet;
     let (refine_keys, dims) = refined_axes(&plan, &cfg)?;
+    let runner = runner_of(args)?;
 
-    let grid = grid_stage(&plan, &out, args, &targets, progress)?;
+    let grid = grid_stage(&plan, &out, &runner, &targets, progress)?;
     let best_grid = grid.evaluations[grid.best].clone();
     let best_run = plan.run(grid.best)?;
     let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
@@ -459,6 +486,8 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
         store: &store,
         targets: &targets,
         threads,
+        runner: &runner,
+        out: &out,
         progress,
     };
     let problem = stage.problem(fixed, dims);
@@ -505,6 +534,26 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
     }
     println!("{}", out.join("calibration.json").display());
     Ok(result)
+}
+
+/// Where the calibration's runs execute: here (`--threads`, `--jobs`) or, with `--slurm`,
+/// each batch as a Slurm job array.
+fn runner_of(args: &CalibrateArgs) -> Result<Runner> {
+    let quiet = args.study.quiet;
+    if !args.slurm {
+        if args.slurm_flags.any_set() {
+            bail!("--partition, --time, --cpus-per-task, --array-limit and --sbatch-option are options of the Slurm job arrays: add --slurm");
+        }
+        return Ok(Runner::Local(args.study.exec_options()));
+    }
+    if args.study.threads.is_some() {
+        bail!("calibrate --slurm: --threads is not used (each run gets --cpus-per-task threads)");
+    }
+    if args.study.jobs.is_some() {
+        bail!("calibrate --slurm: --jobs is not used (--array-limit K caps the runs at once)");
+    }
+    let opts = args.slurm_flags.options(false, quiet)?;
+    Ok(Runner::Slurm(SlurmBatches::new(opts, args.poll, !quiet)?))
 }
 
 /// What the search after the grid found.
@@ -587,7 +636,7 @@ fn search_stage(
                 .cloned()
                 .zip(grid.records.iter().cloned())
                 .collect();
-            let o = super::ego::search(problem, &settings, &pairs, &args.study.exec_options())?;
+            let o = super::ego::search(problem, &settings, &pairs)?;
             Ok(SearchOutcome {
                 method: method.name(),
                 evaluations: o
@@ -664,12 +713,21 @@ struct Grid {
 fn grid_stage(
     plan: &Plan,
     out: &Path,
-    args: &CalibrateArgs,
+    runner: &Runner,
     targets: &Targets,
     progress: bool,
 ) -> Result<Grid> {
     let stored = stored_before(plan, out)?;
-    let (mut table, report) = execute_plan(plan, out, &args.study.exec_options())?;
+    let store = Store::open(out)?;
+    let jobs: Vec<Job> = (0..plan.runs.len())
+        .map(|i| job_of(plan, i))
+        .collect::<Result<_>>()?;
+    let describe = |i: usize| describe_values(&plan.axes, &plan.runs[i].values);
+    let report = runner.execute(&store, out, plan, &jobs, &describe, "grid")?;
+    let mut table = results_table(
+        plan,
+        &report.records.iter().cloned().map(Some).collect::<Vec<_>>(),
+    );
     if progress {
         eprintln!("grid: {}", report.line());
     }
@@ -760,6 +818,8 @@ struct Stage<'a> {
     store: &'a Store,
     targets: &'a Targets,
     threads: usize,
+    runner: &'a Runner,
+    out: &'a Path,
     progress: bool,
 }
 
@@ -774,6 +834,8 @@ impl<'a> Stage<'a> {
             fixed,
             dims,
             threads: self.threads,
+            runner: self.runner,
+            out: self.out,
             progress: self.progress,
             log: RefCell::new(Vec::new()),
             ran: RefCell::new(0),

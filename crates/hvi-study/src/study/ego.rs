@@ -28,7 +28,6 @@ use hvi_analysis::score::objective;
 use hvi_analysis::surrogate::{
     self, converged, propose, seed_mean_noise, Observation, SearchBox, Surrogate,
 };
-use hvi_run::exec::{execute, ExecOptions};
 use hvi_run::store::{Job, Record, RunStatus};
 use serde::{Deserialize, Serialize};
 
@@ -115,7 +114,6 @@ pub(super) fn search(
     problem: &Refinement,
     settings: &EgoSettings,
     grid: &[(Evaluation, Record)],
-    opts: &ExecOptions,
 ) -> Result<EgoOutcome> {
     let space = SearchBox::new(problem.dims.iter().map(|d| (d.2, d.3)).collect())?;
     let seeds: Vec<Option<u64>> = if settings.seeds.is_empty() {
@@ -138,7 +136,7 @@ pub(super) fn search(
         let grid_points: Vec<BTreeMap<String, f64>> = scored_grid
             .map(|(e, _)| refined(problem, &e.params))
             .collect();
-        let (evs, n) = run_points(problem, "grid-seeds", &grid_points, &seeds, opts)?;
+        let (evs, n) = run_points(problem, "grid-seeds", &grid_points, &seeds)?;
         evaluations.extend(evs);
         runs += n;
     }
@@ -172,7 +170,7 @@ pub(super) fn search(
         let points: Vec<BTreeMap<String, f64>> =
             proposal.points.iter().map(|x| problem.values(x)).collect();
         let label = format!("ego-{batch}");
-        let (evs, n) = run_points(problem, &label, &points, &seeds, opts)?;
+        let (evs, n) = run_points(problem, &label, &points, &seeds)?;
         if problem.progress {
             for (e, _) in &evs {
                 eprintln!("{label}: {}  J = {:.4}", fmt_params(&e.params), e.objective);
@@ -263,7 +261,6 @@ fn run_points(
     stage: &str,
     points: &[BTreeMap<String, f64>],
     seeds: &[Option<u64>],
-    opts: &ExecOptions,
 ) -> Result<(Vec<Scored>, usize)> {
     let mut planned = Vec::new();
     for p in points {
@@ -289,7 +286,14 @@ fn run_points(
             Some(r) if r.status == RunStatus::Completed
         ));
     }
-    let report = execute(problem.store, &jobs, &describe, opts)?;
+    let report = problem.runner.execute(
+        problem.store,
+        problem.out,
+        problem.plan,
+        &jobs,
+        &describe,
+        stage,
+    )?;
     let mut records = report.records.into_iter();
     let mut stored = stored.into_iter();
     let mut out = Vec::new();

@@ -92,6 +92,9 @@ pub fn fig7_9_10(
         max_iters: None,
         max_batches: None,
         seeds: None,
+        slurm: false,
+        slurm_flags: Default::default(),
+        poll: 10.0,
     })?;
     // `calibrate` returns its result but not the grid's records: those are the store's.
     let records = plan_records(plan, &dir)?;
