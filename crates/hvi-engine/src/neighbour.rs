@@ -33,6 +33,7 @@ use std::collections::HashMap;
 
 use glam::DVec3;
 use rayon::prelude::*;
+use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
 
 use crate::state::{Particles, PermuteScratch, BONDS_PER_PARTICLE, BROKEN_FLAG};
@@ -82,6 +83,7 @@ pub struct NeighbourList {
     zs: Vec<f64>,
     fill: Vec<u32>,
     block_keys: Vec<u64>,
+    block_of: Vec<u32>,
 }
 
 #[inline]
@@ -236,57 +238,44 @@ impl NeighbourList {
         };
     }
 
-    /// Each block's key and mean velocity (in key order), and each particle's frame velocity
-    /// (its block's mean) into `frame_vel`.
-    ///
-    /// A block's sum runs in particle order (fixed by the sort), so it does not depend on the
-    /// thread count: the particles fall into runs of equal block (common in cell order), each
-    /// run is summed in order, and each block adds its runs' sums in run order. Runs and
-    /// blocks are summed in parallel.
+    /// Each block's key and mean velocity (in order of first appearance), and each particle's
+    /// frame velocity (its block's mean) into `frame_vel`.
     fn block_means(&mut self, p: &Particles, block: f64) -> Vec<(u64, DVec3)> {
         let n = p.len();
         let inv_b = 1.0 / block;
         let keys = &mut self.block_keys;
         keys.clear();
         keys.par_extend(p.pos.par_iter().map(|&x| cell_key(x, inv_b).0));
-        let keys = &self.block_keys;
-        let starts = run_starts(n, |i| keys[i] != keys[i - 1]);
-        // Each run: (block key, run index, sum of velocities, particles).
-        let runs: Vec<(u64, u32, DVec3, f64)> = starts
-            .par_iter()
-            .enumerate()
-            .map(|(r, &s)| {
-                let e = starts.get(r + 1).map_or(n, |&e| e as usize);
-                let mut sum = DVec3::ZERO;
-                for v in &p.vel[s as usize..e] {
-                    sum += *v;
-                }
-                (keys[s as usize], r as u32, sum, (e - s as usize) as f64)
-            })
-            .collect();
-        // The runs of each block together, in run order (pairs are distinct).
-        let mut by_block: Vec<(u64, u32)> = runs.par_iter().map(|r| (r.0, r.1)).collect();
-        by_block.par_sort_unstable();
-        let first = run_starts(by_block.len(), |k| by_block[k].0 != by_block[k - 1].0);
-        let blocks: Vec<(u64, DVec3)> = first
-            .par_iter()
-            .enumerate()
-            .map(|(g, &s)| {
-                let e = first.get(g + 1).map_or(by_block.len(), |&e| e as usize);
-                let (mut sum, mut count) = (DVec3::ZERO, 0.0);
-                for &(_, r) in &by_block[s as usize..e] {
-                    let run = &runs[r as usize];
-                    sum += run.2;
-                    count += run.3;
-                }
-                (by_block[s as usize].0, sum / count)
-            })
-            .collect();
+        // Sums in particle order (fixed by the sort), one map update per run of equal block:
+        // runs are common in cell order. Blocks get dense indices in order of first
+        // appearance, so the per-particle pass below indexes a vector instead of the map.
+        let mut index: FxHashMap<u64, u32> = FxHashMap::default();
+        let mut blocks: Vec<(u64, DVec3, f64)> = Vec::new();
+        let block_of = &mut self.block_of;
+        block_of.clear();
+        block_of.resize(n, 0);
+        let mut i = 0;
+        while i < n {
+            let mut j = i;
+            let mut sum = DVec3::ZERO;
+            while j < n && keys[j] == keys[i] {
+                sum += p.vel[j];
+                j += 1;
+            }
+            let b = *index.entry(keys[i]).or_insert_with(|| {
+                blocks.push((keys[i], DVec3::ZERO, 0.0));
+                (blocks.len() - 1) as u32
+            });
+            let e = &mut blocks[b as usize];
+            e.1 += sum;
+            e.2 += (j - i) as f64;
+            block_of[i..j].fill(b);
+            i = j;
+        }
+        let blocks: Vec<(u64, DVec3)> = blocks.into_iter().map(|(k, s, c)| (k, s / c)).collect();
         let blocks_r = &blocks;
-        self.frame_vel.par_extend(keys.par_iter().map(|k| {
-            let b = blocks_r.partition_point(|b| b.0 < *k);
-            blocks_r[b].1
-        }));
+        self.frame_vel
+            .par_extend(self.block_of.par_iter().map(|&b| blocks_r[b as usize].1));
         blocks
     }
 
@@ -355,11 +344,14 @@ impl NeighbourList {
             p.permute(perm, &mut self.scratch);
         }
         // Cells: runs of equal key.
-        self.cell_start = run_starts(n, |i| order[i].0 != order[i - 1].0);
+        self.cell_start.clear();
         self.cell_keys.clear();
-        let starts = &self.cell_start;
-        self.cell_keys
-            .par_extend(starts.par_iter().map(|&s| order[s as usize].0));
+        for (i, o) in order.iter().enumerate() {
+            if i == 0 || o.0 != order[i - 1].0 {
+                self.cell_start.push(i as u32);
+                self.cell_keys.push(o.0);
+            }
+        }
         self.cell_start.push(n as u32);
     }
 
@@ -493,16 +485,6 @@ impl NeighbourList {
     pub fn of(&self, i: usize) -> &[u32] {
         &self.neighbours[self.start[i] as usize..self.start[i + 1] as usize]
     }
-}
-
-/// The starts of the runs of `0..n` (in order): index 0 and every i > 0 where `differs(i)` (the
-/// element differs from the one before), found in parallel.
-fn run_starts(n: usize, differs: impl Fn(usize) -> bool + Sync) -> Vec<u32> {
-    (0..n)
-        .into_par_iter()
-        .filter(|&i| i == 0 || differs(i))
-        .map(|i| i as u32)
-        .collect()
 }
 
 /// The largest |u_a - u_b| between a block's frame and an adjacent block's, m/s, over

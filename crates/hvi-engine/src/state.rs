@@ -123,31 +123,18 @@ impl Particles {
         })
     }
 
-    /// Clears the owned and mirror slots of bonds that broke since the last call: the slots
-    /// are found in parallel (few bonds break between two calls), then cleared.
+    /// Clears the owned and mirror slots of bonds that broke since the last call.
     pub(crate) fn clear_broken_slots(&mut self) {
-        use rayon::prelude::*;
-        let bonds = &self.bonds;
-        let clear: Vec<(usize, usize)> = bonds
-            .par_chunks(BONDS_PER_PARTICLE)
-            .enumerate()
-            .flat_map_iter(|(i, slots)| {
-                (0..OWNED_BONDS).filter_map(move |m| {
-                    let s = slots[2 * m];
-                    (s != NO_BOND && s & BROKEN_FLAG != 0).then(|| {
-                        let j = (s & INDEX_MASK) as usize;
-                        debug_assert_eq!(bonds[j * BONDS_PER_PARTICLE + 2 * m + 1], i as u32);
-                        (
-                            i * BONDS_PER_PARTICLE + 2 * m,
-                            j * BONDS_PER_PARTICLE + 2 * m + 1,
-                        )
-                    })
-                })
-            })
-            .collect();
-        for (owned, mirror) in clear {
-            self.bonds[owned] = NO_BOND;
-            self.bonds[mirror] = NO_BOND;
+        for i in 0..self.len() {
+            for m in 0..OWNED_BONDS {
+                let s = self.bonds[i * BONDS_PER_PARTICLE + 2 * m];
+                if s != NO_BOND && s & BROKEN_FLAG != 0 {
+                    let j = (s & INDEX_MASK) as usize;
+                    self.bonds[i * BONDS_PER_PARTICLE + 2 * m] = NO_BOND;
+                    debug_assert_eq!(self.bonds[j * BONDS_PER_PARTICLE + 2 * m + 1], i as u32);
+                    self.bonds[j * BONDS_PER_PARTICLE + 2 * m + 1] = NO_BOND;
+                }
+            }
         }
     }
 
