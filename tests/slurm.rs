@@ -572,6 +572,10 @@ fn calibrate_runs_each_batch_as_a_job_array_and_a_killed_calibration_submits_not
         "one array for the grid, one per stage {stages:?}"
     );
     assert!(stderr(&o).contains("on Slurm"), "{}", stderr(&o));
+    // `status` reads a calibration's store with its batches' submissions: the grid
+    // (2 x 2) done.
+    let o = ok(hvi(&["status", &arg(&cluster_dir)], &env));
+    assert_eq!(status_counts(&o), (4, 0, 0, 0), "{}", stdout(&o));
     // Again: nothing submitted, nothing run.
     let o = ok(calibrate(&cluster_dir, true));
     assert_eq!(json(&cluster_dir)["runs_made"], 0, "{}", stderr(&o));

@@ -763,13 +763,19 @@ mod tests {
         // Brute force over the particles in their (sorted) order.
         let mut sums: HashMap<u64, (DVec3, f64)> = HashMap::new();
         for (x, v) in p.pos.iter().zip(&p.vel) {
-            let e = sums.entry(cell_key(*x, 0.25).0).or_insert((DVec3::ZERO, 0.0));
+            let e = sums
+                .entry(cell_key(*x, 0.25).0)
+                .or_insert((DVec3::ZERO, 0.0));
             e.0 += *v;
             e.1 += 1.0;
         }
         for (x, u) in p.pos.iter().zip(&nl.frame_vel) {
             let (sum, count) = sums[&cell_key(*x, 0.25).0];
-            assert!((*u - sum / count).length() < 1e-12, "{u} vs {}", sum / count);
+            assert!(
+                (*u - sum / count).length() < 1e-12,
+                "{u} vs {}",
+                sum / count
+            );
         }
         let (p4, nl4) = build(4);
         assert_eq!(p4.pos, p.pos);
