@@ -539,6 +539,9 @@ fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_n
         "{}",
         c["noise"]
     );
+    // Two seeds and a zero floor: the noise is the seeds' scatter, and says so.
+    let source = c["noise_source"].as_str().expect("noise_source");
+    assert!(source.starts_with("measured"), "{source}");
     // A region, one interval per searched axis, holding the chosen point.
     for key in ["material.eps_j", "material.kappa_n_m"] {
         let iv = &c["region"]["intervals"][key];

@@ -522,6 +522,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
         method: search.method.into(),
         converged: search.converged,
         noise: search.noise,
+        noise_source: search.noise_source,
         region: search.region,
         best_spread: search.spread,
         runs_made: grid.ran + search.runs + paper_runs,
@@ -565,6 +566,7 @@ struct SearchOutcome {
     termination: String,
     converged: bool,
     noise: Option<f64>,
+    noise_source: Option<String>,
     region: Option<super::ego::ParamRegion>,
     spread: Vec<super::ego::Spread>,
     runs: usize,
@@ -586,6 +588,7 @@ fn search_stage(
         termination: why.to_string(),
         converged: false,
         noise: None,
+        noise_source: None,
         region: None,
         spread: Vec::new(),
         runs: 0,
@@ -607,6 +610,7 @@ fn search_stage(
                 converged: termination.starts_with("Solver converged"),
                 termination,
                 noise: None,
+                noise_source: None,
                 region: None,
                 spread: Vec::new(),
                 runs: *problem.ran.borrow(),
@@ -648,6 +652,7 @@ fn search_stage(
                 termination: o.termination,
                 converged: o.converged,
                 noise: Some(o.noise),
+                noise_source: Some(o.noise_source),
                 region: o.region,
                 spread: o.spread,
                 runs: o.runs,
@@ -1050,7 +1055,10 @@ pub fn report_text(r: &CalibrationResult) -> String {
     }
     if let Some(noise) = r.noise {
         s.push_str(&format!(
-            "  noise:       {noise:.4} in log10 J (a seed mean's standard error, or the floor)\n"
+            "  noise:       {noise:.4} in log10 J ({})\n",
+            r.noise_source
+                .as_deref()
+                .unwrap_or("a seed mean's standard error, or the floor")
         ));
     }
     for sp in &r.best_spread {
@@ -1136,7 +1144,10 @@ pub fn report_md(r: &CalibrationResult) -> String {
     ));
     if let Some(noise) = r.noise {
         s.push_str(&format!(
-            "The noise the search worked with: {noise:.4} in log10 J (a seed mean's standard error, at least calibrate.noise_floor).\n"
+            "The noise the search worked with: {noise:.4} in log10 J ({}).\n",
+            r.noise_source
+                .as_deref()
+                .unwrap_or("a seed mean's standard error, at least calibrate.noise_floor")
         ));
     }
     for g in &r.gaps {

@@ -73,6 +73,9 @@ pub struct CalibrationResult {
     /// The noise the search worked with: a seed mean's standard error of log10 J.
     #[serde(default)]
     pub noise: Option<f64>,
+    /// Where the noise comes from: measured over the seeds, or the floor (and why).
+    #[serde(default)]
+    pub noise_source: Option<String>,
     /// The calibrated parameters' confidence region (ego).
     #[serde(default)]
     pub region: Option<super::ego::ParamRegion>,

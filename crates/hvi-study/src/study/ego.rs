@@ -91,6 +91,8 @@ pub(super) struct EgoOutcome {
     pub termination: String,
     /// The noise the search worked with (of log10 J).
     pub noise: f64,
+    /// Where it comes from (measured, or the floor and why).
+    pub noise_source: String,
     /// The confidence region.
     pub region: Option<ParamRegion>,
     /// The targets' observables over the seeds at the best point.
@@ -143,7 +145,7 @@ pub(super) fn search(
     let mut batch = 0;
     let (converged_now, termination, noise) = loop {
         let obs = observations(problem, &evaluations);
-        let noise = noise_of(&evaluations, settings.noise_floor);
+        let (noise, _) = noise_of(&evaluations, settings.noise_floor);
         if obs.len() < 2 {
             return Err(anyhow!(
                 "the surrogate search needs at least 2 scored points, the grid gave {}",
@@ -187,12 +189,14 @@ pub(super) fn search(
         .ok()
         .map(|r| param_region(problem, &r));
     let spread = spread_of(problem, &observables);
+    let noise_source = noise_of(&evaluations, settings.noise_floor).1;
     Ok(EgoOutcome {
         evaluations: evaluations.into_iter().map(|(e, _)| e).collect(),
         best,
         converged: converged_now,
         termination,
         noise,
+        noise_source,
         region,
         spread,
         runs,
@@ -239,8 +243,9 @@ fn log_objective(j: f64) -> f64 {
     j.max(1e-6).log10()
 }
 
-/// The noise of a seed mean's log10 objective: pooled over the points, at least `floor`.
-fn noise_of(evaluations: &[Scored], floor: f64) -> f64 {
+/// The noise of a seed mean's log10 objective: pooled over the points, at least `floor`; and
+/// where it comes from, in words.
+fn noise_of(evaluations: &[Scored], floor: f64) -> (f64, String) {
     let groups: Vec<Vec<f64>> = evaluations
         .iter()
         .map(|(e, _)| {
@@ -250,7 +255,24 @@ fn noise_of(evaluations: &[Scored], floor: f64) -> f64 {
                 .collect()
         })
         .collect();
-    seed_mean_noise(&groups).map_or(floor, |n| n.max(floor))
+    let points = groups.iter().filter(|g| g.len() > 1).count();
+    match seed_mean_noise(&groups) {
+        Some(n) if n >= floor => (
+            n,
+            format!("measured: the pooled standard error of a seed mean over {points} points"),
+        ),
+        Some(n) => (
+            floor,
+            format!("calibrate.noise_floor: the {n:.4} measured over {points} points is below it"),
+        ),
+        None => (
+            floor,
+            "calibrate.noise_floor, not measured: with one seed the runs show no scatter, so the \
+             stopping rule and the region rest on an assumed noise (run at two or more seeds, \
+             calibrate.seeds, to measure it)"
+                .to_string(),
+        ),
+    }
 }
 
 /// Runs `points` at every seed together (in parallel through the store) and scores each on
