@@ -316,7 +316,7 @@ mod tests {
         assert_eq!(p.runs.len(), 3);
         let keys: Vec<&str> = p.axes.iter().map(|a| a.key.as_str()).collect();
         assert_eq!(keys, ["material.eps_j", "run.seed"]);
-        assert_eq!(p.axes[0].values.len(), 1);
+        assert_eq!(p.axes[0].values.len(), 2, "eps 0.1 and 0.3, each once");
         assert_eq!(p.runs[1].values[1], serde_json::json!(2));
         assert_eq!(p.runs[2].values[1], serde_json::Value::Null);
         assert_eq!(
