@@ -557,6 +557,19 @@ fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_n
     let csv = std::fs::read_to_string(out.join("evaluations.csv")).expect("evaluations.csv");
     let header = csv.lines().next().unwrap_or("");
     assert!(header.contains(",seeds,status,cached,dir"), "{header}");
+    // The model's prediction over the two searched axes, the map's background.
+    let surface = std::fs::read_to_string(out.join("surrogate.csv")).expect("surrogate.csv");
+    let rows: Vec<&str> = surface.lines().collect();
+    assert_eq!(
+        rows[0],
+        "material.eps_j,material.kappa_n_m,predicted_log10_objective"
+    );
+    assert_eq!(rows.len(), 1 + 33 * 33);
+    assert!(rows[1..].iter().all(|r| r
+        .rsplit(',')
+        .next()
+        .and_then(|z| z.parse::<f64>().ok())
+        .is_some_and(f64::is_finite)));
     // The first time nothing after the grid came from the store.
     assert!(evals.iter().all(|e| e["cached"] == false), "{evals:?}");
 

@@ -68,6 +68,10 @@ pub struct ContourPlot {
     pub highlight: Option<(f64, String)>,
     /// Small hollow points (refinement evaluations), physical coordinates.
     pub extra_points: Vec<Point>,
+    /// Where the simulations are, drawn as black dots, when the field is not made of them
+    /// (a model's prediction on a finer lattice); `None`: every node of the field is a run
+    /// (red rings where it has no value).
+    pub samples: Option<Vec<Point>>,
     /// Marked points.
     pub markers: Vec<Marker>,
     /// A box drawn dashed, with its legend text: (lowest corner, highest corner) in physical
@@ -377,7 +381,17 @@ where
     DB::ErrorType: 'static,
 {
     let mut dots = Vec::new();
+    if let Some(samples) = &p.samples {
+        dots.extend(
+            samples
+                .iter()
+                .map(|&(x, y)| Circle::new((tx(x, p.x_log), tx(y, p.y_log)), 5, BLACK.filled())),
+        );
+    }
     for (j, &y) in field.y.iter().enumerate() {
+        if p.samples.is_some() {
+            break;
+        }
         for (i, &x) in field.x.iter().enumerate() {
             let missing = !field.z[j][i].is_finite();
             dots.push(Circle::new(
@@ -597,6 +611,7 @@ mod tests {
             levels: 5,
             highlight: Some((1.55, "target".into())),
             extra_points: vec![(0.05, 3e6)],
+            samples: None,
             markers: vec![Marker {
                 at: (0.1, 2e6),
                 label: "best".into(),

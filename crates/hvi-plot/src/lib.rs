@@ -15,7 +15,7 @@
 //!     title: "R".into(), subtitle: String::new(), x_label: "eps (J)".into(),
 //!     y_label: "kappa (N/m)".into(), x_log: true, y_log: true, field,
 //!     value_label: "R".into(), levels: 4, highlight: Some((1.55, "experiment".into())),
-//!     extra_points: Vec::new(), markers: Vec::new(), region: None,
+//!     extra_points: Vec::new(), samples: None, markers: Vec::new(), region: None,
 //! };
 //! let stem = std::env::temp_dir().join(format!("hvi-plot-doc-{}", std::process::id()));
 //! contour_plot(&stem, &plot).expect("drawn");

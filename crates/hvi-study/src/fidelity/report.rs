@@ -225,6 +225,7 @@ fn draw_maps(res: &FidelityResult, j: &Judged, out: &Path) -> Result<()> {
         levels: 6,
         highlight: None,
         extra_points: Vec::new(),
+        samples: None,
         region: None,
         markers: markers(peak),
     };

@@ -523,6 +523,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<CalibrationResult> {
         converged: search.converged,
         noise: search.noise,
         noise_source: search.noise_source,
+        surface: search.surface,
         region: search.region,
         best_spread: search.spread,
         runs_made: grid.ran + search.runs + paper_runs,
@@ -567,6 +568,7 @@ struct SearchOutcome {
     converged: bool,
     noise: Option<f64>,
     noise_source: Option<String>,
+    surface: Option<super::ego::Surface>,
     region: Option<super::ego::ParamRegion>,
     spread: Vec<super::ego::Spread>,
     runs: usize,
@@ -589,6 +591,7 @@ fn search_stage(
         converged: false,
         noise: None,
         noise_source: None,
+        surface: None,
         region: None,
         spread: Vec::new(),
         runs: 0,
@@ -611,6 +614,7 @@ fn search_stage(
                 termination,
                 noise: None,
                 noise_source: None,
+                surface: None,
                 region: None,
                 spread: Vec::new(),
                 runs: *problem.ran.borrow(),
@@ -653,6 +657,7 @@ fn search_stage(
                 converged: o.converged,
                 noise: Some(o.noise),
                 noise_source: Some(o.noise_source),
+                surface: o.surface,
                 region: o.region,
                 spread: o.spread,
                 runs: o.runs,
@@ -1226,6 +1231,29 @@ fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluation]) -> Resu
             row.push(e.cached.to_string());
             row.push(e.dir.clone().unwrap_or_default());
             csv.write_record(&row)?;
+        }
+        csv.flush()?;
+        Ok(())
+    })?;
+    if let Some(surface) = &r.surface {
+        write_surface(out, surface)?;
+    }
+    Ok(())
+}
+
+/// `surrogate.csv`: the search's final model over two axes (x, y, predicted log10 J).
+fn write_surface(out: &Path, s: &super::ego::Surface) -> Result<()> {
+    write_atomic(&out.join("surrogate.csv"), |w| {
+        let mut csv = csv::Writer::from_writer(w);
+        csv.write_record([
+            s.keys.0.as_str(),
+            s.keys.1.as_str(),
+            "predicted_log10_objective",
+        ])?;
+        for (row, &y) in s.field.z.iter().zip(&s.field.y) {
+            for (&z, &x) in row.iter().zip(&s.field.x) {
+                csv.write_record([x.to_string(), y.to_string(), z.to_string()])?;
+            }
         }
         csv.flush()?;
         Ok(())

@@ -76,6 +76,9 @@ pub struct CalibrationResult {
     /// Where the noise comes from: measured over the seeds, or the floor (and why).
     #[serde(default)]
     pub noise_source: Option<String>,
+    /// The surrogate's predicted log10 J over two searched axes (ego; `surrogate.csv`).
+    #[serde(skip)]
+    pub surface: Option<super::ego::Surface>,
     /// The calibrated parameters' confidence region (ego).
     #[serde(default)]
     pub region: Option<super::ego::ParamRegion>,

@@ -97,6 +97,8 @@ pub(super) struct EgoOutcome {
     pub region: Option<ParamRegion>,
     /// The targets' observables over the seeds at the best point.
     pub spread: Vec<Spread>,
+    /// The final model's prediction over two searched axes.
+    pub surface: Option<Surface>,
     /// Runs simulated.
     pub runs: usize,
 }
@@ -190,6 +192,8 @@ pub(super) fn search(
         .map(|r| param_region(problem, &r));
     let spread = spread_of(problem, &observables);
     let noise_source = noise_of(&evaluations, settings.noise_floor).1;
+    let surface =
+        coords(problem, &best.params).and_then(|at| surface(problem, &space, &obs, noise, &at));
     Ok(EgoOutcome {
         evaluations: evaluations.into_iter().map(|(e, _)| e).collect(),
         best,
@@ -199,7 +203,67 @@ pub(super) fn search(
         noise_source,
         region,
         spread,
+        surface,
         runs,
+    })
+}
+
+/// Points per axis of [`Surface`].
+const SURFACE_POINTS: usize = 33;
+
+/// The surrogate's prediction over the first two searched axes, the others at the chosen
+/// point: what the search believes J looks like between the runs (the calibration's objective
+/// map draws it).
+#[derive(Debug, Clone)]
+pub struct Surface {
+    /// The keys along x and y.
+    pub keys: (String, String),
+    /// Predicted log10 J over the box, in the keys' own units.
+    pub field: hvi_analysis::contour::Field,
+}
+
+/// The [`Surface`] of the final model (None with fewer than two searched axes, or when the
+/// model cannot be fitted).
+fn surface(
+    problem: &Refinement,
+    space: &SearchBox,
+    obs: &[Observation],
+    noise: f64,
+    at: &[f64],
+) -> Option<Surface> {
+    let [(kx, logx, x0, x1), (ky, logy, y0, y1)] = problem.dims.get(..2)? else {
+        return None;
+    };
+    let axis = |lo: f64, hi: f64| -> Vec<f64> {
+        (0..SURFACE_POINTS)
+            .map(|k| lo + (hi - lo) * k as f64 / (SURFACE_POINTS - 1) as f64)
+            .collect()
+    };
+    let (us, vs) = (axis(*x0, *x1), axis(*y0, *y1));
+    let mut points = Vec::with_capacity(us.len() * vs.len());
+    for &v in &vs {
+        for &u in &us {
+            let mut x = at.to_vec();
+            x[0] = u;
+            x[1] = v;
+            points.push(x);
+        }
+    }
+    let model = Surrogate::fit(space, obs, noise).ok()?;
+    let predicted = model.predict(&points).ok()?;
+    let z = predicted
+        .chunks(us.len())
+        .map(|row| row.iter().map(|p| p.0).collect())
+        .collect();
+    let shown = |log: bool, w: &[f64]| -> Vec<f64> {
+        w.iter()
+            .map(|&u| if log { 10f64.powf(u) } else { u })
+            .collect()
+    };
+    let field = hvi_analysis::contour::Field::new(shown(*logx, &us), shown(*logy, &vs), z)?;
+    Some(Surface {
+        keys: (kx.clone(), ky.clone()),
+        field,
     })
 }
 

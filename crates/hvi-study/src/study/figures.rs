@@ -176,6 +176,7 @@ impl<'a> MapFrame<'a> {
             levels: 6,
             highlight: None,
             extra_points: Vec::new(),
+            samples: None,
             markers: self.markers.clone(),
             region: self.region.clone(),
         }
@@ -284,17 +285,83 @@ fn front_velocity_map(f: &MapFrame) -> Result<ContourPlot> {
     })
 }
 
-/// The objective, in log10 (it spans decades), with the refinement's points and the optimum.
+/// The grid's objective at the search's seeds: log10 J of each grid point's seed-mean
+/// observables (the `grid-seeds` evaluations), as the search scored them; None when the search
+/// did not run the grid at its seeds.
+fn seed_mean_field(f: &MapFrame) -> Result<Option<(Field, Vec<u64>)>> {
+    let evals: Vec<&Evaluation> = f
+        .result
+        .refinement
+        .iter()
+        .filter(|e| e.stage == "grid-seeds" && e.score.is_some() && e.objective.is_finite())
+        .collect();
+    let Some(seeds) = evals.first().map(|e| e.seeds.clone()) else {
+        return Ok(None);
+    };
+    let (kx, ky) = (&f.plan.axes[f.axes.0].key, &f.plan.axes[f.axes.1].key);
+    let field = f.field(|r| {
+        let at = |k: &String| r.params.get(k).and_then(|v| v.as_f64());
+        let (x, y) = (at(kx)?, at(ky)?);
+        evals
+            .iter()
+            .find(|e| e.params.get(kx) == Some(&x) && e.params.get(ky) == Some(&y))
+            .map(|e| e.objective.max(1e-6).log10())
+    })?;
+    Ok(Some((field, seeds)))
+}
+
+/// The objective, in log10 (it spans decades), with the refinement's points and the optimum:
+/// the surrogate search's final model where there is one (it shows the valleys between grid
+/// points that the search found), else over the grid at the search's seeds when it ran them
+/// (the optimum's J is a seed mean), else over the grid's own runs.
 fn objective_map(f: &MapFrame) -> Result<ContourPlot> {
     let result = f.result;
-    let field = f.field(|r| {
-        let j = objective(&result.targets, |n| r.observables.get(n)).objective;
-        j.is_finite().then(|| j.max(1e-6).log10())
-    })?;
+    let (kx, ky) = (&f.plan.axes[f.axes.0].key, &f.plan.axes[f.axes.1].key);
+    let surface = result
+        .surface
+        .as_ref()
+        .filter(|s| (&s.keys.0, &s.keys.1) == (kx, ky));
+    // With the model's field, the grid's runs are drawn where they are.
+    let samples = match surface {
+        Some(_) => {
+            let grid = f.field(|_| Some(0.0))?;
+            Some(
+                grid.y
+                    .iter()
+                    .flat_map(|&y| grid.x.iter().map(move |&x| (x, y)))
+                    .collect(),
+            )
+        }
+        None => None,
+    };
+    let (field, what) = match (surface, seed_mean_field(f)?) {
+        (Some(s), _) => (
+            s.field.clone(),
+            "J as the search's kriging model predicts it".to_string(),
+        ),
+        (None, Some((field, seeds))) => (
+            field,
+            format!(
+                "J of the seed-mean observables at seeds {}",
+                seeds
+                    .iter()
+                    .map(|s| s.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        ),
+        (None, None) => (
+            f.field(|r| {
+                let j = objective(&result.targets, |n| r.observables.get(n)).objective;
+                j.is_finite().then(|| j.max(1e-6).log10())
+            })?,
+            "J".to_string(),
+        ),
+    };
     Ok(ContourPlot {
         title: "Objective J over the grid, log10 (optimum marked)".into(),
         subtitle: format!(
-            "J = weighted mean of the target terms (experiments_data/README.md); search: {} ({})\n{}",
+            "{what} = weighted mean of the target terms (experiments_data/README.md); search: {} ({})\n{}",
             result.method,
             if result.converged {
                 "converged"
@@ -310,6 +377,7 @@ fn objective_map(f: &MapFrame) -> Result<ContourPlot> {
             .filter(|e| e.score.is_some() && e.stage != "grid-seeds")
             .filter_map(|e| point_of(f.plan, f.axes, e))
             .collect(),
+        samples,
         ..f.plot(field, "log10 J")
     })
 }

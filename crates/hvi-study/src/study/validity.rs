@@ -259,6 +259,7 @@ fn map_plot(
         levels: 6,
         highlight: Some((cutoff, format!("{} = {cutoff}", observable))),
         extra_points: Vec::new(),
+        samples: None,
         region: None,
         markers: Vec::new(),
     }
