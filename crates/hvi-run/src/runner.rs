@@ -103,6 +103,14 @@ impl SlurmBatches {
             }
         }
         let plan = batch_plan(template, jobs);
+        // Runs this batch needed (each once, however often the jobs name it).
+        let mut needed: usize = 0;
+        for r in &plan.runs {
+            if !matches!(store.lookup(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
+            {
+                needed += 1;
+            }
+        }
         let mut opts = self.options.clone();
         opts.quiet = !self.progress;
         let (job_id, earlier) = submit_batch(&plan, out, &opts, who)?;
@@ -112,7 +120,6 @@ impl SlurmBatches {
                 earlier.join(", ")
             );
         }
-        let submitted = plan.runs.len() - cached;
         let queue = self.wait(store, out, &plan, who)?;
         let mut records = Vec::with_capacity(jobs.len());
         let (mut ran, mut failed) = (0, 0);
@@ -127,10 +134,10 @@ impl SlurmBatches {
             records.push(rec);
         }
         if job_id.is_some() {
-            ran = submitted.saturating_sub(failed);
+            ran = needed.saturating_sub(failed);
         }
         let elsewhere = if job_id.is_none() {
-            submitted.saturating_sub(failed)
+            needed.saturating_sub(failed)
         } else {
             0
         };
