@@ -576,6 +576,15 @@ fn calibrate_runs_each_batch_as_a_job_array_and_a_killed_calibration_submits_not
     // (2 x 2) done.
     let o = ok(hvi(&["status", &arg(&cluster_dir)], &env));
     assert_eq!(status_counts(&o), (4, 0, 0, 0), "{}", stdout(&o));
+    // ... and counts the search's runs beyond the grid, none in progress.
+    let beyond = stored - 4;
+    assert!(
+        stdout(&o).contains(&format!(
+            "beyond the plan (a calibration's search, or runs of another plan in this store): {beyond} done, 0 in progress here"
+        )),
+        "{}",
+        stdout(&o)
+    );
     // Again: nothing submitted, nothing run.
     let o = ok(calibrate(&cluster_dir, true));
     assert_eq!(json(&cluster_dir)["runs_made"], 0, "{}", stderr(&o));

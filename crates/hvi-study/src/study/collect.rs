@@ -98,6 +98,9 @@ pub struct Survey {
     pub runs: Vec<(Option<Record>, RunState)>,
     /// Slurm's view of the directory's submissions.
     pub queue: QueueView,
+    /// Runs in the store beyond the plan (a calibration's search, a batch's plan): done, and
+    /// in progress here now.
+    pub beyond_plan: (usize, usize),
 }
 
 /// Surveys a study directory: records from the store, running and queued runs from Slurm (when
@@ -107,6 +110,31 @@ pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
     let store = Store::open(dir)?;
     let queue = QueueView::of(dir)?;
     let markers = store.in_progress()?;
+    let in_plan: std::collections::HashSet<&str> = plan
+        .runs
+        .iter()
+        .map(|r| &r.fingerprint[..DIR_DIGITS.min(r.fingerprint.len())])
+        .collect();
+    let done_beyond = std::fs::read_dir(dir.join("runs"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            !name.starts_with('.')
+                && !name.starts_with("damaged-")
+                && !in_plan.contains(name.as_str())
+                && e.path().join("record.json").is_file()
+        })
+        .count();
+    let mut running_beyond: Vec<&str> = markers
+        .iter()
+        .filter(|m| m.alive != Some(false) && !in_plan.contains(m.digits.as_str()))
+        .map(|m| m.digits.as_str())
+        .collect();
+    running_beyond.sort_unstable();
+    running_beyond.dedup();
+    let beyond_plan = (done_beyond, running_beyond.len());
     let mut runs = Vec::with_capacity(plan.runs.len());
     for run in &plan.runs {
         let record = store.lookup(&run.fingerprint)?;
@@ -158,7 +186,11 @@ pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
         };
         runs.push((record, state));
     }
-    Ok(Survey { runs, queue })
+    Ok(Survey {
+        runs,
+        queue,
+        beyond_plan,
+    })
 }
 
 impl Survey {
@@ -197,6 +229,13 @@ pub fn status(args: &StatusArgs) -> Result<()> {
         let _ = write!(s, " ({queued} queued in Slurm)");
     }
     s.push('\n');
+    let (done_beyond, running_beyond) = survey.beyond_plan;
+    if done_beyond + running_beyond > 0 {
+        let _ = writeln!(
+            s,
+            "beyond the plan (a calibration's search, or runs of another plan in this store): {done_beyond} done, {running_beyond} in progress here"
+        );
+    }
     let q = &survey.queue;
     for sub in &q.submissions {
         let mut n = (0, 0, 0);
