@@ -9,7 +9,7 @@
 //! run per job, with the jobs' parameters as its axes; the study's `plan.json` is not
 //! touched. `hvi-study status` lists the batches' jobs with the study's other submissions.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -95,22 +95,21 @@ impl SlurmBatches {
         who: &str,
     ) -> Result<ExecReport> {
         let t0 = Instant::now();
-        let mut cached = 0;
-        for j in jobs {
-            if matches!(store.lookup(&j.fingerprint)?, Some(r) if r.status == RunStatus::Completed)
-            {
-                cached += 1;
-            }
-        }
         let plan = batch_plan(template, jobs);
-        // Runs this batch needed (each once, however often the jobs name it).
-        let mut needed: usize = 0;
+        // The batch's distinct runs finished before it (each once, however often the jobs
+        // name it).
+        let mut done_before = HashSet::new();
         for r in &plan.runs {
-            if !matches!(store.lookup(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
+            if matches!(store.lookup(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
             {
-                needed += 1;
+                done_before.insert(r.fingerprint.as_str());
             }
         }
+        let cached = jobs
+            .iter()
+            .filter(|j| done_before.contains(j.fingerprint.as_str()))
+            .count();
+        let needed = plan.runs.len() - done_before.len();
         let mut opts = self.options.clone();
         opts.quiet = !self.progress;
         let (job_id, earlier) = submit_batch(&plan, out, &opts, who)?;
@@ -122,7 +121,7 @@ impl SlurmBatches {
         }
         let queue = self.wait(store, out, &plan, who)?;
         let mut records = Vec::with_capacity(jobs.len());
-        let (mut ran, mut failed) = (0, 0);
+        let mut failed = 0;
         for j in jobs {
             let rec = match store.lookup(&j.fingerprint)? {
                 Some(r) => r,
@@ -133,13 +132,12 @@ impl SlurmBatches {
             }
             records.push(rec);
         }
-        if job_id.is_some() {
-            ran = needed.saturating_sub(failed);
-        }
-        let elsewhere = if job_id.is_none() {
-            needed.saturating_sub(failed)
+        // Runs finished now: by this batch's array, or by an earlier submission's.
+        let finished = needed.saturating_sub(failed);
+        let (ran, elsewhere) = if job_id.is_some() {
+            (finished, 0)
         } else {
-            0
+            (0, finished)
         };
         Ok(ExecReport {
             records,

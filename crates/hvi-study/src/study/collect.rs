@@ -115,16 +115,12 @@ pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
         .iter()
         .map(|r| &r.fingerprint[..DIR_DIGITS.min(r.fingerprint.len())])
         .collect();
-    let done_beyond = std::fs::read_dir(dir.join("runs"))
-        .into_iter()
-        .flatten()
-        .flatten()
-        .filter(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            !name.starts_with('.')
-                && !name.starts_with("damaged-")
-                && !in_plan.contains(name.as_str())
-                && e.path().join("record.json").is_file()
+    let done_beyond = store
+        .run_dirs()?
+        .iter()
+        .filter(|d| {
+            d.file_name()
+                .is_some_and(|n| !in_plan.contains(n.to_string_lossy().as_ref()))
         })
         .count();
     let mut running_beyond: Vec<&str> = markers

@@ -145,9 +145,9 @@ pub(super) fn search(
         runs += n;
     }
     let mut batch = 0;
-    let (converged_now, termination, noise) = loop {
+    let (converged_now, termination, noise, noise_source) = loop {
         let obs = observations(problem, &evaluations);
-        let (noise, _) = noise_of(&evaluations, settings.noise_floor);
+        let (noise, noise_source) = noise_of(&evaluations, settings.noise_floor);
         if obs.len() < 2 {
             return Err(anyhow!(
                 "the surrogate search needs at least 2 scored points, the grid gave {}",
@@ -163,13 +163,13 @@ pub(super) fn search(
             );
         }
         if converged(ei, noise) {
-            break (true, format!("converged after {batch} batch(es): the largest expected improvement left ({ei:.3e}) is below the noise of log10 J ({noise:.3e})"), noise);
+            break (true, format!("converged after {batch} batch(es): the largest expected improvement left ({ei:.3e}) is below the noise of log10 J ({noise:.3e})"), noise, noise_source);
         }
         if proposal.points.is_empty() {
-            break (false, format!("not converged: no candidate left after {batch} batch(es) (largest expected improvement {ei:.3e}, noise {noise:.3e})"), noise);
+            break (false, format!("not converged: no candidate left after {batch} batch(es) (largest expected improvement {ei:.3e}, noise {noise:.3e})"), noise, noise_source);
         }
         if batch >= settings.max_batches {
-            break (false, format!("not converged: max_batches = {} reached; the largest expected improvement left ({ei:.3e}) is above the noise of log10 J ({noise:.3e}): raise calibrate.max_batches and run again (finished runs are reused)", settings.max_batches), noise);
+            break (false, format!("not converged: max_batches = {} reached; the largest expected improvement left ({ei:.3e}) is above the noise of log10 J ({noise:.3e}): raise calibrate.max_batches and run again (finished runs are reused)", settings.max_batches), noise, noise_source);
         }
         let points: Vec<BTreeMap<String, f64>> =
             proposal.points.iter().map(|x| problem.values(x)).collect();
@@ -185,15 +185,14 @@ pub(super) fn search(
         batch += 1;
     };
     let obs = observations(problem, &evaluations);
-    let best_index = best_predicted(&space, &obs, noise, problem, &evaluations)?;
+    let model = Surrogate::fit(&space, &obs, noise)?;
+    let best_index = best_predicted(&model, problem, &evaluations)?;
     let (best, observables) = evaluations[best_index].clone();
     let region = surrogate::region(&space, &obs, noise)
         .ok()
         .map(|r| param_region(problem, &r));
     let spread = spread_of(problem, &observables);
-    let noise_source = noise_of(&evaluations, settings.noise_floor).1;
-    let surface =
-        coords(problem, &best.params).and_then(|at| surface(problem, &space, &obs, noise, &at));
+    let surface = coords(problem, &best.params).and_then(|at| surface(problem, &model, &at));
     Ok(EgoOutcome {
         evaluations: evaluations.into_iter().map(|(e, _)| e).collect(),
         best,
@@ -223,14 +222,8 @@ pub struct Surface {
 }
 
 /// The [`Surface`] of the final model (None with fewer than two searched axes, or when the
-/// model cannot be fitted).
-fn surface(
-    problem: &Refinement,
-    space: &SearchBox,
-    obs: &[Observation],
-    noise: f64,
-    at: &[f64],
-) -> Option<Surface> {
+/// prediction fails).
+fn surface(problem: &Refinement, model: &Surrogate, at: &[f64]) -> Option<Surface> {
     let [(kx, logx, x0, x1), (ky, logy, y0, y1)] = problem.dims.get(..2)? else {
         return None;
     };
@@ -249,7 +242,6 @@ fn surface(
             points.push(x);
         }
     }
-    let model = Surrogate::fit(space, obs, noise).ok()?;
     let predicted = model.predict(&points).ok()?;
     let z = predicted
         .chunks(us.len())
@@ -480,13 +472,10 @@ fn scored(
 
 /// The evaluated point with the lowest predicted objective.
 fn best_predicted(
-    space: &SearchBox,
-    obs: &[Observation],
-    noise: f64,
+    model: &Surrogate,
     problem: &Refinement,
     evaluations: &[Scored],
 ) -> Result<usize> {
-    let model = Surrogate::fit(space, obs, noise)?;
     let mut best = None;
     for (i, (e, _)) in evaluations.iter().enumerate() {
         if e.score.is_none() || !e.objective.is_finite() {

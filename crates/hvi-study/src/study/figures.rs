@@ -324,17 +324,21 @@ fn objective_map(f: &MapFrame) -> Result<ContourPlot> {
     // With the model's field, the grid's runs are drawn where they are.
     let samples = match surface {
         Some(_) => {
-            let grid = f.field(|_| Some(0.0))?;
+            let xs = sorted_axis(f.plan, f.axes.0)?;
+            let ys = sorted_axis(f.plan, f.axes.1)?;
             Some(
-                grid.y
-                    .iter()
-                    .flat_map(|&y| grid.x.iter().map(move |&x| (x, y)))
+                ys.iter()
+                    .flat_map(|&(y, _)| xs.iter().map(move |&(x, _)| (x, y)))
                     .collect(),
             )
         }
         None => None,
     };
-    let (field, what) = match (surface, seed_mean_field(f)?) {
+    let seed_means = match surface {
+        Some(_) => None,
+        None => seed_mean_field(f)?,
+    };
+    let (field, what) = match (surface, seed_means) {
         (Some(s), _) => (
             s.field.clone(),
             "J as the search's kriging model predicts it".to_string(),
