@@ -17,11 +17,14 @@
 //! shrink by more than the skin; the separation changes by at most
 //! |e_i| + |e_j| + |u_a - u_b| t (e the displacements relative to the frames, u_a, u_b the two
 //! frames' velocities, t the time since the build). Pairs in the same or adjacent blocks are
-//! covered by the largest |u_a - u_b| among adjacent blocks (`near_dv`); pairs in blocks that
-//! are not adjacent were at least one block side apart, and are covered by a bound on
-//! |u_a - u_b| over all blocks (`far_dv`) against the block side less the contact radius. The
-//! rule is exact (no pair is ever missed); with `block = 0` every frame is at rest and it is the
-//! classic rule. The adaptive step asks the rule to look one step ahead (the same bound at the
+//! bounded block pair by block pair: E_a + E_b + |u_a - u_b| t, E_a the largest displacement in
+//! block a (`block_disp`, kept by the time loop), over every adjacent pair of blocks and every
+//! block with itself (`stale_by_blocks`). So the hottest particles and the largest frame
+//! difference only add up where they meet; the global form 2 max e + max |u_a - u_b| t
+//! (`stale`, with `near_dv`) is looser and still exact. Pairs in blocks that are not adjacent
+//! were at least one block side apart, and are covered by a bound on |u_a - u_b| over all
+//! blocks (`far_dv`) against the block side less the contact radius. The rule is exact (no
+//! pair is ever missed); with `block = 0` every frame is at rest and it is the classic rule. The adaptive step asks the rule to look one step ahead (the same bound at the
 //! end of the next step, from the largest speed relative to a frame), so that a pair is listed
 //! before it comes into contact.
 //!
@@ -30,13 +33,14 @@
 //! are left out: the bond kernel handles their repulsion as well.
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::DVec3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
 
-use crate::state::{Particles, PermuteScratch, BONDS_PER_PARTICLE, BROKEN_FLAG};
+use crate::state::{Particles, PermuteScratch, BONDS_PER_PARTICLE, BROKEN_FLAG, NO_BOND};
 
 const COORD_BITS: u32 = 21;
 const COORD_OFFSET: i64 = 1 << (COORD_BITS - 1);
@@ -48,7 +52,7 @@ const HIT_BLOCK: usize = 64;
 const _: () = assert!(HIT_BLOCK <= 64);
 
 /// The neighbour list in compressed-row form over the current particle order.
-#[derive(Debug, Default, Clone)]
+#[derive(Debug, Default)]
 pub struct NeighbourList {
     /// `start[i]..start[i + 1]` indexes `neighbours` for particle i.
     pub start: Vec<u32>,
@@ -83,7 +87,15 @@ pub struct NeighbourList {
     zs: Vec<f64>,
     fill: Vec<u32>,
     block_keys: Vec<u64>,
+    /// Each particle's block (dense index, in order of first appearance at the build).
     block_of: Vec<u32>,
+    /// Adjacent blocks (a, b) in the forward half (each unordered pair once, no block with
+    /// itself) and |u_a - u_b|, m/s.
+    block_pairs: Vec<(u32, u32, f64)>,
+    /// Per block: the largest squared displacement relative to the frame since the build, as
+    /// the bits of a non-negative f64 (their order is the numbers' order), raised by the time
+    /// loop through [`BlockDisplacement`].
+    block_disp: Vec<AtomicU64>,
 }
 
 #[inline]
@@ -187,6 +199,20 @@ impl NeighbourList {
         self.builds = s.builds;
         self.pair_speed = s.pair_speed;
         self.out_of_range = s.out_of_range;
+        // The blocks derive from the positions and frames at the build, which are saved.
+        if self.block > 0.0 {
+            let keys = block_keys_of(&self.pos_at_build, self.block, &mut self.block_keys);
+            let firsts = dense_blocks(keys, &mut self.block_of);
+            let blocks: Vec<(u64, DVec3)> = firsts
+                .iter()
+                .map(|&i| (keys[i], self.frame_vel[i]))
+                .collect();
+            self.link_blocks(&blocks);
+        } else {
+            self.block_of.clear();
+            self.block_pairs.clear();
+            self.block_disp.clear();
+        }
     }
 
     /// Whether the list may miss a contact now or, with `ahead_s` > 0, by the end of a step of
@@ -210,8 +236,69 @@ impl NeighbourList {
         self.block > 0.0 && two_e + self.far_dv * t >= self.block - contact_radius
     }
 
-    /// The frames: each particle's block (side `block`) and its mean velocity; `near_dv` and
-    /// `far_dv`. Sums run in the (sorted) particle order, so they do not depend on threads.
+    /// The block-pair form of the rule (see the module): whether some pair in the same or
+    /// adjacent blocks, or in blocks farther apart, could come within `contact_radius` now or
+    /// by the end of a look-ahead step of `ahead_s` at speeds at most `max_s` relative to the
+    /// frames. The blocks' displacements are those [`Self::measure_block_displacement`] last
+    /// measured. With `block = 0` (one frame at rest) it is [`Self::stale`]
+    /// with `max_e`, the largest displacement of any particle.
+    pub fn stale_by_blocks(
+        &self,
+        max_e: f64,
+        since_build_s: f64,
+        contact_radius: f64,
+        max_s: f64,
+        ahead_s: f64,
+    ) -> bool {
+        if self.block <= 0.0 || self.block_disp.is_empty() {
+            return self.stale(max_e, since_build_s, contact_radius, max_s, ahead_s);
+        }
+        let t = since_build_s + ahead_s;
+        let ahead = max_s * ahead_s;
+        let e = |b: u32| {
+            f64::from_bits(self.block_disp[b as usize].load(Ordering::Relaxed)).sqrt() + ahead
+        };
+        let skin = self.radius - contact_radius;
+        // A block with itself: E_a + E_a.
+        let largest = (0..self.block_disp.len() as u32).fold(0.0f64, |a, b| a.max(e(b)));
+        if 2.0 * largest >= skin {
+            return true;
+        }
+        let near = self
+            .block_pairs
+            .iter()
+            .fold(0.0f64, |m, &(a, b, dv)| m.max(e(a) + e(b) + dv * t));
+        near >= skin || 2.0 * largest + self.far_dv * t >= self.block - contact_radius
+    }
+
+    /// Measures each block's largest displacement relative to its frame, `since_build_s`
+    /// after the build (positions `pos`), for [`Self::stale_by_blocks`]. Maxima do not depend
+    /// on the order, so any thread count gives the same.
+    pub fn measure_block_displacement(&self, pos: &[DVec3], since_build_s: f64) {
+        if self.block_disp.is_empty() {
+            return;
+        }
+        for a in &self.block_disp {
+            a.store(0, Ordering::Relaxed);
+        }
+        let target = BlockDisplacement {
+            block_of: &self.block_of,
+            disp: &self.block_disp,
+        };
+        pos.par_chunks(4096).enumerate().for_each(|(c, chunk)| {
+            let mut cursor = target.cursor();
+            let base = c * 4096;
+            for (k, &x) in chunk.iter().enumerate() {
+                let i = base + k;
+                let d = x - self.pos_at_build[i] - self.frame_vel[i] * since_build_s;
+                cursor.push(i, d.length_squared());
+            }
+        });
+    }
+
+    /// The frames: each particle's block (side `block`) and its mean velocity; `near_dv`,
+    /// `far_dv` and the adjacent blocks. Sums run in the (sorted) particle order, so they do
+    /// not depend on threads.
     fn build_frames(&mut self, p: &Particles, block: f64) {
         let n = p.len();
         self.block = block;
@@ -220,59 +307,70 @@ impl NeighbourList {
             self.frame_vel.resize(n, DVec3::ZERO);
             self.near_dv = 0.0;
             self.far_dv = 0.0;
+            self.block_of.clear();
+            self.block_pairs.clear();
+            self.block_disp.clear();
             return;
         }
-        let mut blocks = self.block_means(p, block);
-        // In key order for the walk below (keys are distinct).
-        blocks.par_sort_unstable_by_key(|b| b.0);
-        let near = adjacent_blocks_dv(&blocks);
-        let (lo, hi) = blocks.par_iter().map(|&(_, u)| (u, u)).reduce(
+        let blocks = self.block_means(p, block);
+        self.link_blocks(&blocks);
+    }
+
+    /// From the blocks (key and frame velocity, by dense index): the adjacent pairs with
+    /// their frames' difference, `near_dv` (the largest of those), `far_dv` (a bound over all
+    /// blocks) and the per-block displacements, zeroed.
+    fn link_blocks(&mut self, blocks: &[(u64, DVec3)]) {
+        // In key order for the walk (keys are distinct), with the dense indices.
+        let mut sorted: Vec<(u64, DVec3, u32)> = blocks
+            .iter()
+            .enumerate()
+            .map(|(b, &(k, u))| (k, u, b as u32))
+            .collect();
+        sorted.par_sort_unstable_by_key(|b| b.0);
+        self.block_pairs = adjacent_blocks(&sorted);
+        self.near_dv = self.block_pairs.iter().fold(0.0f64, |a, p| a.max(p.2));
+        let (lo, hi) = sorted.par_iter().map(|&(_, u, _)| (u, u)).reduce(
             || (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
             |a, b| (a.0.min(b.0), a.1.max(b.1)),
         );
-        self.near_dv = near;
-        self.far_dv = if blocks.is_empty() {
+        self.far_dv = if sorted.is_empty() {
             0.0
         } else {
             (hi - lo).length()
         };
+        self.block_disp.clear();
+        self.block_disp
+            .extend((0..blocks.len()).map(|_| AtomicU64::new(0)));
     }
 
-    /// Each block's key and mean velocity (in order of first appearance), and each particle's
-    /// frame velocity (its block's mean) into `frame_vel`.
+    /// Each block's key and mean velocity (by dense index: order of first appearance), and
+    /// each particle's frame velocity (its block's mean) into `frame_vel`.
     fn block_means(&mut self, p: &Particles, block: f64) -> Vec<(u64, DVec3)> {
+        let keys = block_keys_of(&p.pos, block, &mut self.block_keys);
+        let firsts = dense_blocks(keys, &mut self.block_of);
+        // Sums in particle order (fixed by the sort), one add per run of equal block: runs
+        // are common in cell order.
+        let mut sums = vec![(DVec3::ZERO, 0.0f64); firsts.len()];
+        let block_of = &self.block_of;
         let n = p.len();
-        let inv_b = 1.0 / block;
-        let keys = &mut self.block_keys;
-        keys.clear();
-        keys.par_extend(p.pos.par_iter().map(|&x| cell_key(x, inv_b).0));
-        // Sums in particle order (fixed by the sort), one map update per run of equal block:
-        // runs are common in cell order. Blocks get dense indices in order of first
-        // appearance, so the per-particle pass below indexes a vector instead of the map.
-        let mut index: FxHashMap<u64, u32> = FxHashMap::default();
-        let mut blocks: Vec<(u64, DVec3, f64)> = Vec::new();
-        let block_of = &mut self.block_of;
-        block_of.clear();
-        block_of.resize(n, 0);
         let mut i = 0;
         while i < n {
             let mut j = i;
             let mut sum = DVec3::ZERO;
-            while j < n && keys[j] == keys[i] {
+            while j < n && block_of[j] == block_of[i] {
                 sum += p.vel[j];
                 j += 1;
             }
-            let b = *index.entry(keys[i]).or_insert_with(|| {
-                blocks.push((keys[i], DVec3::ZERO, 0.0));
-                (blocks.len() - 1) as u32
-            });
-            let e = &mut blocks[b as usize];
-            e.1 += sum;
-            e.2 += (j - i) as f64;
-            block_of[i..j].fill(b);
+            let e = &mut sums[block_of[i] as usize];
+            e.0 += sum;
+            e.1 += (j - i) as f64;
             i = j;
         }
-        let blocks: Vec<(u64, DVec3)> = blocks.into_iter().map(|(k, s, c)| (k, s / c)).collect();
+        let blocks: Vec<(u64, DVec3)> = firsts
+            .iter()
+            .zip(&sums)
+            .map(|(&i, &(s, c))| (keys[i], s / c))
+            .collect();
         let blocks_r = &blocks;
         self.frame_vel
             .par_extend(self.block_of.par_iter().map(|&b| blocks_r[b as usize].1));
@@ -480,6 +578,30 @@ impl NeighbourList {
         missing
     }
 
+    /// The largest relative speed |v_i - v_j| of the pairs that can interact until the next
+    /// build: listed pairs, and bond partners (`bonds`, slots intact or broken), m/s. Maxima
+    /// do not depend on the order, so any thread count gives the same.
+    pub fn interacting_pair_speed(&self, vel: &[DVec3], bonds: &[u32]) -> f64 {
+        (0..vel.len())
+            .into_par_iter()
+            .with_min_len(1024)
+            .map(|i| {
+                let vi = vel[i];
+                let mut w2: f64 = 0.0;
+                for &j in self.of(i) {
+                    w2 = w2.max((vi - vel[j as usize]).length_squared());
+                }
+                for &s in &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE] {
+                    if s != NO_BOND {
+                        w2 = w2.max((vi - vel[(s & !BROKEN_FLAG) as usize]).length_squared());
+                    }
+                }
+                w2
+            })
+            .reduce(|| 0.0, f64::max)
+            .sqrt()
+    }
+
     /// Neighbours of particle i.
     #[inline(always)]
     pub fn of(&self, i: usize) -> &[u32] {
@@ -487,14 +609,101 @@ impl NeighbourList {
     }
 }
 
-/// The largest |u_a - u_b| between a block's frame and an adjacent block's, m/s, over
-/// `blocks` sorted by key. For each block the forward half of its 26 neighbours (the other
-/// half sees this block) is found by pointers that only move forward as the sorted blocks are
-/// walked, as in the cell search. Maxima do not depend on the order.
-fn adjacent_blocks_dv(blocks: &[(u64, DVec3)]) -> f64 {
+/// The per-block displacement of the rule's block-pair form: each particle's squared
+/// displacement relative to its frame goes to its block's maximum.
+struct BlockDisplacement<'a> {
+    block_of: &'a [u32],
+    disp: &'a [AtomicU64],
+}
+
+impl BlockDisplacement<'_> {
+    /// A cursor over particles in index order that raises their blocks' maxima: particles of
+    /// one block come in runs in cell order, so it makes one atomic update per run.
+    fn cursor(&self) -> BlockCursor<'_> {
+        BlockCursor {
+            target: self,
+            block: u32::MAX,
+            max: 0.0,
+        }
+    }
+}
+
+/// See [`BlockDisplacement::cursor`].
+struct BlockCursor<'a> {
+    target: &'a BlockDisplacement<'a>,
+    block: u32,
+    max: f64,
+}
+
+impl BlockCursor<'_> {
+    /// Particle `i`'s squared displacement relative to its frame (NaN is the caller's to
+    /// catch: `max` drops it).
+    #[inline]
+    fn push(&mut self, i: usize, d2: f64) {
+        let Some(&b) = self.target.block_of.get(i) else {
+            return;
+        };
+        if b != self.block {
+            self.flush();
+            self.block = b;
+            self.max = 0.0;
+        }
+        self.max = self.max.max(d2);
+    }
+
+    fn flush(&mut self) {
+        if let Some(a) = self.target.disp.get(self.block as usize) {
+            a.fetch_max(self.max.to_bits(), Ordering::Relaxed);
+        }
+    }
+}
+
+impl Drop for BlockCursor<'_> {
+    fn drop(&mut self) {
+        self.flush();
+    }
+}
+
+/// The key of each position's block (side `block`) into `keys`.
+fn block_keys_of<'k>(pos: &[DVec3], block: f64, keys: &'k mut Vec<u64>) -> &'k [u64] {
+    let inv_b = 1.0 / block;
+    keys.clear();
+    keys.par_extend(pos.par_iter().map(|&x| cell_key(x, inv_b).0));
+    keys
+}
+
+/// Dense block indices in order of first appearance into `block_of`; returns each block's
+/// first particle.
+fn dense_blocks(keys: &[u64], block_of: &mut Vec<u32>) -> Vec<usize> {
+    let mut index: FxHashMap<u64, u32> = FxHashMap::default();
+    let mut firsts = Vec::new();
+    block_of.clear();
+    block_of.resize(keys.len(), 0);
+    let mut i = 0;
+    while i < keys.len() {
+        let mut j = i;
+        while j < keys.len() && keys[j] == keys[i] {
+            j += 1;
+        }
+        let b = *index.entry(keys[i]).or_insert_with(|| {
+            firsts.push(i);
+            (firsts.len() - 1) as u32
+        });
+        block_of[i..j].fill(b);
+        i = j;
+    }
+    firsts
+}
+
+/// The adjacent pairs among `blocks` (key, frame velocity, dense index; sorted by key), each
+/// unordered pair once, with |u_a - u_b|, m/s. For each block the forward half of its 26
+/// neighbours (the other half sees this block) is found by pointers that only move forward as
+/// the sorted blocks are walked, as in the cell search. Chunks are concatenated in order, so
+/// the list does not depend on the thread count.
+fn adjacent_blocks(blocks: &[(u64, DVec3, u32)]) -> Vec<(u32, u32, f64)> {
     let nb = blocks.len();
     let offsets = forward_rows();
-    (0..nb.div_ceil(CELL_CHUNK))
+    let chunks: Vec<Vec<(u32, u32, f64)>> = (0..nb.div_ceil(CELL_CHUNK))
         .into_par_iter()
         .map(|chunk| {
             let c0 = chunk * CELL_CHUNK;
@@ -505,8 +714,8 @@ fn adjacent_blocks_dv(blocks: &[(u64, DVec3)]) -> f64 {
             for (r, p) in ptr.iter_mut().enumerate() {
                 *p = blocks.partition_point(|b| (b.0 as i64) < first(k0, r));
             }
-            let mut near: f64 = 0.0;
-            for &(k, u) in &blocks[c0..c1] {
+            let mut pairs = Vec::new();
+            for &(k, u, a) in &blocks[c0..c1] {
                 let k = k as i64;
                 for (r, p) in ptr.iter_mut().enumerate() {
                     while *p < nb && (blocks[*p].0 as i64) < first(k, r) {
@@ -514,14 +723,15 @@ fn adjacent_blocks_dv(blocks: &[(u64, DVec3)]) -> f64 {
                     }
                     let mut b = *p;
                     while b < nb && blocks[b].0 as i64 <= k + offsets[r] + 1 {
-                        near = near.max((u - blocks[b].1).length());
+                        pairs.push((a, blocks[b].2, (u - blocks[b].1).length()));
                         b += 1;
                     }
                 }
             }
-            near
+            pairs
         })
-        .reduce(|| 0.0, f64::max)
+        .collect();
+    chunks.concat()
 }
 
 /// What the pair search reads, in the sorted particle order: the coordinates as separate
@@ -663,6 +873,18 @@ mod tests {
             "bonded pairs within the radius are covered too"
         );
         assert_eq!(nl.pair_speed, fastest);
+        // Measured again from the lists and bonds (no search): every listed or bonded pair,
+        // here all within the radius except bonded ones beyond it.
+        let mut interacting: f64 = 0.0;
+        for i in 0..n {
+            for j in 0..n {
+                let listed = nl.of(i).contains(&(j as u32));
+                if listed || p.intact_partners_of(i).any(|b| b == j) {
+                    interacting = interacting.max((p.vel[i] - p.vel[j]).length());
+                }
+            }
+        }
+        assert_eq!(nl.interacting_pair_speed(&p.vel, &p.bonds), interacting);
         let brute = assert_lists_exact(&nl, &p, radius);
         assert!(
             brute > n,
@@ -724,6 +946,76 @@ mod tests {
         nl.build(&mut p, 1.3, 4.0, false);
         assert!(!nl.stale(0.0, 1.0, 1.0, 0.0, 0.45));
         assert!(nl.stale(0.0, 1.0, 1.0, 0.0, 0.55));
+    }
+
+    /// The block-pair form of the rule: the hottest block and the largest frame difference
+    /// add up only where they meet. Three clumps on a line, in blocks of side 4: A at rest
+    /// and B next to it moving at 1 (adjacent, frame difference 1), C two blocks beyond B at
+    /// rest, with one particle displaced (hot). The global form counts C's displacement twice
+    /// plus A-B's difference; the pair form counts C with itself, and A-B with their own.
+    #[test]
+    fn block_pairs_bound_only_blocks_that_meet() {
+        let mut pos = Vec::new();
+        let mut vel = Vec::new();
+        for (x0, v) in [(0.5, 0.0), (4.5, 1.0), (12.5, 0.0)] {
+            for k in 0..8 {
+                let o = DVec3::new((k % 2) as f64, ((k / 2) % 2) as f64, (k / 4) as f64);
+                pos.push(o + DVec3::new(x0, 0.5, 0.5));
+                vel.push(DVec3::new(v, 0.0, 0.0));
+            }
+        }
+        let n = pos.len();
+        let mut p = Particles::new(
+            pos,
+            vel,
+            vec![1.0; n],
+            vec![Body::Target; n],
+            vec![NO_BOND; n * BONDS_PER_PARTICLE],
+        );
+        let mut nl = NeighbourList::default();
+        let (radius, contact) = (1.5, 1.0);
+        nl.build(&mut p, radius, 4.0, false);
+        assert_eq!(nl.block_pairs.len(), 1, "A-B adjacent, C alone");
+        assert_eq!(nl.near_dv, 1.0);
+        let skin = radius - contact;
+        // C's particle moved 0.2 (relative to its frame at rest), A-B apart by 0.2 in t = 0.2.
+        let hot = (0..n)
+            .find(|&i| p.pos[i].x > 12.0)
+            .expect("a particle of C");
+        // Every particle moves with its frame for t = 0.2; C's hot particle 0.2 beyond.
+        let t = 0.2;
+        let mut moved = p.pos.clone();
+        for (x, u) in moved.iter_mut().zip(&nl.frame_vel) {
+            *x += *u * t;
+        }
+        moved[hot].y += 0.2;
+        nl.measure_block_displacement(&moved, t);
+        assert!(
+            nl.stale(0.2, t, contact, 0.0, 0.0),
+            "global: 2 x 0.2 + 1 x 0.2 >= {skin}"
+        );
+        assert!(
+            !nl.stale_by_blocks(0.2, t, contact, 0.0, 0.0),
+            "pairs: C with itself 0.4, A-B 0.2"
+        );
+        // Moved 0.26: C with itself reaches the skin.
+        moved[hot].y += 0.06;
+        nl.measure_block_displacement(&moved, t);
+        assert!(nl.stale_by_blocks(0.26, t, contact, 0.0, 0.0));
+        // A-B alone: their difference over t = 0.5 reaches the skin, C's block does not matter.
+        let mut with_frames = p.pos.clone();
+        for (x, u) in with_frames.iter_mut().zip(&nl.frame_vel) {
+            *x += *u * 0.45;
+        }
+        nl.measure_block_displacement(&with_frames, 0.45);
+        assert!(!nl.stale_by_blocks(0.0, 0.45, contact, 0.0, 0.0));
+        assert!(nl.stale_by_blocks(0.0, 0.5, contact, 0.0, 0.0));
+        // Restored from what a checkpoint keeps, the blocks are the same.
+        let mut back = NeighbourList::default();
+        back.restore_state(nl.save_state());
+        assert_eq!(back.block_of, nl.block_of);
+        assert_eq!(back.block_pairs, nl.block_pairs);
+        assert_eq!(back.block_disp.len(), nl.block_disp.len());
     }
 
     /// Each particle's frame is the mean velocity of its block's particles (to round-off: the

@@ -17,7 +17,7 @@ use crate::neighbour::NeighbourList;
 use crate::potential::Interaction;
 use crate::scene::{Derived, RunSettings, Setup};
 use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND, OWNED_BONDS};
-use crate::step::{stiffness_step_s, LOOKAHEAD_SKIN_FRACTION};
+use crate::step::{stiffness_step_s, LOOKAHEAD_SKIN_FRACTION, SPEED_REFRESH};
 
 // The adaptive step's raise delay, also at the path it had when it was defined here.
 pub use crate::step::STRIDE_RAISE_AFTER;
@@ -112,6 +112,8 @@ pub struct Simulation {
     last_min_r2: f64,
     speed_partials: Vec<[f64; 2]>,
     vel_at_build: Vec<DVec3>,
+    /// Measurements of the pairs' speed between builds ([`Self::refresh_pair_speed`]).
+    pub speed_refreshes: u64,
     /// Bonds at t = 0.
     pub bonds_initial: u64,
     /// Bonds broken so far.
@@ -210,6 +212,7 @@ impl Simulation {
             last_min_r2: f64::INFINITY,
             speed_partials: vec![[0.0; 2]; nchunks],
             vel_at_build: Vec::new(),
+            speed_refreshes: 0,
             bonds_initial,
             bonds_broken: 0,
             coast_velocity: Vec::new(),
@@ -389,9 +392,10 @@ impl Simulation {
     /// which neighbours actually close in. After each step:
     /// - pairs that can interact until the next build (the neighbour list's pairs and bond
     ///   partners): u = u_b + 2 max_i |v_i - v_i(b)| bounds their relative speed, where u_b is
-    ///   the largest relative speed among them measured at the last build and v_i(b) each
-    ///   particle's velocity then. The displacement bound: u m dt <=
-    ///   `run.stride_displacement_over_sigma` sigma;
+    ///   the largest relative speed among them measured at the last build, or measured again
+    ///   since ([`Self::refresh_pair_speed`], once 2 max_i |v_i - v_i(b)| exceeds
+    ///   [`SPEED_REFRESH`] u_b), and v_i(b) each particle's velocity then. The displacement
+    ///   bound: u m dt <= `run.stride_displacement_over_sigma` sigma;
     /// - pairs not yet listed close in at most at u' = 2 max_i |v_i - f_i| + df (f_i the
     ///   frame velocity of the particle's block, df the largest difference between adjacent
     ///   blocks' frames, see [`crate::neighbour`]). The list's rebuild rule looks one step
@@ -437,7 +441,11 @@ impl Simulation {
         if !max_d2.is_finite() {
             return Err(self.unstable("non-finite or runaway particle position".into()));
         }
-        self.rebuild_if_stale(max_d2, since, max_e2)?;
+        let rebuilt = self.rebuild_if_stale(max_d2, since, max_e2)?;
+        if adaptive && !rebuilt && 2.0 * max_w2.sqrt() > SPEED_REFRESH * self.neighbours.pair_speed
+        {
+            self.refresh_pair_speed();
+        }
         self.compute_forces(half)?;
         if adaptive {
             self.adapt_stride(max_e2.sqrt(), max_w2.sqrt());
@@ -499,7 +507,7 @@ impl Simulation {
 
     /// Rebuilds the neighbour list when its rule says a contact could be missed (see
     /// [`NeighbourList::stale`]); `max_d2` and `max_e2` as from [`Self::kick_and_drift`].
-    fn rebuild_if_stale(&mut self, max_d2: f64, since: f64, max_e2: f64) -> Result<()> {
+    fn rebuild_if_stale(&mut self, max_d2: f64, since: f64, max_e2: f64) -> Result<bool> {
         // The adaptive step looks one step ahead (the next stride is at most one more than
         // this one), so that pairs enter contact only once listed.
         let ahead = if self.max_stride > 1 {
@@ -507,13 +515,15 @@ impl Simulation {
         } else {
             0.0
         };
-        if self.neighbours.stale(
-            max_d2.sqrt(),
-            since,
-            self.interaction.r_eq_m,
-            max_e2.sqrt(),
-            ahead,
-        ) {
+        let (max_e, max_s, rc) = (max_d2.sqrt(), max_e2.sqrt(), self.interaction.r_eq_m);
+        // The global form first: it is looser, so when it holds the block-pair form does.
+        // Only when it fails are the blocks' displacements measured.
+        if self.neighbours.stale(max_e, since, rc, max_s, ahead) && {
+            self.neighbours
+                .measure_block_displacement(&self.particles.pos, since);
+            self.neighbours
+                .stale_by_blocks(max_e, since, rc, max_s, ahead)
+        } {
             self.rebuild();
             if self.neighbours.out_of_range > 0 {
                 return Err(self.unstable(format!(
@@ -521,8 +531,27 @@ impl Simulation {
                     self.neighbours.out_of_range
                 )));
             }
+            return Ok(true);
         }
-        Ok(())
+        Ok(false)
+    }
+
+    /// Measures again, without a build, the largest relative speed of the pairs that can
+    /// interact (listed pairs and bond partners, intact or broken since the build) into the
+    /// list's `pair_speed`, and takes the velocities now as those at the build: the adaptive
+    /// step's speed bound then starts again from the speeds now instead of growing by twice
+    /// the largest change of any velocity since the build.
+    fn refresh_pair_speed(&mut self) {
+        let t = Instant::now();
+        let vel = &self.particles.vel;
+        let w = self
+            .neighbours
+            .interacting_pair_speed(vel, &self.particles.bonds);
+        self.neighbours.pair_speed = w;
+        self.vel_at_build.clear();
+        self.vel_at_build.par_extend(vel.par_iter().copied());
+        self.speed_refreshes += 1;
+        self.timing.integrate += t.elapsed();
     }
 
     /// The stride for the next step, from the speed bound and the closest pair (see

@@ -198,6 +198,9 @@ pub struct Summary {
     pub threads: usize,
     /// Neighbour-list builds.
     pub neighbour_builds: u64,
+    /// Measurements of the interacting pairs' speed between builds (the adaptive step's).
+    #[serde(default)]
+    pub speed_refreshes: u64,
     /// How often each bound of the adaptive step set the stride (all zero at a fixed step).
     pub stride_limits: hvi_engine::sim::StrideLimits,
     /// Time since first contact at which the ballistic cut-off began free flight, s (null when
@@ -1167,6 +1170,7 @@ fn summarise(spec: &SceneSpec, sim: &Simulation, counts: Counts, m: Measured) ->
         particle_steps_per_second: n as f64 * sim.steps_taken as f64 / m.step_wall_s.max(1e-12),
         threads: rayon::current_num_threads(),
         neighbour_builds: sim.neighbour_builds(),
+        speed_refreshes: sim.speed_refreshes,
         stride_limits: sim.stride_limits,
         ballistic_cutoff_tau_s: sim
             .coasting_since()

@@ -28,6 +28,8 @@ pub struct SimState {
     stride_calm: u32,
     last_min_r2: f64,
     vel_at_build: Vec<DVec3>,
+    #[serde(default)]
+    speed_refreshes: u64,
     bonds_broken: u64,
     coast_velocity: Vec<DVec3>,
     coast_from_step: Option<u64>,
@@ -111,6 +113,7 @@ impl Simulation {
             stride_calm: self.stride_calm,
             last_min_r2: self.last_min_r2,
             vel_at_build: self.vel_at_build.clone(),
+            speed_refreshes: self.speed_refreshes,
             bonds_broken: self.bonds_broken,
             coast_velocity: self.coast_velocity.clone(),
             coast_from_step: self.coast_from_step,
@@ -155,6 +158,7 @@ impl Simulation {
         self.stride_calm = s.stride_calm;
         self.last_min_r2 = s.last_min_r2;
         self.vel_at_build = s.vel_at_build;
+        self.speed_refreshes = s.speed_refreshes;
         self.bonds_broken = s.bonds_broken;
         self.coast_velocity = s.coast_velocity;
         self.coast_from_step = s.coast_from_step;
