@@ -112,7 +112,7 @@ pub struct Simulation {
     last_min_r2: f64,
     speed_partials: Vec<[f64; 2]>,
     vel_at_build: Vec<DVec3>,
-    /// Measurements of the pairs' speed between builds ([`Self::refresh_pair_speed`]).
+    /// Measurements of the pairs' speed between builds (see [`Self::step_until`]).
     pub speed_refreshes: u64,
     /// Bonds at t = 0.
     pub bonds_initial: u64,
@@ -393,7 +393,7 @@ impl Simulation {
     /// - pairs that can interact until the next build (the neighbour list's pairs and bond
     ///   partners): u = u_b + 2 max_i |v_i - v_i(b)| bounds their relative speed, where u_b is
     ///   the largest relative speed among them measured at the last build, or measured again
-    ///   since ([`Self::refresh_pair_speed`], once 2 max_i |v_i - v_i(b)| exceeds
+    ///   since (a pass over the lists and bonds, once 2 max_i |v_i - v_i(b)| exceeds
     ///   [`SPEED_REFRESH`] u_b), and v_i(b) each particle's velocity then. The displacement
     ///   bound: u m dt <= `run.stride_displacement_over_sigma` sigma;
     /// - pairs not yet listed close in at most at u' = 2 max_i |v_i - f_i| + df (f_i the
