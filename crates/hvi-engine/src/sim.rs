@@ -22,7 +22,9 @@ use crate::step::{stiffness_step_s, LOOKAHEAD_SKIN_FRACTION, SPEED_REFRESH};
 // The adaptive step's raise delay, also at the path it had when it was defined here.
 pub use crate::step::STRIDE_RAISE_AFTER;
 
+mod band;
 mod saved;
+pub use band::{AbsorbingBand, BAND_ABSORPTION};
 pub use saved::SimState;
 
 /// Particles per work unit and per partial sum.
@@ -46,12 +48,16 @@ pub struct Energy {
     pub bond_j: f64,
     /// Energy carried away by broken bonds (booked once, when they break), J.
     pub broken_j: f64,
+    /// Energy taken out by the absorbing band at the plate's edge (`run.absorbing_band_over_d`;
+    /// zero without one), J.
+    #[serde(default)]
+    pub absorbed_j: f64,
 }
 
 impl Energy {
     /// The conserved sum, J.
     pub fn total_j(&self) -> f64 {
-        self.kinetic_j + self.contact_j + self.bond_j + self.broken_j
+        self.kinetic_j + self.contact_j + self.bond_j + self.broken_j + self.absorbed_j
     }
 }
 
@@ -121,6 +127,12 @@ pub struct Simulation {
     coast_velocity: Vec<DVec3>,
     coast_from_step: Option<u64>,
     broken_energy: f64,
+    /// The absorbing band: damping rate by particle id, 1/s (empty: no band), and by current
+    /// index (refreshed at every re-sort); energy it took out, J; per-chunk partials.
+    damping_by_id: Vec<f64>,
+    damping: Vec<f64>,
+    absorbed_energy: f64,
+    absorbed_partials: Vec<f64>,
     /// Energy at t = 0.
     pub energy_initial: Energy,
     /// Momentum at t = 0, kg m/s.
@@ -176,6 +188,10 @@ impl Simulation {
         } = setup;
         let mut sim = Self::from_parts(particles, interaction, derived, &spec.run)?;
         sim.rim_ids = rim_ids;
+        if let Some(band) = AbsorbingBand::of_scene(&spec) {
+            sim.damping_by_id = band.damping_by_id(&sim.particles, &sim.interaction);
+            sim.refresh_damping();
+        }
         Ok(sim)
     }
 
@@ -218,6 +234,10 @@ impl Simulation {
             coast_velocity: Vec::new(),
             coast_from_step: None,
             broken_energy: 0.0,
+            damping_by_id: Vec::new(),
+            damping: Vec::new(),
+            absorbed_energy: 0.0,
+            absorbed_partials: vec![0.0; nchunks],
             energy_initial: Energy::default(),
             momentum_initial: DVec3::ZERO,
             timing: Timing::default(),
@@ -259,12 +279,24 @@ impl Simulation {
         self.neighbours.builds
     }
 
+    /// The band's damping rates in the current particle order (after a re-sort or a restore).
+    fn refresh_damping(&mut self) {
+        if self.damping_by_id.is_empty() {
+            return;
+        }
+        let by_id = &self.damping_by_id;
+        self.damping.clear();
+        self.damping
+            .par_extend(self.particles.id.par_iter().map(|&id| by_id[id as usize]));
+    }
+
     fn rebuild(&mut self) {
         let t = Instant::now();
         let radius = self.interaction.r_eq_m + self.skin_m;
         let adaptive = self.max_stride > 1;
         self.neighbours
             .build(&mut self.particles, radius, self.block_m, adaptive);
+        self.refresh_damping();
         self.since_build_s = 0.0;
         if adaptive {
             // For the adaptive step: the velocities now (the build measured the largest
@@ -334,14 +366,19 @@ impl Simulation {
         let fr_bond = &self.bond_force_over_r;
         let bonds = &p.bonds;
         let inv_mass = &p.inv_mass;
+        let mass = &p.mass;
+        let damping = &self.damping;
+        let damp = !damping.is_empty() && half_dt > 0.0;
         p.force
             .par_chunks_mut(CHUNK)
             .zip(p.vel.par_chunks_mut(CHUNK))
             .zip(self.contact_min_r2.par_iter_mut())
+            .zip(self.absorbed_partials.par_iter_mut())
             .enumerate()
-            .for_each(|(c, ((force, vel), min_out))| {
+            .for_each(|(c, (((force, vel), min_out), absorbed_out))| {
                 let base = c * CHUNK;
                 let mut min_r2 = f64::INFINITY;
+                let mut absorbed = 0.0;
                 for (k, (f_out, v)) in force.iter_mut().zip(vel.iter_mut()).enumerate() {
                     let i = base + k;
                     let f = contact_force(&ia, pos, i, nl.of(i), &mut min_r2);
@@ -349,8 +386,12 @@ impl Simulation {
                     let f = add_bond_forces(f, pos, i, slots, fr_bond);
                     *f_out = f;
                     *v += f * (half_dt * inv_mass[i]);
+                    if damp && damping[i] > 0.0 {
+                        absorbed += band::damp(v, damping[i], 2.0 * half_dt, mass[i]);
+                    }
                 }
                 *min_out = min_r2;
+                *absorbed_out = absorbed;
             });
     }
 
@@ -362,6 +403,11 @@ impl Simulation {
             self.bonds_broken += b.broken;
             self.broken_energy += b.broken_energy;
             min_r2 = min_r2.min(b.min_r2).min(c);
+        }
+        if !self.damping.is_empty() {
+            for &a in &self.absorbed_partials {
+                self.absorbed_energy += a;
+            }
         }
         min_r2
     }
@@ -646,6 +692,7 @@ impl Simulation {
             .collect();
         let mut e = Energy {
             broken_j: self.broken_energy,
+            absorbed_j: self.absorbed_energy,
             ..Default::default()
         };
         for [k, c, b] in partials {

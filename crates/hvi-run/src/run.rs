@@ -65,7 +65,10 @@ pub struct EnergyRow {
     pub bond_j: f64,
     /// Broken-bond energy, J.
     pub broken_j: f64,
-    /// Sum of the four, J.
+    /// Energy the absorbing band took out (`run.absorbing_band_over_d`; 0 without one), J.
+    #[serde(default)]
+    pub absorbed_j: f64,
+    /// Sum of the five, J.
     pub total_j: f64,
     /// Bonds broken so far.
     pub bonds_broken: u64,
@@ -101,6 +104,9 @@ pub struct EnergySummary {
     /// Final broken-bond energy, J.
     #[serde(deserialize_with = "nan_if_null")]
     pub broken_j: f64,
+    /// Energy the absorbing band took out by the end, J (0 without one).
+    #[serde(default)]
+    pub absorbed_j: f64,
     /// Ledger total at t = 0, J.
     #[serde(deserialize_with = "nan_if_null")]
     pub total_initial_j: f64,
@@ -297,6 +303,7 @@ fn row(sim: &Simulation, e: &Energy) -> EnergyRow {
         contact_j: e.contact_j,
         bond_j: e.bond_j,
         broken_j: e.broken_j,
+        absorbed_j: e.absorbed_j,
         total_j: e.total_j(),
         bonds_broken: sim.bonds_broken,
         dt_s: sim.dt * sim.stride as f64,
@@ -1031,6 +1038,7 @@ fn energy_summary(last: &EnergyRow, e0: f64, max_drift: f64) -> EnergySummary {
         contact_j: last.contact_j,
         bond_j: last.bond_j,
         broken_j: last.broken_j,
+        absorbed_j: last.absorbed_j,
         total_initial_j: e0,
         total_final_j: last.total_j,
         relative_drift: (last.total_j - e0) / e0,

@@ -350,6 +350,14 @@ pub const KEYS: &[Key] = &[
         default: "1e-3",
     },
     Key {
+        name: "run.absorbing_band_over_d",
+        meaning: "width over D of a band inside the plate's lateral edge that damps outgoing \
+                  stress waves (a sponge layer; sphere on plate only, less than half the \
+                  plate's side; its energy is booked in the ledger as `absorbed_j`)",
+        allowed: interval(0.0, false, 10.0, false),
+        default: "0 (no band)",
+    },
+    Key {
         name: "analysis.cloud",
         meaning: "measure the cloud at the end of the run (fragments, F, La, Lr, R, va, sizes)",
         allowed: Allowed::Text("`true` or `false`"),

@@ -306,6 +306,11 @@ pub struct RunSettings {
     pub cutoff_quiet_s: f64,
     /// ... the broken-bond count grew by at most this fraction (0: not a single break).
     pub cutoff_break_fraction: f64,
+    /// Width over D of the absorbing band inside the plate's lateral edge (0: none; sphere on
+    /// plate only; see [`crate::sim::AbsorbingBand`]). Omitted from the scene as written when
+    /// 0, so runs without a band keep their fingerprints.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub absorbing_band_over_d: f64,
 }
 
 impl Default for RunSettings {
@@ -328,8 +333,13 @@ impl Default for RunSettings {
             cutoff_min_tau_s: 8e-6,
             cutoff_quiet_s: 2e-6,
             cutoff_break_fraction: 1e-3,
+            absorbing_band_over_d: 0.0,
         }
     }
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 fn is_fixed_stride(m: &u64) -> bool {

@@ -125,6 +125,32 @@ impl RunSettings {
     }
 }
 
+impl SceneSpec {
+    /// The absorbing band: in range, narrower than half the plate, on a sphere-on-plate scene.
+    pub(super) fn validate_band(&self) -> Result<()> {
+        let band = keys::check("run.absorbing_band_over_d", self.run.absorbing_band_over_d)?;
+        if band == 0.0 {
+            return Ok(());
+        }
+        match self.scene {
+            Geometry::SphereOnPlate { width_over_d, .. } if band < 0.5 * width_over_d => Ok(()),
+            Geometry::SphereOnPlate { width_over_d, .. } => Err(EngineError::invalid(
+                "run.absorbing_band_over_d",
+                band,
+                format!(
+                    "less than half the plate's side over D (scene.width_over_d / 2 = {})",
+                    0.5 * width_over_d
+                ),
+            )),
+            Geometry::FlyerPlate { .. } => Err(EngineError::invalid(
+                "run.absorbing_band_over_d",
+                band,
+                "0 on a flyer-plate scene (the band is for a sphere on a plate)",
+            )),
+        }
+    }
+}
+
 /// Below this impact velocity a scene draws a warning (km/s typed as m/s?), m/s.
 pub const SUSPICIOUS_V0_M_S: f64 = 100.0;
 

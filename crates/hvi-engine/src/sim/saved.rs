@@ -34,6 +34,8 @@ pub struct SimState {
     coast_velocity: Vec<DVec3>,
     coast_from_step: Option<u64>,
     broken_energy: f64,
+    #[serde(default)]
+    absorbed_energy: f64,
     energy_initial: Energy,
     momentum_initial: DVec3,
     timing: Timing,
@@ -118,6 +120,7 @@ impl Simulation {
             coast_velocity: self.coast_velocity.clone(),
             coast_from_step: self.coast_from_step,
             broken_energy: self.broken_energy,
+            absorbed_energy: self.absorbed_energy,
             energy_initial: self.energy_initial,
             momentum_initial: self.momentum_initial,
             timing: self.timing,
@@ -163,9 +166,11 @@ impl Simulation {
         self.coast_velocity = s.coast_velocity;
         self.coast_from_step = s.coast_from_step;
         self.broken_energy = s.broken_energy;
+        self.absorbed_energy = s.absorbed_energy;
         self.energy_initial = s.energy_initial;
         self.momentum_initial = s.momentum_initial;
         self.timing = s.timing;
+        self.refresh_damping();
         Ok(())
     }
 }
