@@ -108,11 +108,9 @@ fn run_writes_summary_energy_dumps_and_lammps_data() {
     assert_eq!(summary["status"], "completed");
     assert_eq!(summary["scene"]["resolution"]["particles"], 2000.0);
     let csv = std::fs::read_to_string(out.join("energy.csv")).expect("energy.csv");
-    assert!(
-        csv.starts_with(
-            "time_s,tau_s,kinetic_j,contact_j,bond_j,broken_j,absorbed_j,total_j,bonds_broken"
-        )
-    );
+    assert!(csv.starts_with(
+        "time_s,tau_s,kinetic_j,contact_j,bond_j,broken_j,absorbed_j,total_j,bonds_broken"
+    ));
     assert!(csv.lines().count() > 3);
     let trajectory = std::fs::read_to_string(out.join("trajectory.extxyz")).expect("trajectory");
     let mut lines = trajectory.lines();
