@@ -509,7 +509,10 @@ impl NeighbourList {
     }
 
     /// Full lists in compressed-row form: count, prefix-sum, fill in pair order (fixed by
-    /// the sorted walk, so the lists are the same at any thread count).
+    /// the sorted walk, so the lists are the same at any thread count). Each list comes out
+    /// in ascending order: the pairs arrive ordered by their first particle, and within it by
+    /// the second, so particle i's partners k < i (entered from k's pairs) precede its own
+    /// pairs (i, j > i).
     fn fill_lists(&mut self, pairs: &[(Vec<(u32, u32)>, f64)], n: usize) {
         let fill = &mut self.fill;
         fill.clear();
@@ -579,7 +582,9 @@ impl NeighbourList {
     }
 
     /// The largest relative speed |v_i - v_j| of the pairs that can interact until the next
-    /// build: listed pairs, and bond partners (`bonds`, slots intact or broken), m/s. Maxima
+    /// build: listed pairs, and bond partners (`bonds`, slots intact or broken), m/s. Each
+    /// pair is visited once: a particle's list is in ascending order (see [`Self::build`]), so
+    /// its partners j > i are a tail of it, and each bond is seen from its owned slot. Maxima
     /// do not depend on the order, so any thread count gives the same.
     pub fn interacting_pair_speed(&self, vel: &[DVec3], bonds: &[u32]) -> f64 {
         (0..vel.len())
@@ -588,10 +593,13 @@ impl NeighbourList {
             .map(|i| {
                 let vi = vel[i];
                 let mut w2: f64 = 0.0;
-                for &j in self.of(i) {
+                let list = self.of(i);
+                let later = list.partition_point(|&j| (j as usize) < i);
+                for &j in &list[later..] {
                     w2 = w2.max((vi - vel[j as usize]).length_squared());
                 }
-                for &s in &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE] {
+                let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
+                for &s in slots.iter().step_by(2) {
                     if s != NO_BOND {
                         w2 = w2.max((vi - vel[(s & !BROKEN_FLAG) as usize]).length_squared());
                     }
