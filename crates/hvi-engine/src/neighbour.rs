@@ -811,6 +811,27 @@ mod tests {
     use super::*;
     use crate::state::{Body, NO_BOND};
 
+    /// Unit-mass target particles without bonds.
+    fn unbonded(pos: Vec<DVec3>, vel: Vec<DVec3>) -> Particles {
+        let n = pos.len();
+        Particles::new(
+            pos,
+            vel,
+            vec![1.0; n],
+            vec![Body::Target; n],
+            vec![NO_BOND; n * BONDS_PER_PARTICLE],
+        )
+    }
+
+    /// The positions each particle reaches in `t` moving with its frame.
+    fn carried_by_frames(p: &Particles, nl: &NeighbourList, t: f64) -> Vec<DVec3> {
+        p.pos
+            .iter()
+            .zip(&nl.frame_vel)
+            .map(|(&x, &u)| x + u * t)
+            .collect()
+    }
+
     /// Each list is exactly the unbonded particles within the radius, in ascending order;
     /// returns the number of listed entries.
     fn assert_lists_exact(nl: &NeighbourList, p: &Particles, radius: f64) -> usize {
@@ -927,14 +948,7 @@ mod tests {
             pos.push(o + DVec3::new(20.0, 0.0, 0.0));
             vel.push(-DVec3::X);
         }
-        let n = pos.len();
-        let mut p = Particles::new(
-            pos,
-            vel,
-            vec![1.0; n],
-            vec![Body::Target; n],
-            vec![NO_BOND; n * BONDS_PER_PARTICLE],
-        );
+        let mut p = unbonded(pos, vel);
         let mut nl = NeighbourList::default();
         nl.build(&mut p, 1.3, 4.0, false);
         assert!(nl.frame_vel.iter().all(|u| (u.x.abs() - 1.0).abs() < 1e-12));
@@ -973,13 +987,7 @@ mod tests {
             }
         }
         let n = pos.len();
-        let mut p = Particles::new(
-            pos,
-            vel,
-            vec![1.0; n],
-            vec![Body::Target; n],
-            vec![NO_BOND; n * BONDS_PER_PARTICLE],
-        );
+        let mut p = unbonded(pos, vel);
         let mut nl = NeighbourList::default();
         let (radius, contact) = (1.5, 1.0);
         nl.build(&mut p, radius, 4.0, false);
@@ -992,10 +1000,7 @@ mod tests {
             .expect("a particle of C");
         // Every particle moves with its frame for t = 0.2; C's hot particle 0.2 beyond.
         let t = 0.2;
-        let mut moved = p.pos.clone();
-        for (x, u) in moved.iter_mut().zip(&nl.frame_vel) {
-            *x += *u * t;
-        }
+        let mut moved = carried_by_frames(&p, &nl, t);
         moved[hot].y += 0.2;
         nl.measure_block_displacement(&moved, t);
         assert!(
@@ -1011,11 +1016,7 @@ mod tests {
         nl.measure_block_displacement(&moved, t);
         assert!(nl.stale_by_blocks(0.26, t, contact, 0.0, 0.0));
         // A-B alone: their difference over t = 0.5 reaches the skin, C's block does not matter.
-        let mut with_frames = p.pos.clone();
-        for (x, u) in with_frames.iter_mut().zip(&nl.frame_vel) {
-            *x += *u * 0.45;
-        }
-        nl.measure_block_displacement(&with_frames, 0.45);
+        nl.measure_block_displacement(&carried_by_frames(&p, &nl, 0.45), 0.45);
         assert!(!nl.stale_by_blocks(0.0, 0.45, contact, 0.0, 0.0));
         assert!(nl.stale_by_blocks(0.0, 0.5, contact, 0.0, 0.0));
         // Restored from what a checkpoint keeps, the blocks are the same.
@@ -1044,13 +1045,7 @@ mod tests {
             .map(|k| DVec3::new(crate::rng::uniform(6, k, 0) - 0.5, 1.0, k as f64 * 1e-3))
             .collect();
         let build = |threads: usize| {
-            let mut p = Particles::new(
-                pos.clone(),
-                vel.clone(),
-                vec![1.0; n],
-                vec![Body::Target; n],
-                vec![NO_BOND; n * BONDS_PER_PARTICLE],
-            );
+            let mut p = unbonded(pos.clone(), vel.clone());
             let mut nl = NeighbourList::default();
             rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
