@@ -18,15 +18,16 @@
 //! |e_i| + |e_j| + |u_a - u_b| t (e the displacements relative to the frames, u_a, u_b the two
 //! frames' velocities, t the time since the build). Pairs in the same or adjacent blocks are
 //! bounded block pair by block pair: E_a + E_b + |u_a - u_b| t, E_a the largest displacement in
-//! block a (`block_disp`, kept by the time loop), over every adjacent pair of blocks and every
-//! block with itself (`stale_by_blocks`). So the hottest particles and the largest frame
-//! difference only add up where they meet; the global form 2 max e + max |u_a - u_b| t
-//! (`stale`, with `near_dv`) is looser and still exact. Pairs in blocks that are not adjacent
-//! were at least one block side apart, and are covered by a bound on |u_a - u_b| over all
-//! blocks (`far_dv`) against the block side less the contact radius. The rule is exact (no
-//! pair is ever missed); with `block = 0` every frame is at rest and it is the classic rule. The adaptive step asks the rule to look one step ahead (the same bound at the
-//! end of the next step, from the largest speed relative to a frame), so that a pair is listed
-//! before it comes into contact.
+//! block a (`measure_block_displacement`), over every adjacent pair of blocks and every block
+//! with itself (`stale_by_blocks`). So the hottest particles and the largest frame difference
+//! only add up where they meet; the global form 2 max e + max |u_a - u_b| t (`stale`, with
+//! `near_dv`) is looser and still exact, so the time loop checks it first and measures the
+//! blocks only when it fails. Pairs in blocks that are not adjacent were at least one block
+//! side apart, and are covered by a bound on |u_a - u_b| over all blocks (`far_dv`) against
+//! the block side less the contact radius. The rule is exact (no pair is ever missed); with
+//! `block = 0` every frame is at rest and it is the classic rule. The adaptive step asks the
+//! rule to look one step ahead (the same bound at the end of the next step, from the largest
+//! speed relative to a frame), so that a pair is listed before it comes into contact.
 //!
 //! The list is full (each pair appears on both particles' lists) so forces are gathered per
 //! particle and the result does not depend on the thread count. Pairs joined by an intact bond
@@ -93,8 +94,8 @@ pub struct NeighbourList {
     /// itself) and |u_a - u_b|, m/s.
     block_pairs: Vec<(u32, u32, f64)>,
     /// Per block: the largest squared displacement relative to the frame since the build, as
-    /// the bits of a non-negative f64 (their order is the numbers' order), raised by the time
-    /// loop through [`BlockDisplacement`].
+    /// the bits of a non-negative f64 (their order is the numbers' order), as
+    /// [`Self::measure_block_displacement`] last measured it.
     block_disp: Vec<AtomicU64>,
 }
 
@@ -281,17 +282,25 @@ impl NeighbourList {
         for a in &self.block_disp {
             a.store(0, Ordering::Relaxed);
         }
-        let target = BlockDisplacement {
-            block_of: &self.block_of,
-            disp: &self.block_disp,
-        };
+        let disp = &self.block_disp;
         pos.par_chunks(4096).enumerate().for_each(|(c, chunk)| {
-            let mut cursor = target.cursor();
-            let base = c * 4096;
+            // Particles of one block come in runs in cell order: one atomic update per run.
+            let mut run: Option<(u32, f64)> = None;
             for (k, &x) in chunk.iter().enumerate() {
-                let i = base + k;
+                let i = c * 4096 + k;
                 let d = x - self.pos_at_build[i] - self.frame_vel[i] * since_build_s;
-                cursor.push(i, d.length_squared());
+                let (b, d2) = (self.block_of[i], d.length_squared());
+                run = match run {
+                    Some((rb, m)) if rb == b => Some((b, m.max(d2))),
+                    Some((rb, m)) => {
+                        disp[rb as usize].fetch_max(m.to_bits(), Ordering::Relaxed);
+                        Some((b, d2.max(0.0)))
+                    }
+                    None => Some((b, d2.max(0.0))),
+                };
+            }
+            if let Some((rb, m)) = run {
+                disp[rb as usize].fetch_max(m.to_bits(), Ordering::Relaxed);
             }
         });
     }
@@ -614,61 +623,6 @@ impl NeighbourList {
     #[inline(always)]
     pub fn of(&self, i: usize) -> &[u32] {
         &self.neighbours[self.start[i] as usize..self.start[i + 1] as usize]
-    }
-}
-
-/// The per-block displacement of the rule's block-pair form: each particle's squared
-/// displacement relative to its frame goes to its block's maximum.
-struct BlockDisplacement<'a> {
-    block_of: &'a [u32],
-    disp: &'a [AtomicU64],
-}
-
-impl BlockDisplacement<'_> {
-    /// A cursor over particles in index order that raises their blocks' maxima: particles of
-    /// one block come in runs in cell order, so it makes one atomic update per run.
-    fn cursor(&self) -> BlockCursor<'_> {
-        BlockCursor {
-            target: self,
-            block: u32::MAX,
-            max: 0.0,
-        }
-    }
-}
-
-/// See [`BlockDisplacement::cursor`].
-struct BlockCursor<'a> {
-    target: &'a BlockDisplacement<'a>,
-    block: u32,
-    max: f64,
-}
-
-impl BlockCursor<'_> {
-    /// Particle `i`'s squared displacement relative to its frame (NaN is the caller's to
-    /// catch: `max` drops it).
-    #[inline]
-    fn push(&mut self, i: usize, d2: f64) {
-        let Some(&b) = self.target.block_of.get(i) else {
-            return;
-        };
-        if b != self.block {
-            self.flush();
-            self.block = b;
-            self.max = 0.0;
-        }
-        self.max = self.max.max(d2);
-    }
-
-    fn flush(&mut self) {
-        if let Some(a) = self.target.disp.get(self.block as usize) {
-            a.fetch_max(self.max.to_bits(), Ordering::Relaxed);
-        }
-    }
-}
-
-impl Drop for BlockCursor<'_> {
-    fn drop(&mut self) {
-        self.flush();
     }
 }
 
