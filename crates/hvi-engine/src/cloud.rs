@@ -132,7 +132,7 @@ impl CloudReference {
 
     /// The reference of a running simulation (its rim ids and derived numbers).
     pub fn of(sim: &Simulation) -> Self {
-        Self::new(&sim.particles, &sim.derived, &sim.rim_ids)
+        Self::new(&sim.full_particles(), &sim.derived, &sim.full_rim_ids())
     }
 
     /// True when particle `id` was on the plate's outer rim at t = 0.
@@ -895,9 +895,10 @@ impl CloudObserver {
             return;
         }
         let t0 = Instant::now();
-        let members = self.finder.find(&sim.particles, &self.reference);
+        let full = sim.full_particles();
+        let members = self.finder.find(&full, &self.reference);
         let ext = extent(
-            &sim.particles,
+            &full,
             &members.in_cloud,
             self.reference.plate_rear_z_m,
             self.settings.quantile,
@@ -928,7 +929,7 @@ impl CloudObserver {
         }
         if front {
             let sample = front_sample(
-                &sim.particles,
+                &full,
                 &members.in_cloud,
                 ext.front_z_m,
                 &self.reference,
@@ -940,7 +941,7 @@ impl CloudObserver {
                     self.front[k] = Some(sample);
                     if self.keep_state {
                         self.front_states[k] =
-                            Some(CloudState::capture(sim, members, &self.reference));
+                            Some(CloudState::capture(sim, &full, members, &self.reference));
                     }
                 }
             }
@@ -955,9 +956,10 @@ impl CloudObserver {
             return None;
         }
         let t0 = Instant::now();
-        let members = self.finder.find(&sim.particles, &self.reference);
+        let full = sim.full_particles();
+        let members = self.finder.find(&full, &self.reference);
         let mut result = cloud_result(
-            &sim.particles,
+            &full,
             members,
             &self.reference,
             &self.settings,
@@ -967,7 +969,7 @@ impl CloudObserver {
         );
         if self.keep_state {
             result.kept = Some(KeptStates {
-                end: CloudState::capture(sim, members, &self.reference),
+                end: CloudState::capture(sim, &full, members, &self.reference),
                 front: std::mem::take(&mut self.front_states),
             });
         }
@@ -1191,10 +1193,15 @@ pub struct CloudState {
 }
 
 impl CloudState {
-    /// The state of `sim` now, with the labelling `members` (by current index, as
+    /// The state of `sim` now (its particles of the full scene `p`,
+    /// [`Simulation::full_particles`]), with the labelling `members` (by index in `p`, as
     /// [`CloudFinder::find`] gives it) found against `reference`.
-    pub fn capture(sim: &Simulation, members: &CloudMembers, reference: &CloudReference) -> Self {
-        let p = &sim.particles;
+    pub fn capture(
+        sim: &Simulation,
+        p: &Particles,
+        members: &CloudMembers,
+        reference: &CloudReference,
+    ) -> Self {
         let order: Vec<usize> = ids_in_order(p).collect();
         CloudState {
             step: sim.step,

@@ -39,6 +39,7 @@ pub mod shadowgraph;
 pub mod sim;
 pub mod state;
 pub mod step;
+pub mod symmetry;
 pub mod witness;
 
 pub use error::{EngineError, Result};

@@ -42,6 +42,10 @@ use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
 
 use crate::state::{Particles, PermuteScratch, BONDS_PER_PARTICLE, BROKEN_FLAG, NO_BOND};
+use crate::symmetry::{image_bond_flags, reflect, IMAGE_SHIFT, MIRROR_X, MIRROR_Y};
+
+mod images;
+pub use images::split_image;
 
 const COORD_BITS: u32 = 21;
 const COORD_OFFSET: i64 = 1 << (COORD_BITS - 1);
@@ -78,6 +82,15 @@ pub struct NeighbourList {
     pub pair_speed: f64,
     /// Particles outside the representable grid at the last build (a blow-up symptom).
     pub out_of_range: usize,
+    /// Quarter symmetry: pairs with the images across the planes x = 0 and y = 0 are listed
+    /// too ([`Self::images_of`]); set at each build from the particles (they carry image
+    /// bonds).
+    pub mirrors: bool,
+    /// `image_start[i]..image_start[i + 1]` indexes `image_nbrs` for particle i (empty for a
+    /// full scene).
+    image_start: Vec<u32>,
+    /// Image-list entries `j | code << IMAGE_SHIFT`.
+    image_nbrs: Vec<u32>,
     scratch: PermuteScratch,
     order: Vec<(u64, u32)>,
     perm: Vec<u32>,
@@ -148,6 +161,12 @@ pub struct NeighbourState {
     builds: u64,
     pair_speed: f64,
     out_of_range: usize,
+    #[serde(default)]
+    mirrors: bool,
+    #[serde(default)]
+    image_start: Vec<u32>,
+    #[serde(default)]
+    image_nbrs: Vec<u32>,
 }
 
 impl NeighbourState {
@@ -164,6 +183,17 @@ impl NeighbourState {
         }
         if self.neighbours.iter().any(|&j| j as usize >= n) {
             return Err("its neighbour list names particles beyond the count".into());
+        }
+        let images_fit = if self.mirrors {
+            self.image_start.len() == n + 1
+                && self.image_start.windows(2).all(|w| w[0] <= w[1])
+                && self.image_start.last().map_or(0, |&s| s as usize) == self.image_nbrs.len()
+                && self.image_nbrs.iter().all(|&e| split_image(e).0 < n)
+        } else {
+            self.image_start.is_empty() && self.image_nbrs.is_empty()
+        };
+        if !images_fit {
+            return Err("its image lists (quarter symmetry) are not well formed".into());
         }
         Ok(())
     }
@@ -184,6 +214,9 @@ impl NeighbourList {
             builds: self.builds,
             pair_speed: self.pair_speed,
             out_of_range: self.out_of_range,
+            mirrors: self.mirrors,
+            image_start: self.image_start.clone(),
+            image_nbrs: self.image_nbrs.clone(),
         }
     }
 
@@ -200,6 +233,9 @@ impl NeighbourList {
         self.builds = s.builds;
         self.pair_speed = s.pair_speed;
         self.out_of_range = s.out_of_range;
+        self.mirrors = s.mirrors;
+        self.image_start = s.image_start;
+        self.image_nbrs = s.image_nbrs;
         // The blocks derive from the positions and frames at the build, which are saved.
         if self.block > 0.0 {
             let keys = block_keys_of(&self.pos_at_build, self.block, &mut self.block_keys);
@@ -337,11 +373,17 @@ impl NeighbourList {
             .collect();
         sorted.par_sort_unstable_by_key(|b| b.0);
         self.block_pairs = adjacent_blocks(&sorted);
+        if self.mirrors {
+            self.block_pairs.extend(images::image_block_pairs(&sorted));
+        }
         self.near_dv = self.block_pairs.iter().fold(0.0f64, |a, p| a.max(p.2));
-        let (lo, hi) = sorted.par_iter().map(|&(_, u, _)| (u, u)).reduce(
+        let (mut lo, mut hi) = sorted.par_iter().map(|&(_, u, _)| (u, u)).reduce(
             || (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
             |a, b| (a.0.min(b.0), a.1.max(b.1)),
         );
+        if self.mirrors && !sorted.is_empty() {
+            (lo, hi) = images::mirrored_frame_spread(lo, hi);
+        }
         self.far_dv = if sorted.is_empty() {
             0.0
         } else {
@@ -395,6 +437,7 @@ impl NeighbourList {
     pub fn build(&mut self, p: &mut Particles, radius: f64, block: f64, measure_speed: bool) {
         self.radius = radius;
         self.builds += 1;
+        self.mirrors = !p.image_bonds.is_empty();
         let n = p.len();
         p.clear_broken_slots();
         self.sort_into_cells(p, 1.0 / radius);
@@ -413,8 +456,15 @@ impl NeighbourList {
             .into_par_iter()
             .map(|chunk| self.search_cells(&search, chunk))
             .collect();
-        self.pair_speed = pairs.iter().fold(0.0f64, |a, c| a.max(c.1)).sqrt();
+        let mut max_w2 = pairs.iter().fold(0.0f64, |a, c| a.max(c.1));
         self.fill_lists(&pairs, n);
+        if self.mirrors {
+            max_w2 = max_w2.max(self.search_images(p, radius * radius, measure_speed));
+        } else {
+            self.image_start.clear();
+            self.image_nbrs.clear();
+        }
+        self.pair_speed = max_w2.sqrt();
         self.pos_at_build.clear();
         self.pos_at_build.par_extend(p.pos.par_iter().copied());
         self.build_frames(p, block);
@@ -587,6 +637,49 @@ impl NeighbourList {
                 }
             }
         }
+        if !p.image_bonds.is_empty() {
+            missing += self.missing_image_pairs(p, &grid, cell, r2);
+        }
+        missing
+    }
+
+    /// The image pairs (i, M j) closer than the contact radius (squared: `r2`) that are
+    /// neither on i's image list nor an intact image bond, found through `grid` of cells
+    /// `cell` (side at least the radius): [`Self::missing_pairs`] under quarter symmetry.
+    fn missing_image_pairs(
+        &self,
+        p: &Particles,
+        grid: &HashMap<(i64, i64, i64), Vec<usize>>,
+        cell: impl Fn(DVec3) -> (i64, i64, i64),
+        r2: f64,
+    ) -> usize {
+        let mut missing = 0;
+        for (i, &x) in p.pos.iter().enumerate() {
+            for code in [MIRROR_X, MIRROR_Y, MIRROR_X | MIRROR_Y] {
+                let (cx, cy, cz) = cell(reflect(x, code));
+                for dz in -1..=1 {
+                    for dy in -1..=1 {
+                        for dx in -1..=1 {
+                            let Some(js) = grid.get(&(cx + dx, cy + dy, cz + dz)) else {
+                                continue;
+                            };
+                            for &j in js {
+                                if (x - reflect(p.pos[j], code)).length_squared() >= r2 {
+                                    continue;
+                                }
+                                let bonded = i == j
+                                    && code != MIRROR_X | MIRROR_Y
+                                    && p.image_bonds[i] & image_bond_flags(code).0 != 0;
+                                let entry = j as u32 | (code << IMAGE_SHIFT);
+                                if !bonded && !self.images_of(i).contains(&entry) {
+                                    missing += 1;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
         missing
     }
 
@@ -595,7 +688,10 @@ impl NeighbourList {
     /// pair is visited once: a particle's list is in ascending order (see [`Self::build`]), so
     /// its partners j > i are a tail of it, and each bond is seen from its owned slot. Maxima
     /// do not depend on the order, so any thread count gives the same.
-    pub fn interacting_pair_speed(&self, vel: &[DVec3], bonds: &[u32]) -> f64 {
+    ///
+    /// Under quarter symmetry the image pairs and image bonds (`image_bonds`, empty for a full
+    /// scene) are included: |v_i - M v_j|.
+    pub fn interacting_pair_speed(&self, vel: &[DVec3], bonds: &[u32], image_bonds: &[u8]) -> f64 {
         (0..vel.len())
             .into_par_iter()
             .with_min_len(1024)
@@ -611,6 +707,17 @@ impl NeighbourList {
                 for &s in slots.iter().step_by(2) {
                     if s != NO_BOND {
                         w2 = w2.max((vi - vel[(s & !BROKEN_FLAG) as usize]).length_squared());
+                    }
+                }
+                for &e in self.images_of(i) {
+                    let (j, code) = split_image(e);
+                    w2 = w2.max((vi - reflect(vel[j], code)).length_squared());
+                }
+                if let Some(&flags) = image_bonds.get(i) {
+                    for code in [MIRROR_X, MIRROR_Y] {
+                        if flags & image_bond_flags(code).0 != 0 {
+                            w2 = w2.max((vi - reflect(vi, code)).length_squared());
+                        }
                     }
                 }
                 w2
@@ -867,7 +974,10 @@ mod tests {
                 }
             }
         }
-        assert_eq!(nl.interacting_pair_speed(&p.vel, &p.bonds), interacting);
+        assert_eq!(
+            nl.interacting_pair_speed(&p.vel, &p.bonds, &p.image_bonds),
+            interacting
+        );
         let brute = assert_lists_exact(&nl, &p, radius);
         assert!(
             brute > n,

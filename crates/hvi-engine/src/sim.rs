@@ -6,6 +6,7 @@
 //! (energies, momentum, broken-bond energy) are taken over fixed chunks of `CHUNK` particles and
 //! the chunk results added in chunk order: results are bit-identical at any thread count.
 
+use std::borrow::Cow;
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
@@ -13,11 +14,14 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{EngineError, Result};
-use crate::neighbour::NeighbourList;
+use crate::neighbour::{split_image, NeighbourList};
 use crate::potential::Interaction;
 use crate::scene::{Derived, RunSettings, Setup};
 use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND, OWNED_BONDS};
 use crate::step::{stiffness_step_s, LOOKAHEAD_SKIN_FRACTION, SPEED_REFRESH};
+use crate::symmetry::{
+    image_bond_flags, intact_image_bonds, reflect, unfold, unfold_ids, Symmetry, MIRROR_X, MIRROR_Y,
+};
 
 // The adaptive step's raise delay, also at the path it had when it was defined here.
 pub use crate::step::STRIDE_RAISE_AFTER;
@@ -145,8 +149,14 @@ pub struct Simulation {
     /// F/r of each owned bond (0 when empty or broken and stretched), per owned slot.
     bond_force_over_r: Vec<f64>,
     bond_partials: Vec<BondPartial>,
+    /// Image bonds broken per chunk in the last step (quarter symmetry).
+    image_partials: Vec<u64>,
     contact_min_r2: Vec<f64>,
     disp_partials: Vec<f64>,
+    /// The part of the scene simulated: the particles carry image bonds under quarter
+    /// symmetry ([`crate::symmetry`]). Energies, bond counts and momentum are reported for
+    /// the full scene.
+    pub symmetry: Symmetry,
 }
 
 /// How often each bound of the adaptive step ([`Simulation::step_until`]) set the stride's
@@ -203,7 +213,17 @@ impl Simulation {
         run: &RunSettings,
     ) -> Result<Self> {
         let n = particles.len();
-        let bonds_initial = particles.intact_bonds() as u64;
+        let symmetry = if particles.image_bonds.is_empty() {
+            Symmetry::Full
+        } else {
+            Symmetry::Quarter
+        };
+        // Bonds of the full scene: each bond of the quarter stands for `copies`, each image
+        // bond for half as many (it joins two copies).
+        let copies = symmetry.copies();
+        let bonds_initial = (copies * particles.intact_bonds() as f64
+            + 0.5 * copies * intact_image_bonds(&particles) as f64)
+            as u64;
         let nchunks = n.div_ceil(CHUNK);
         let mut sim = Simulation {
             particles,
@@ -244,8 +264,10 @@ impl Simulation {
             rim_ids: Vec::new(),
             bond_force_over_r: vec![0.0; n * OWNED_BONDS],
             bond_partials: vec![BondPartial::default(); nchunks],
+            image_partials: vec![0; nchunks],
             contact_min_r2: vec![f64::INFINITY; nchunks],
             disp_partials: vec![0.0; nchunks],
+            symmetry,
         };
         sim.min_mass = sim
             .particles
@@ -352,6 +374,41 @@ impl Simulation {
             .for_each(|(c, ((fr, bonds), out))| {
                 *out = bond_chunk(&ia, pos, c * CHUNK, bonds, fr);
             });
+        if self.symmetry == Symmetry::Quarter {
+            self.break_image_bonds();
+        }
+    }
+
+    /// Breaks the image bonds stretched past rcut (quarter symmetry), per chunk of particles
+    /// with the chunk's count in `image_partials`. Their force is gathered with the contacts.
+    fn break_image_bonds(&mut self) {
+        let rcut2 = self.interaction.rcut2();
+        let pos = &self.particles.pos;
+        self.particles
+            .image_bonds
+            .par_chunks_mut(CHUNK)
+            .zip(self.image_partials.par_iter_mut())
+            .enumerate()
+            .for_each(|(c, (flags, out))| {
+                let mut broken = 0;
+                for (k, f) in flags.iter_mut().enumerate() {
+                    if *f == 0 {
+                        continue;
+                    }
+                    let pi = pos[c * CHUNK + k];
+                    for code in [MIRROR_X, MIRROR_Y] {
+                        let (bond, gone) = image_bond_flags(code);
+                        if *f & bond != 0
+                            && *f & gone == 0
+                            && (pi - reflect(pi, code)).length_squared() > rcut2
+                        {
+                            *f |= gone;
+                            broken += 1;
+                        }
+                    }
+                }
+                *out = broken;
+            });
     }
 
     /// Per particle: the contact repulsion over the neighbour list, plus each bond slot's F/r
@@ -369,6 +426,8 @@ impl Simulation {
         let mass = &p.mass;
         let damping = &self.damping;
         let damp = !damping.is_empty() && half_dt > 0.0;
+        let image_bonds = &p.image_bonds;
+        let mirrored = self.symmetry == Symmetry::Quarter;
         p.force
             .par_chunks_mut(CHUNK)
             .zip(p.vel.par_chunks_mut(CHUNK))
@@ -383,7 +442,10 @@ impl Simulation {
                     let i = base + k;
                     let f = contact_force(&ia, pos, i, nl.of(i), &mut min_r2);
                     let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
-                    let f = add_bond_forces(f, pos, i, slots, fr_bond);
+                    let mut f = add_bond_forces(f, pos, i, slots, fr_bond);
+                    if mirrored {
+                        f += image_force(&ia, pos, i, nl.images_of(i), image_bonds[i], &mut min_r2);
+                    }
                     *f_out = f;
                     *v += f * (half_dt * inv_mass[i]);
                     if damp && damping[i] > 0.0 {
@@ -399,10 +461,21 @@ impl Simulation {
     /// squared distance of the closest pair (bonded or listed).
     fn book_chunk_partials(&mut self) -> f64 {
         let mut min_r2 = f64::INFINITY;
+        // Counts are of the full scene: a bond of the quarter stands for `copies` bonds, an
+        // image bond for half as many. The ledger is the quarter's (an image bond's energy
+        // counts one half, see `crate::symmetry`).
+        let copies = self.symmetry.copies() as u64;
         for (b, &c) in self.bond_partials.iter().zip(&self.contact_min_r2) {
-            self.bonds_broken += b.broken;
+            self.bonds_broken += copies * b.broken;
             self.broken_energy += b.broken_energy;
             min_r2 = min_r2.min(b.min_r2).min(c);
+        }
+        if self.symmetry == Symmetry::Quarter {
+            let half_break = 0.5 * self.interaction.break_energy_at_rcut();
+            for &k in &self.image_partials {
+                self.bonds_broken += copies / 2 * k;
+                self.broken_energy += half_break * k as f64;
+            }
         }
         if !self.damping.is_empty() {
             for &a in &self.absorbed_partials {
@@ -590,9 +663,11 @@ impl Simulation {
     fn refresh_pair_speed(&mut self) {
         let t = Instant::now();
         let vel = &self.particles.vel;
-        let w = self
-            .neighbours
-            .interacting_pair_speed(vel, &self.particles.bonds);
+        let w = self.neighbours.interacting_pair_speed(
+            vel,
+            &self.particles.bonds,
+            &self.particles.image_bonds,
+        );
         self.neighbours.pair_speed = w;
         self.vel_at_build.clear();
         self.vel_at_build.par_extend(vel.par_iter().copied());
@@ -674,6 +749,26 @@ impl Simulation {
                         contact +=
                             0.5 * ia.contact_energy((pi - p.pos[j as usize]).length_squared());
                     }
+                    // Pairs and bonds across a mirror plane count one half (crate::symmetry).
+                    for &e in nl.images_of(i) {
+                        let (j, code) = split_image(e);
+                        contact += 0.5
+                            * ia.contact_energy((pi - reflect(p.pos[j], code)).length_squared());
+                    }
+                    if let Some(&flags) = p.image_bonds.get(i) {
+                        for code in [MIRROR_X, MIRROR_Y] {
+                            let (bonded, gone) = image_bond_flags(code);
+                            if flags & bonded == 0 {
+                                continue;
+                            }
+                            let r2 = (pi - reflect(pi, code)).length_squared();
+                            if r2 < r_eq2 {
+                                contact += 0.5 * ia.contact_energy(r2);
+                            } else if flags & gone == 0 {
+                                bond += 0.5 * ia.spring_energy(r2.sqrt());
+                            }
+                        }
+                    }
                     for m in 0..OWNED_BONDS {
                         let s = p.bonds[i * BONDS_PER_PARTICLE + 2 * m];
                         if s == NO_BOND {
@@ -700,6 +795,17 @@ impl Simulation {
             e.contact_j += c;
             e.bond_j += b;
         }
+        // The full scene's ledger: `copies` times the quarter's.
+        let copies = self.symmetry.copies();
+        for x in [
+            &mut e.kinetic_j,
+            &mut e.contact_j,
+            &mut e.bond_j,
+            &mut e.broken_j,
+            &mut e.absorbed_j,
+        ] {
+            *x *= copies;
+        }
         self.timing.energy += t.elapsed();
         e
     }
@@ -722,25 +828,34 @@ impl Simulation {
     /// within the neighbour-list radius is closing in, judged by the fragments' centre-of-mass
     /// velocities. `labels[i]` is the fragment of particle i (any id below the particle count,
     /// e.g. [`crate::cloud::label_fragments`]). Bonds breaking recently is the caller's check.
+    ///
+    /// Under quarter symmetry the pairs with images count too: particle i and the image M j
+    /// are of one fragment of the full scene when j is of i's fragment and that fragment spans
+    /// every plane M reflects across (it is bonded to its own image there).
     pub fn fragments_separating(&self, labels: &[u32]) -> bool {
         let p = &self.particles;
-        let cm = fragment_velocities(p, labels);
+        let (cm, spans) = fragment_velocities(p, labels);
         let r_eq2 = self.interaction.r_eq2();
         let nl = &self.neighbours;
         (0..p.len()).into_par_iter().all(|i| {
             let li = labels[i];
-            let touching = |j: usize| {
+            let touching = |j: usize, code: u32| {
                 let lj = labels[j];
-                if lj == li {
+                if lj == li && code & !spans[li as usize] == 0 {
                     return false;
                 }
-                let d = p.pos[i] - p.pos[j];
-                d.length_squared() < r_eq2 || d.dot(cm[li as usize] - cm[lj as usize]) < 0.0
+                let d = p.pos[i] - reflect(p.pos[j], code);
+                let closing = cm[li as usize] - reflect(cm[lj as usize], code);
+                d.length_squared() < r_eq2 || d.dot(closing) < 0.0
             };
-            !nl.of(i).iter().any(|&j| touching(j as usize))
+            !nl.of(i).iter().any(|&j| touching(j as usize, 0))
+                && !nl.images_of(i).iter().any(|&e| {
+                    let (j, code) = split_image(e);
+                    touching(j, code)
+                })
                 && !p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE]
                     .iter()
-                    .any(|&s| s != NO_BOND && touching((s & INDEX_MASK) as usize))
+                    .any(|&s| s != NO_BOND && touching((s & INDEX_MASK) as usize, 0))
         })
     }
 
@@ -754,7 +869,7 @@ impl Simulation {
     /// positions (front, La, Lr) and fragment counts are therefore unchanged to that order.
     /// `labels` as for [`Self::fragments_separating`].
     pub fn start_coasting(&mut self, labels: &[u32]) {
-        let cm = fragment_velocities(&self.particles, labels);
+        let (cm, _) = fragment_velocities(&self.particles, labels);
         self.coast_velocity = labels.iter().map(|&l| cm[l as usize]).collect();
         self.coast_from_step = Some(self.step);
     }
@@ -781,7 +896,31 @@ impl Simulation {
         self.timing.integrate += t.elapsed();
     }
 
-    /// Total momentum, kg m/s.
+    /// The particles of the full scene: the simulated ones, or under quarter symmetry the
+    /// quarter with its three mirror images ([`crate::symmetry::unfold`]). What the cloud's
+    /// measurement and every output read.
+    pub fn full_particles(&self) -> Cow<'_, Particles> {
+        match self.symmetry {
+            Symmetry::Full => Cow::Borrowed(&self.particles),
+            Symmetry::Quarter => Cow::Owned(unfold(&self.particles)),
+        }
+    }
+
+    /// [`Self::rim_ids`] in the numbering of [`Self::full_particles`].
+    pub fn full_rim_ids(&self) -> Cow<'_, [u32]> {
+        match self.symmetry {
+            Symmetry::Full => Cow::Borrowed(&self.rim_ids),
+            Symmetry::Quarter => Cow::Owned(unfold_ids(&self.rim_ids, self.particles.len())),
+        }
+    }
+
+    /// Particles of the full scene ([`Self::full_particles`]' count).
+    pub fn full_particle_count(&self) -> usize {
+        (self.symmetry.copies() as usize) * self.particles.len()
+    }
+
+    /// Total momentum of the full scene, kg m/s (under quarter symmetry its x and y
+    /// components are zero by symmetry and z is four times the quarter's).
     pub fn momentum(&self) -> DVec3 {
         let p = &self.particles;
         let n = p.len();
@@ -795,7 +934,11 @@ impl Simulation {
                 m
             })
             .collect();
-        partials.into_iter().fold(DVec3::ZERO, |a, b| a + b)
+        let p = partials.into_iter().fold(DVec3::ZERO, |a, b| a + b);
+        match self.symmetry {
+            Symmetry::Full => p,
+            Symmetry::Quarter => DVec3::new(0.0, 0.0, self.symmetry.copies() * p.z),
+        }
     }
 }
 
@@ -921,8 +1064,56 @@ fn add_bond_forces(mut f: DVec3, pos: &[DVec3], i: usize, slots: &[u32], fr_bond
     f
 }
 
-/// Centre-of-mass velocity of each fragment label (indexed by label), summed in index order.
-fn fragment_velocities(p: &Particles, labels: &[u32]) -> Vec<DVec3> {
+/// The repulsion and image-bond force on particle `i` from across the mirror planes (quarter
+/// symmetry): the contact force of each image pair in `images`, and of each image bond in
+/// `flags` the same law as an ordinary bond (repulsion when compressed, the spring when
+/// stretched and intact, nothing when broken and stretched). Lowers `min_r2` to the closest
+/// such pair's squared distance.
+#[inline]
+fn image_force(
+    ia: &Interaction,
+    pos: &[DVec3],
+    i: usize,
+    images: &[u32],
+    flags: u8,
+    min_r2: &mut f64,
+) -> DVec3 {
+    let r_eq2 = ia.r_eq2();
+    let pi = pos[i];
+    let mut f = DVec3::ZERO;
+    for &e in images {
+        let (j, code) = split_image(e);
+        let d = pi - reflect(pos[j], code);
+        let r2 = d.length_squared();
+        *min_r2 = min_r2.min(r2);
+        if r2 < r_eq2 {
+            f += d * ia.contact_force_over_r(r2);
+        }
+    }
+    for code in [MIRROR_X, MIRROR_Y] {
+        let (bond, gone) = image_bond_flags(code);
+        if flags & bond == 0 {
+            continue;
+        }
+        let d = pi - reflect(pi, code);
+        let r2 = d.length_squared();
+        *min_r2 = min_r2.min(r2);
+        let (fc, fs) = ia.contact_and_spring_force_over_r(r2);
+        if r2 < r_eq2 {
+            f += d * fc;
+        } else if flags & gone == 0 {
+            f += d * fs;
+        }
+    }
+    f
+}
+
+/// Centre-of-mass velocity of each fragment label (indexed by label) in the full scene,
+/// summed in index order, and each label's mirror planes: under quarter symmetry a fragment
+/// bonded to its own image across a plane is one fragment with it in the full scene, so its
+/// velocity across that plane is zero (the bits `MIRROR_X`, `MIRROR_Y` of the planes it
+/// spans; 0 for a full scene).
+fn fragment_velocities(p: &Particles, labels: &[u32]) -> (Vec<DVec3>, Vec<u32>) {
     let n = p.len();
     let mut momentum = vec![DVec3::ZERO; n];
     let mut mass = vec![0.0f64; n];
@@ -930,9 +1121,24 @@ fn fragment_velocities(p: &Particles, labels: &[u32]) -> Vec<DVec3> {
         momentum[l as usize] += v * m;
         mass[l as usize] += m;
     }
-    momentum
+    let mut spans = vec![0u32; n];
+    for (&l, &f) in labels.iter().zip(&p.image_bonds) {
+        for code in [MIRROR_X, MIRROR_Y] {
+            let (bond, gone) = image_bond_flags(code);
+            if f & bond != 0 && f & gone == 0 {
+                spans[l as usize] |= code;
+            }
+        }
+    }
+    let cm = momentum
         .iter()
         .zip(&mass)
-        .map(|(&q, &m)| if m > 0.0 { q / m } else { DVec3::ZERO })
-        .collect()
+        .zip(&spans)
+        .map(|((&q, &m), &s)| {
+            let v = if m > 0.0 { q / m } else { DVec3::ZERO };
+            // The mean of the fragment and its image across each plane it spans.
+            0.5 * (v + reflect(v, s))
+        })
+        .collect();
+    (cm, spans)
 }

@@ -51,6 +51,11 @@ pub struct Particles {
     /// `BONDS_PER_PARTICLE` slots per particle: the partner's current index, `NO_BOND`, or a
     /// partner index with `BROKEN_FLAG` set.
     pub bonds: Vec<u32>,
+    /// Under quarter symmetry ([`crate::symmetry`]), each particle's bonds to its own mirror
+    /// images across the planes x = 0 and y = 0 (`IMAGE_BOND_X`, `IMAGE_BOND_Y`, each with
+    /// its broken-since-the-build flag); empty for a full scene.
+    #[serde(default)]
+    pub image_bonds: Vec<u8>,
 }
 
 impl Particles {
@@ -77,6 +82,7 @@ impl Particles {
             body,
             id: (0..n as u32).collect(),
             bonds,
+            image_bonds: Vec::new(),
         }
     }
 
@@ -123,8 +129,10 @@ impl Particles {
         })
     }
 
-    /// Clears the owned and mirror slots of bonds that broke since the last call.
+    /// Clears the owned and mirror slots of bonds that broke since the last call (and the
+    /// image bonds that did).
     pub(crate) fn clear_broken_slots(&mut self) {
+        crate::symmetry::clear_broken_image_bonds(&mut self.image_bonds);
         for i in 0..self.len() {
             for m in 0..OWNED_BONDS {
                 let s = self.bonds[i * BONDS_PER_PARTICLE + 2 * m];
@@ -173,6 +181,9 @@ impl Particles {
         gather(&mut self.inv_mass, &mut scratch.scalar, perm);
         gather(&mut self.body, &mut scratch.body, perm);
         gather(&mut self.id, &mut scratch.index, perm);
+        if !self.image_bonds.is_empty() {
+            gather(&mut self.image_bonds, &mut scratch.flags, perm);
+        }
         let inv = &scratch.inv;
         let src = &self.bonds;
         scratch.bonds.resize(n * BONDS_PER_PARTICLE, NO_BOND);
@@ -206,4 +217,5 @@ pub struct PermuteScratch {
     body: Vec<Body>,
     index: Vec<u32>,
     bonds: Vec<u32>,
+    flags: Vec<u8>,
 }

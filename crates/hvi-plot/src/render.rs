@@ -61,7 +61,8 @@ pub struct Frame {
 impl Frame {
     /// The simulation's particles now.
     pub fn capture(sim: &Simulation) -> Frame {
-        let p = &sim.particles;
+        let full = sim.full_particles();
+        let p = &*full;
         Frame {
             tau_s: sim.tau_s(),
             pos: p

@@ -202,13 +202,14 @@ impl Trajectory {
             w,
             vtk,
             frames: 0,
-            initial_bonds: intact_bonds_by_id(&sim.particles),
+            initial_bonds: intact_bonds_by_id(&sim.full_particles()),
         })
     }
 
     /// Appends the state at base step `step` as one frame.
     pub fn frame(&mut self, sim: &Simulation, step: u64) -> Result<()> {
-        let p = &sim.particles;
+        let full = sim.full_particles();
+        let p: &Particles = &full;
         let fragment = hvi_engine::cloud::label_fragments(p);
         let order = by_id(p);
         let broken: Vec<u8> = order
@@ -220,12 +221,12 @@ impl Trajectory {
             })
             .collect();
         if let Some(w) = self.w.as_mut() {
-            write_xyz_frame(w, sim, step, self.frames, &order, &fragment, &broken)
+            write_xyz_frame(w, sim, p, step, self.frames, &order, &fragment, &broken)
                 .with_context(|| format!("cannot write {}", self.partial.display()))?;
         }
         if let Some(vtk) = self.vtk.as_mut() {
             let name = format!("{VTK_DIR}/frame_{:05}.vtu", self.frames);
-            let bytes = vtu_frame(sim, step, &order, &fragment, &broken)?;
+            let bytes = vtu_frame(sim, p, step, &order, &fragment, &broken)?;
             write_atomic_bytes(&self.dir.join(&name), &bytes)?;
             vtk.push((sim.tau_s(), name));
         }
@@ -332,16 +333,17 @@ impl Trajectory {
 }
 
 /// One extended XYZ frame (see [`Trajectory`]), particles in `order` (by id).
+#[allow(clippy::too_many_arguments)]
 fn write_xyz_frame(
     w: &mut impl Write,
     sim: &Simulation,
+    p: &Particles,
     step: u64,
     frame: usize,
     order: &[u32],
     fragment: &[u32],
     broken: &[u8],
 ) -> Result<()> {
-    let p = &sim.particles;
     writeln!(w, "{}", p.len())?;
     writeln!(
         w,
@@ -381,6 +383,7 @@ fn write_xyz_frame(
 /// `body`, `fragment` and `broken_bonds`, and the step and times in the title.
 fn vtu_frame(
     sim: &Simulation,
+    p: &Particles,
     step: u64,
     order: &[u32],
     fragment: &[u32],
@@ -390,7 +393,6 @@ fn vtu_frame(
         Attribute, Attributes, ByteOrder, CellType, Cells, DataSet, UnstructuredGridPiece, Version,
         VertexNumbers, Vtk,
     };
-    let p = &sim.particles;
     let n = order.len();
     let mut points = Vec::with_capacity(3 * n);
     let mut velocity = Vec::with_capacity(3 * n);
@@ -444,7 +446,8 @@ fn vtu_frame(
 /// The state as a LAMMPS data file (`units si`, `atom_style bond`): atoms (id = hvi id + 1,
 /// molecule = body + 1, type 1 impactor / 2 target), velocities and intact bonds.
 pub fn write_lammps_data(path: &Path, sim: &Simulation) -> Result<()> {
-    let p = &sim.particles;
+    let full = sim.full_particles();
+    let p: &Particles = &full;
     let d = &sim.derived;
     let order = by_id(p);
     let mut bonds: Vec<(u32, u32)> = p

@@ -167,8 +167,12 @@ pub struct Summary {
     pub error: Option<String>,
     /// hvi-study version.
     pub engine_version: String,
-    /// Particles.
+    /// Particles of the scene.
     pub particles: usize,
+    /// Particles simulated: all of them, or a quarter under `run.symmetry = "quarter"` (the
+    /// others are their mirror images).
+    #[serde(default)]
+    pub particles_simulated: usize,
     /// Impactor particles.
     pub particles_impactor: usize,
     /// Target particles.
@@ -197,7 +201,7 @@ pub struct Summary {
     /// Wall time of the whole run, s.
     #[serde(deserialize_with = "nan_if_null")]
     pub wall_seconds: f64,
-    /// Particles times steps over the stepping wall time.
+    /// Simulated particles times steps over the stepping wall time.
     #[serde(deserialize_with = "nan_if_null")]
     pub particle_steps_per_second: f64,
     /// Threads used.
@@ -375,8 +379,10 @@ fn timing_table(
 /// Particle counts of a run.
 #[derive(Debug, Clone, Copy)]
 struct Counts {
-    /// All particles.
+    /// All particles of the scene.
     particles: usize,
+    /// Particles simulated (a quarter of them under `run.symmetry = "quarter"`).
+    simulated: usize,
     /// Impactor particles.
     impactor: usize,
 }
@@ -389,7 +395,7 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     let (mut sim, counts) = set_up(spec, opts)?;
     let d = sim.derived;
     let mut run = Gathered::begin(&mut sim, spec, opts, wall0)?;
-    let step_wall = run.step_to_end(&mut sim, spec, opts, counts.particles)?;
+    let step_wall = run.step_to_end(&mut sim, spec, opts, counts.simulated)?;
     let final_energy = final_energy_row(&mut run.rows, &mut sim, &d);
     let momentum = momentum_summary(&sim, &d);
     let (cloud, track, analysis_time) = run.finish_cloud(&sim);
@@ -458,13 +464,18 @@ fn set_up(spec: &SceneSpec, opts: &RunOptions) -> Result<(Simulation, Counts)> {
         .filter(|b| **b == hvi_engine::state::Body::Impactor)
         .count();
     let sim = Simulation::new(setup)?;
+    let copies = sim.symmetry.copies() as usize;
     if opts.progress {
-        eprintln!("{}", describe(&sim.derived, n, sim.bonds_initial));
+        eprintln!("{}", describe(&sim.derived, copies * n, sim.bonds_initial));
+        if copies > 1 {
+            eprintln!("quarter symmetry: {n} particles simulated, with their mirror images");
+        }
         eprintln!("threads {}", rayon::current_num_threads());
     }
     let counts = Counts {
-        particles: n,
-        impactor: n_imp,
+        particles: copies * n,
+        simulated: n,
+        impactor: copies * n_imp,
     };
     Ok((sim, counts))
 }
@@ -1022,7 +1033,7 @@ fn final_energy_row(rows: &mut Vec<EnergyRow>, sim: &mut Simulation, d: &Derived
 /// The momentum block: total momentum at t = 0 and now, and the change over M v0.
 fn momentum_summary(sim: &Simulation, d: &Derived) -> MomentumSummary {
     let momentum = sim.momentum();
-    let total_mass: f64 = sim.particles.mass.iter().sum();
+    let total_mass: f64 = sim.symmetry.copies() * sim.particles.mass.iter().sum::<f64>();
     let scale = (total_mass * d.v0_m_s).max(f64::MIN_POSITIVE);
     MomentumSummary {
         initial_kg_m_s: sim.momentum_initial.to_array(),
@@ -1163,6 +1174,7 @@ fn summarise(spec: &SceneSpec, sim: &Simulation, counts: Counts, m: Measured) ->
         error: m.error,
         engine_version: env!("CARGO_PKG_VERSION").into(),
         particles: n,
+        particles_simulated: counts.simulated,
         particles_impactor: counts.impactor,
         particles_target: n - counts.impactor,
         bonds_initial: sim.bonds_initial,
@@ -1175,7 +1187,8 @@ fn summarise(spec: &SceneSpec, sim: &Simulation, counts: Counts, m: Measured) ->
         tau_s: sim.tau_s(),
         sigma_m: d.sigma_m,
         wall_seconds: m.wall.as_secs_f64(),
-        particle_steps_per_second: n as f64 * sim.steps_taken as f64 / m.step_wall_s.max(1e-12),
+        particle_steps_per_second: counts.simulated as f64 * sim.steps_taken as f64
+            / m.step_wall_s.max(1e-12),
         threads: rayon::current_num_threads(),
         neighbour_builds: sim.neighbour_builds(),
         speed_refreshes: sim.speed_refreshes,

@@ -17,6 +17,7 @@ use crate::paper;
 use crate::potential::Interaction;
 use crate::state::{Body, Particles};
 use crate::step::stability_bound_s;
+use crate::symmetry::Symmetry;
 
 /// Numbers derived from a scene that every run prints (and the summary records).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -145,7 +146,8 @@ impl SceneSpec {
         let sized = self.material.sized(sigma, sigma_ref)?;
         let interaction = sized.interaction;
 
-        let mut layout = lay_out(geometry, r_eq)?;
+        let symmetry = self.run.symmetry;
+        let mut layout = lay_out(geometry, r_eq, symmetry)?;
         let [mass_imp, mass_tgt] = particle_masses_kg(geometry, &layout, density);
 
         let run = &self.run;
@@ -178,6 +180,9 @@ impl SceneSpec {
             contact_time_s: standoff / v0,
             steps,
         };
+        if symmetry == Symmetry::Quarter {
+            layout.keep_quarter();
+        }
         let particles = layout.into_particles(mass_imp, mass_tgt, v0, run.thermal_ratio, run.seed);
         let rim_ids = rim_ids(&particles, r_eq);
         Ok(Setup {

@@ -358,6 +358,16 @@ pub const KEYS: &[Key] = &[
         default: "0 (no band)",
     },
     Key {
+        name: "run.symmetry",
+        meaning: "`quarter` simulates the quarter x > 0, y > 0 of a normal impact on a square \
+                  plate with mirror images across both planes (a quarter of the particles; \
+                  the plate's side rounds to an even number of lattice sites); outputs and \
+                  measurements are of the full scene (its error against the full scene: \
+                  [model decisions](model-decisions.md#quarter-symmetry))",
+        allowed: Allowed::Text("`full` or `quarter`"),
+        default: "full",
+    },
+    Key {
         name: "analysis.cloud",
         meaning: "measure the cloud at the end of the run (fragments, F, La, Lr, R, va, sizes)",
         allowed: Allowed::Text("`true` or `false`"),

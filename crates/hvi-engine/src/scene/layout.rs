@@ -8,6 +8,7 @@ use super::spec::Geometry;
 use crate::error::{check_range, EngineError, Result};
 use crate::rng;
 use crate::state::{Body, Particles, BONDS_PER_PARTICLE, NO_BOND};
+use crate::symmetry::{Symmetry, IMAGE_BOND_X, IMAGE_BOND_Y};
 
 /// Lattice sites of both bodies with integer coordinates, before masses and velocities.
 pub(super) struct Layout {
@@ -21,6 +22,8 @@ pub(super) struct Layout {
     impactor_z_shift: f64,
     /// z of the target plate's rear face, m.
     pub(super) plate_rear_z: f64,
+    /// Only the quarter x > 0, y > 0 is kept ([`Self::keep_quarter`]).
+    quarter: bool,
 }
 
 /// The six lattice directions, in bond-slot order (+x, -x, +y, -y, +z, -z).
@@ -50,6 +53,28 @@ impl Layout {
             p.z += self.impactor_z_shift;
         }
         p
+    }
+
+    /// Keeps the sites of the quarter x > 0, y > 0 (the lattice is symmetric about both
+    /// planes with none of its sites on them: an even number of sites per side); the sites
+    /// next to a plane get a bond to their own image across it ([`crate::symmetry`]).
+    pub(super) fn keep_quarter(&mut self) {
+        debug_assert_eq!(
+            self.lateral_offset, 0.5,
+            "quarter symmetry needs even sides"
+        );
+        let keep: Vec<bool> = self.sites.iter().map(|s| s[0] >= 0 && s[1] >= 0).collect();
+        let mut k = 0;
+        self.sites.retain(|_| {
+            k += 1;
+            keep[k - 1]
+        });
+        let mut k = 0;
+        self.body.retain(|_| {
+            k += 1;
+            keep[k - 1]
+        });
+        self.quarter = true;
     }
 
     /// Moves the impactor's sites by -`dz` along z.
@@ -96,7 +121,20 @@ impl Layout {
                 }
             })
             .collect();
-        Particles::new(pos, vel, mass, self.body, bonds)
+        let image_bonds: Vec<u8> = if self.quarter {
+            self.sites
+                .iter()
+                .map(|s| {
+                    (if s[0] == 0 { IMAGE_BOND_X } else { 0 })
+                        | (if s[1] == 0 { IMAGE_BOND_Y } else { 0 })
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let mut p = Particles::new(pos, vel, mass, self.body, bonds);
+        p.image_bonds = image_bonds;
+        p
     }
 
     /// Bonds: lattice nearest neighbours of the same body, found through a dense index grid;
@@ -179,20 +217,33 @@ impl Layout {
 
 /// The lattice sites of `geometry` at spacing `r_eq`, or an error naming the key when a body
 /// would be less than one particle thick or the lattice too large.
-pub(super) fn lay_out(geometry: &Geometry, r_eq: f64) -> Result<Layout> {
+/// Under quarter symmetry the plate has an even number of sites per side (its width rounded to
+/// the nearest even count), so that the mirror planes pass between lattice layers.
+pub(super) fn lay_out(geometry: &Geometry, r_eq: f64, symmetry: Symmetry) -> Result<Layout> {
+    let even = symmetry == Symmetry::Quarter;
     match *geometry {
         Geometry::SphereOnPlate {
             diameter_m,
             t_over_d,
             width_over_d,
             ..
-        } => lay_out_sphere_on_plate(diameter_m, t_over_d, width_over_d, r_eq),
+        } => lay_out_sphere_on_plate(diameter_m, t_over_d, width_over_d, r_eq, even),
         Geometry::FlyerPlate {
             flyer_thickness_m,
             target_thickness_m,
             width_m,
             ..
-        } => lay_out_flyer_plate(flyer_thickness_m, target_thickness_m, width_m, r_eq),
+        } => lay_out_flyer_plate(flyer_thickness_m, target_thickness_m, width_m, r_eq, even),
+    }
+}
+
+/// Sites per side of a square of side `width` at spacing `r_eq` (at least 1, or 2 when
+/// `even`).
+fn sites_per_side(width: f64, r_eq: f64, even: bool) -> i64 {
+    if even {
+        2 * ((0.5 * width / r_eq).round() as i64).max(1)
+    } else {
+        ((width / r_eq).round() as i64).max(1)
     }
 }
 
@@ -234,6 +285,7 @@ fn lay_out_sphere_on_plate(
     t_over_d: f64,
     width_over_d: f64,
     r_eq: f64,
+    even: bool,
 ) -> Result<Layout> {
     let t = t_over_d * diameter_m;
     let nz = (t / r_eq).round() as i64;
@@ -248,7 +300,7 @@ fn lay_out_sphere_on_plate(
             ),
         ));
     }
-    let nxy = ((width_over_d * diameter_m / r_eq).round() as i64).max(1);
+    let nxy = sites_per_side(width_over_d * diameter_m, r_eq, even);
     let nsphere = diameter_m / r_eq;
     if nsphere < 1.0 {
         return Err(EngineError::invalid(
@@ -281,6 +333,7 @@ fn lay_out_sphere_on_plate(
         lateral_offset,
         impactor_z_shift: 0.0,
         plate_rear_z: nz as f64 * r_eq,
+        quarter: false,
     })
 }
 
@@ -321,6 +374,7 @@ fn lay_out_flyer_plate(
     target_thickness_m: f64,
     width_m: f64,
     r_eq: f64,
+    even: bool,
 ) -> Result<Layout> {
     let nt = (target_thickness_m / r_eq).round() as i64;
     let nf = (flyer_thickness_m / r_eq).round() as i64;
@@ -344,7 +398,7 @@ fn lay_out_flyer_plate(
             ),
         ));
     }
-    let nxy = ((width_m / r_eq).round() as i64).max(1);
+    let nxy = sites_per_side(width_m, r_eq, even);
     check_range(
         "resolution (total sites)",
         (nxy * nxy * (nt + nf)) as f64,
@@ -370,6 +424,7 @@ fn lay_out_flyer_plate(
         lateral_offset,
         impactor_z_shift: 0.0,
         plate_rear_z: nt as f64 * r_eq,
+        quarter: false,
     })
 }
 

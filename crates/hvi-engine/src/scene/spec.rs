@@ -10,6 +10,7 @@ use super::analysis::Analysis;
 use crate::paper;
 use crate::potential::ContactForm;
 use crate::step::{DEFAULT_DT_FACTOR, DEFAULT_MAX_STRIDE, DEFAULT_STRIDE_DISPLACEMENT_OVER_SIGMA};
+use crate::symmetry::Symmetry;
 
 /// A whole scene: geometry, resolution, material and run settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -311,6 +312,11 @@ pub struct RunSettings {
     /// 0, so runs without a band keep their fingerprints.
     #[serde(skip_serializing_if = "is_zero")]
     pub absorbing_band_over_d: f64,
+    /// Which part of the scene is simulated: `full`, or `quarter` (the quarter x > 0, y > 0
+    /// with mirror images across both planes; normal impact on a square plate; see
+    /// [`crate::symmetry`]). Omitted from the scene as written when full.
+    #[serde(skip_serializing_if = "is_full")]
+    pub symmetry: Symmetry,
 }
 
 impl Default for RunSettings {
@@ -334,8 +340,13 @@ impl Default for RunSettings {
             cutoff_quiet_s: 2e-6,
             cutoff_break_fraction: 1e-3,
             absorbing_band_over_d: 0.0,
+            symmetry: Symmetry::Full,
         }
     }
+}
+
+fn is_full(s: &Symmetry) -> bool {
+    *s == Symmetry::Full
 }
 
 fn is_zero(x: &f64) -> bool {
