@@ -27,6 +27,7 @@
 //! every output read that.
 
 use glam::DVec3;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND};
@@ -156,68 +157,75 @@ pub fn unfold(p: &Particles) -> Particles {
     };
     for k in 0..4u32 {
         let shift = k * n as u32;
-        out.pos.extend(p.pos.iter().map(|&x| reflect(x, k)));
-        out.vel.extend(p.vel.iter().map(|&v| reflect(v, k)));
-        out.force.extend(p.force.iter().map(|&f| reflect(f, k)));
+        out.pos.par_extend(p.pos.par_iter().map(|&x| reflect(x, k)));
+        out.vel.par_extend(p.vel.par_iter().map(|&v| reflect(v, k)));
+        out.force
+            .par_extend(p.force.par_iter().map(|&f| reflect(f, k)));
         out.mass.extend_from_slice(&p.mass);
         out.inv_mass.extend_from_slice(&p.inv_mass);
         out.body.extend_from_slice(&p.body);
         out.id.extend(p.id.iter().map(|&id| id + shift));
-        for i in 0..n {
-            let dst =
-                &mut out.bonds[(k as usize * n + i) * BONDS_PER_PARTICLE..][..BONDS_PER_PARTICLE];
-            let src = &p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
-            for m in 0..3 {
-                let plane = if m < 2 { 1u32 << m } else { 0 };
-                let flipped = k & plane != 0;
-                let (owned, mirror) = (src[2 * m], src[2 * m + 1]);
-                // The image bond across this axis's plane, if any: (partner copy, broken).
-                let image = (plane != 0)
-                    .then(|| image_bond_flags(plane))
-                    .filter(|&(bond, _)| p.image_bonds[i] & bond != 0)
-                    .map(|(_, broken)| {
-                        let partner = (k ^ plane) * n as u32 + i as u32;
-                        let flag = if p.image_bonds[i] & broken != 0 {
-                            BROKEN_FLAG
-                        } else {
-                            0
-                        };
-                        (partner, flag)
-                    });
-                let moved = |s: u32| {
-                    if s == NO_BOND {
-                        NO_BOND
-                    } else {
-                        ((s & INDEX_MASK) + shift) | (s & BROKEN_FLAG)
-                    }
-                };
-                if !flipped {
-                    dst[2 * m] = moved(owned);
-                    dst[2 * m + 1] = match image {
-                        Some((partner, _)) => partner,
-                        None => moved(mirror),
-                    };
+    }
+    out.bonds
+        .par_chunks_mut(BONDS_PER_PARTICLE)
+        .enumerate()
+        .for_each(|(g, dst)| unfold_slots(p, (g / n) as u32, g % n, dst));
+    out
+}
+
+/// The bond slots `dst` of copy `k` of particle `i` of the quarter `p` (see [`unfold`]).
+fn unfold_slots(p: &Particles, k: u32, i: usize, dst: &mut [u32]) {
+    let n = p.len() as u32;
+    let shift = k * n;
+    let src = &p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
+    for m in 0..3 {
+        let plane = if m < 2 { 1u32 << m } else { 0 };
+        let flipped = k & plane != 0;
+        let (owned, mirror) = (src[2 * m], src[2 * m + 1]);
+        // The image bond across this axis's plane, if any: (partner copy, broken).
+        let image = (plane != 0)
+            .then(|| image_bond_flags(plane))
+            .filter(|&(bond, _)| p.image_bonds[i] & bond != 0)
+            .map(|(_, broken)| {
+                let partner = (k ^ plane) * n + i as u32;
+                let flag = if p.image_bonds[i] & broken != 0 {
+                    BROKEN_FLAG
                 } else {
-                    // Towards +axis in the copy is towards -axis in the quarter.
-                    dst[2 * m] = match image {
-                        Some((partner, flag)) => partner | flag,
-                        None if mirror == NO_BOND => NO_BOND,
-                        None => {
-                            let j = mirror as usize;
-                            let flag = p.bonds[j * BONDS_PER_PARTICLE + 2 * m] & BROKEN_FLAG;
-                            (mirror + shift) | flag
-                        }
-                    };
-                    dst[2 * m + 1] = if owned == NO_BOND {
-                        NO_BOND
-                    } else {
-                        (owned & INDEX_MASK) + shift
-                    };
-                }
+                    0
+                };
+                (partner, flag)
+            });
+        let moved = |s: u32| {
+            if s == NO_BOND {
+                NO_BOND
+            } else {
+                ((s & INDEX_MASK) + shift) | (s & BROKEN_FLAG)
             }
+        };
+        if !flipped {
+            dst[2 * m] = moved(owned);
+            dst[2 * m + 1] = match image {
+                Some((partner, _)) => partner,
+                None => moved(mirror),
+            };
+        } else {
+            // Towards +axis in the copy is towards -axis in the quarter.
+            dst[2 * m] = match image {
+                Some((partner, flag)) => partner | flag,
+                None if mirror == NO_BOND => NO_BOND,
+                None => {
+                    let j = mirror as usize;
+                    let flag = p.bonds[j * BONDS_PER_PARTICLE + 2 * m] & BROKEN_FLAG;
+                    (mirror + shift) | flag
+                }
+            };
+            dst[2 * m + 1] = if owned == NO_BOND {
+                NO_BOND
+            } else {
+                (owned & INDEX_MASK) + shift
+            };
         }
     }
-    out
 }
 
 #[cfg(test)]
