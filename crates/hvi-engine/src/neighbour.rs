@@ -32,6 +32,10 @@
 //! The list is full (each pair appears on both particles' lists) so forces are gathered per
 //! particle and the result does not depend on the thread count. Pairs joined by an intact bond
 //! are left out: the bond kernel handles their repulsion as well.
+//!
+//! Under quarter symmetry (`crate::symmetry`) each particle also has an image list: pairs with
+//! the mirror images of particles across the planes x = 0 and y = 0 (`images_of`, found at each
+//! build by the `images` submodule), and the rebuild rule counts the images' frames.
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -615,25 +619,14 @@ impl NeighbourList {
         let r2 = contact_radius * contact_radius;
         let mut missing = 0;
         for (i, &x) in p.pos.iter().enumerate() {
-            let (cx, cy, cz) = cell(x);
-            for dz in -1..=1 {
-                for dy in -1..=1 {
-                    for dx in -1..=1 {
-                        let Some(js) = grid.get(&(cx + dx, cy + dy, cz + dz)) else {
-                            continue;
-                        };
-                        for &j in js {
-                            if j <= i || (p.pos[j] - x).length_squared() >= r2 {
-                                continue;
-                            }
-                            let slots =
-                                &p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
-                            let bonded = slots.iter().any(|&s| s & !BROKEN_FLAG == j as u32);
-                            if !bonded && !self.of(i).contains(&(j as u32)) {
-                                missing += 1;
-                            }
-                        }
-                    }
+            for j in around(&grid, cell(x)) {
+                if j <= i || (p.pos[j] - x).length_squared() >= r2 {
+                    continue;
+                }
+                let slots = &p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
+                let bonded = slots.iter().any(|&s| s & !BROKEN_FLAG == j as u32);
+                if !bonded && !self.of(i).contains(&(j as u32)) {
+                    missing += 1;
                 }
             }
         }
@@ -656,26 +649,16 @@ impl NeighbourList {
         let mut missing = 0;
         for (i, &x) in p.pos.iter().enumerate() {
             for code in [MIRROR_X, MIRROR_Y, MIRROR_X | MIRROR_Y] {
-                let (cx, cy, cz) = cell(reflect(x, code));
-                for dz in -1..=1 {
-                    for dy in -1..=1 {
-                        for dx in -1..=1 {
-                            let Some(js) = grid.get(&(cx + dx, cy + dy, cz + dz)) else {
-                                continue;
-                            };
-                            for &j in js {
-                                if (x - reflect(p.pos[j], code)).length_squared() >= r2 {
-                                    continue;
-                                }
-                                let bonded = i == j
-                                    && code != MIRROR_X | MIRROR_Y
-                                    && p.image_bonds[i] & image_bond_flags(code).0 != 0;
-                                let entry = j as u32 | (code << IMAGE_SHIFT);
-                                if !bonded && !self.images_of(i).contains(&entry) {
-                                    missing += 1;
-                                }
-                            }
-                        }
+                for j in around(grid, cell(reflect(x, code))) {
+                    if (x - reflect(p.pos[j], code)).length_squared() >= r2 {
+                        continue;
+                    }
+                    let bonded = i == j
+                        && code != MIRROR_X | MIRROR_Y
+                        && p.image_bonds[i] & image_bond_flags(code).0 != 0;
+                    let entry = j as u32 | (code << IMAGE_SHIFT);
+                    if !bonded && !self.images_of(i).contains(&entry) {
+                        missing += 1;
                     }
                 }
             }
@@ -731,6 +714,18 @@ impl NeighbourList {
     pub fn of(&self, i: usize) -> &[u32] {
         &self.neighbours[self.start[i] as usize..self.start[i + 1] as usize]
     }
+}
+
+/// The particles of a hash grid's 27 cells around cell `c` (the diagnostics' brute search).
+fn around(
+    grid: &HashMap<(i64, i64, i64), Vec<usize>>,
+    (cx, cy, cz): (i64, i64, i64),
+) -> impl Iterator<Item = usize> + '_ {
+    (-1..=1)
+        .flat_map(move |dz| (-1..=1).flat_map(move |dy| (-1..=1).map(move |dx| (dx, dy, dz))))
+        .filter_map(move |(dx, dy, dz)| grid.get(&(cx + dx, cy + dy, cz + dz)))
+        .flatten()
+        .copied()
 }
 
 /// The key of each position's block (side `block`) into `keys`.

@@ -5,6 +5,10 @@
 //! particle's force is summed in the same order whatever the thread count. Sums over particles
 //! (energies, momentum, broken-bond energy) are taken over fixed chunks of `CHUNK` particles and
 //! the chunk results added in chunk order: results are bit-identical at any thread count.
+//!
+//! Under quarter symmetry (`crate::symmetry`) the kernels add the image pairs and image bonds,
+//! and what the simulation reports (energies, bond counts, momentum, `full_particles`) is of
+//! the full scene.
 
 use std::borrow::Cow;
 use std::time::{Duration, Instant};
