@@ -158,6 +158,7 @@ fn bad_inputs_name_the_key_and_the_allowed_range() {
         (&["--set", "scene.standoff_m=-0.002"], "overlap"),
         (&["--set", "run.dt_s=1e-6"], "run.dt_s"),
         (&["--set", "run.dt_factor=5000"], "run.dt_factor"),
+        (&["--set", "run.symmetry=half"], "run.symmetry"),
         (
             &["--set", "run.frame_block_over_sigma=1"],
             "run.frame_block_over_sigma",
@@ -314,6 +315,44 @@ fn accuracy_compares_seed_means_and_resumes_from_the_store() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(stderr.matches("(stored)").count(), 4, "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A quarter-symmetry run shows the user the full scene: the summary's counts, the cloud,
+/// the trajectory's particles and the LAMMPS data are of the four copies.
+#[test]
+fn a_quarter_run_writes_the_full_scene() {
+    let out = scratch("quarter");
+    let data = out.join("init.data");
+    let o = run(
+        &out,
+        &[
+            "--set",
+            "run.symmetry=quarter",
+            "--set",
+            "run.end_time_s=4e-6",
+            "--dump-every",
+            "100000",
+            "--dump-format",
+            "extxyz",
+            "--lammps-data",
+            data.to_str().expect("utf8"),
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("simulated"));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
+            .expect("json");
+    let n = summary["particles"].as_u64().expect("particles");
+    let simulated = summary["particles_simulated"].as_u64().expect("simulated");
+    assert_eq!(n, 4 * simulated);
+    assert_eq!(summary["scene"]["run"]["symmetry"], "quarter");
+    assert!(summary["cloud"]["n_part"].as_u64().expect("cloud") > 0);
+    let xyz = std::fs::read_to_string(out.join("trajectory.extxyz")).expect("xyz");
+    assert_eq!(xyz.lines().next().expect("count").trim(), n.to_string());
+    let lammps = std::fs::read_to_string(&data).expect("data");
+    assert!(lammps.contains(&format!("{n} atoms")), "{}", &lammps[..300]);
+    let _ = std::fs::remove_dir_all(&out);
 }
 
 #[test]

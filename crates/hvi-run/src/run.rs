@@ -1211,12 +1211,17 @@ fn print_end(summary: &Summary, sim: &Simulation, table: &str) {
     let mut err = std::io::stderr().lock();
     let _ = writeln!(
         err,
-        "{} steps ({} of {:.3e} s, largest {:.3e} s), {} particles in {:.2} s: {:.3e} particle-steps/s; bonds broken {} of {}; energy drift {:.2e}; {} neighbour builds",
+        "{} steps ({} of {:.3e} s, largest {:.3e} s), {} particles{} in {:.2} s: {:.3e} particle-steps/s; bonds broken {} of {}; energy drift {:.2e}; {} neighbour builds",
         sim.steps_taken,
         sim.step,
         summary.dt_s,
         summary.dt_largest_s,
         summary.particles,
+        if summary.particles_simulated < summary.particles {
+            format!(" ({} simulated)", summary.particles_simulated)
+        } else {
+            String::new()
+        },
         summary.wall_seconds,
         summary.particle_steps_per_second,
         sim.bonds_broken,
