@@ -89,7 +89,7 @@ pub struct NeighbourList {
     /// Quarter symmetry: pairs with the images across the planes x = 0 and y = 0 are listed
     /// too ([`Self::images_of`]); set at each build from the particles (they carry image
     /// bonds).
-    pub mirrors: bool,
+    mirrors: bool,
     /// `image_start[i]..image_start[i + 1]` indexes `image_nbrs` for particle i (empty for a
     /// full scene).
     image_start: Vec<u32>,

@@ -24,7 +24,8 @@ use crate::scene::{Derived, RunSettings, Setup};
 use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND, OWNED_BONDS};
 use crate::step::{stiffness_step_s, LOOKAHEAD_SKIN_FRACTION, SPEED_REFRESH};
 use crate::symmetry::{
-    image_bond_flags, intact_image_bonds, reflect, unfold, unfold_ids, Symmetry, MIRROR_X, MIRROR_Y,
+    image_bond_flags, image_bond_intact, intact_image_bonds, reflect, unfold, unfold_ids, Symmetry,
+    MIRROR_X, MIRROR_Y,
 };
 
 // The adaptive step's raise delay, also at the path it had when it was defined here.
@@ -224,10 +225,9 @@ impl Simulation {
         };
         // Bonds of the full scene: each bond of the quarter stands for `copies`, each image
         // bond for half as many (it joins two copies).
-        let copies = symmetry.copies();
-        let bonds_initial = (copies * particles.intact_bonds() as f64
-            + 0.5 * copies * intact_image_bonds(&particles) as f64)
-            as u64;
+        let copies = symmetry.copies() as u64;
+        let bonds_initial = copies * particles.intact_bonds() as u64
+            + copies / 2 * intact_image_bonds(&particles) as u64;
         let nchunks = n.div_ceil(CHUNK);
         let mut sim = Simulation {
             particles,
@@ -401,12 +401,10 @@ impl Simulation {
                     }
                     let pi = pos[c * CHUNK + k];
                     for code in [MIRROR_X, MIRROR_Y] {
-                        let (bond, gone) = image_bond_flags(code);
-                        if *f & bond != 0
-                            && *f & gone == 0
+                        if image_bond_intact(*f, code)
                             && (pi - reflect(pi, code)).length_squared() > rcut2
                         {
-                            *f |= gone;
+                            *f |= image_bond_flags(code).1;
                             broken += 1;
                         }
                     }
@@ -1128,8 +1126,7 @@ fn fragment_velocities(p: &Particles, labels: &[u32]) -> (Vec<DVec3>, Vec<u32>) 
     let mut spans = vec![0u32; n];
     for (&l, &f) in labels.iter().zip(&p.image_bonds) {
         for code in [MIRROR_X, MIRROR_Y] {
-            let (bond, gone) = image_bond_flags(code);
-            if f & bond != 0 && f & gone == 0 {
+            if image_bond_intact(f, code) {
                 spans[l as usize] |= code;
             }
         }

@@ -97,6 +97,14 @@ pub fn image_bond_flags(code: u32) -> (u8, u8) {
     }
 }
 
+/// Whether `flags` hold an intact image bond across plane `code` (`MIRROR_X` or `MIRROR_Y`):
+/// present and not broken since the build.
+#[inline]
+pub fn image_bond_intact(flags: u8, code: u32) -> bool {
+    let (bond, broken) = image_bond_flags(code);
+    flags & bond != 0 && flags & broken == 0
+}
+
 /// Forgets image bonds that broke since the last build (the pair joins the image list).
 pub(crate) fn clear_broken_image_bonds(flags: &mut [u8]) {
     for f in flags {
@@ -116,10 +124,7 @@ pub fn intact_image_bonds(p: &Particles) -> usize {
         .map(|&f| {
             [MIRROR_X, MIRROR_Y]
                 .into_iter()
-                .filter(|&c| {
-                    let (bond, broken) = image_bond_flags(c);
-                    f & bond != 0 && f & broken == 0
-                })
+                .filter(|&c| image_bond_intact(f, c))
                 .count()
         })
         .sum()

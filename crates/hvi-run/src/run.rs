@@ -466,14 +466,15 @@ fn set_up(spec: &SceneSpec, opts: &RunOptions) -> Result<(Simulation, Counts)> {
     let sim = Simulation::new(setup)?;
     let copies = sim.symmetry.copies() as usize;
     if opts.progress {
-        eprintln!("{}", describe(&sim.derived, copies * n, sim.bonds_initial));
+        let full = sim.full_particle_count();
+        eprintln!("{}", describe(&sim.derived, full, sim.bonds_initial));
         if copies > 1 {
             eprintln!("quarter symmetry: {n} particles simulated, with their mirror images");
         }
         eprintln!("threads {}", rayon::current_num_threads());
     }
     let counts = Counts {
-        particles: copies * n,
+        particles: sim.full_particle_count(),
         simulated: n,
         impactor: copies * n_imp,
     };
