@@ -45,9 +45,7 @@ use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
 
-use crate::state::{
-    never_meet, Particles, PermuteScratch, BONDS_PER_PARTICLE, BROKEN_FLAG, NO_BOND,
-};
+use crate::state::{Particles, PermuteScratch, BONDS_PER_PARTICLE, BROKEN_FLAG, NO_BOND};
 use crate::symmetry::{image_bond_flags, reflect, IMAGE_SHIFT, MIRROR_X, MIRROR_Y};
 
 mod images;
@@ -454,7 +452,6 @@ impl NeighbourList {
             zs: &self.zs,
             bonds: &p.bonds,
             vel: &p.vel,
-            free_flight: &p.free_flight,
             r2: radius * radius,
             measure_speed,
         };
@@ -676,11 +673,8 @@ impl NeighbourList {
     /// do not depend on the order, so any thread count gives the same.
     ///
     /// Under quarter symmetry the image pairs and image bonds (`image_bonds`, empty for a full
-    /// scene) are included: |v_i - M v_j|. Pairs of particles in free flight that never meet
-    /// (`free_flight`, see [`crate::state::never_meet`]) are left out.
-    pub fn interacting_pair_speed(&self, p: &Particles) -> f64 {
-        let (vel, pos, bonds, image_bonds) = (&p.vel, &p.pos, &p.bonds, &p.image_bonds);
-        let ff = &p.free_flight;
+    /// scene) are included: |v_i - M v_j|.
+    pub fn interacting_pair_speed(&self, vel: &[DVec3], bonds: &[u32], image_bonds: &[u8]) -> f64 {
         (0..vel.len())
             .into_par_iter()
             .with_min_len(1024)
@@ -689,19 +683,13 @@ impl NeighbourList {
                 let mut w2: f64 = 0.0;
                 let list = self.of(i);
                 let later = list.partition_point(|&j| (j as usize) < i);
-                let mut raise = |j: usize| {
-                    let w = vi - vel[j];
-                    if !never_meet(ff, i, j, pos[i] - pos[j], w) {
-                        w2 = w2.max(w.length_squared());
-                    }
-                };
                 for &j in &list[later..] {
-                    raise(j as usize);
+                    w2 = w2.max((vi - vel[j as usize]).length_squared());
                 }
                 let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
                 for &s in slots.iter().step_by(2) {
                     if s != NO_BOND {
-                        raise((s & !BROKEN_FLAG) as usize);
+                        w2 = w2.max((vi - vel[(s & !BROKEN_FLAG) as usize]).length_squared());
                     }
                 }
                 for &e in self.images_of(i) {
@@ -818,9 +806,6 @@ struct PairSearch<'a> {
     zs: &'a [f64],
     bonds: &'a [u32],
     vel: &'a [DVec3],
-    /// Fragments in free flight (`Particles::free_flight`): pairs that never meet are not
-    /// measured.
-    free_flight: &'a [u32],
     r2: f64,
     measure_speed: bool,
 }
@@ -862,12 +847,8 @@ impl PairSearch<'_> {
                     let j = (a0 + mask.trailing_zeros() as usize) as u32;
                     mask &= mask - 1;
                     if self.measure_speed {
-                        let w = vel[i] - vel[j as usize];
-                        let ju = j as usize;
-                        let d = DVec3::new(px - xs[ju], py - ys[ju], pz - zs[ju]);
-                        if !never_meet(self.free_flight, i, ju, d, w) {
-                            *max_w2 = max_w2.max(w.length_squared());
-                        }
+                        let w2 = (vel[i] - vel[j as usize]).length_squared();
+                        *max_w2 = max_w2.max(w2);
                     }
                     // All the slots at once (no early exit to mispredict).
                     let bonded = slots.iter().fold(false, |acc, &s| acc | (s == j));
@@ -988,7 +969,10 @@ mod tests {
                 }
             }
         }
-        assert_eq!(nl.interacting_pair_speed(&p), interacting);
+        assert_eq!(
+            nl.interacting_pair_speed(&p.vel, &p.bonds, &p.image_bonds),
+            interacting
+        );
         let brute = assert_lists_exact(&nl, &p, radius);
         assert!(
             brute > n,

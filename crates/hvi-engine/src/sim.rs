@@ -21,9 +21,7 @@ use crate::error::{EngineError, Result};
 use crate::neighbour::{split_image, NeighbourList};
 use crate::potential::Interaction;
 use crate::scene::{Derived, RunSettings, Setup};
-use crate::state::{
-    Particles, ACTIVE, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND, OWNED_BONDS,
-};
+use crate::state::{Particles, BONDS_PER_PARTICLE, BROKEN_FLAG, INDEX_MASK, NO_BOND, OWNED_BONDS};
 use crate::step::{stiffness_step_s, LOOKAHEAD_SKIN_FRACTION, SPEED_REFRESH};
 use crate::symmetry::{
     image_bond_flags, image_bond_intact, intact_image_bonds, reflect, unfold, unfold_ids, Symmetry,
@@ -34,10 +32,8 @@ use crate::symmetry::{
 pub use crate::step::STRIDE_RAISE_AFTER;
 
 mod band;
-mod flight;
 mod saved;
 pub use band::{AbsorbingBand, BAND_ABSORPTION};
-pub use flight::FreeFlightStats;
 pub use saved::SimState;
 
 /// Particles per work unit and per partial sum.
@@ -65,21 +61,12 @@ pub struct Energy {
     /// zero without one), J.
     #[serde(default)]
     pub absorbed_j: f64,
-    /// Internal kinetic energy (vibration and rotation) of the fragments that started free
-    /// flight (`run.free_flight_every_s`; zero without it), frozen when each started, J.
-    #[serde(default)]
-    pub frozen_j: f64,
 }
 
 impl Energy {
     /// The conserved sum, J.
     pub fn total_j(&self) -> f64 {
-        self.kinetic_j
-            + self.contact_j
-            + self.bond_j
-            + self.broken_j
-            + self.absorbed_j
-            + self.frozen_j
+        self.kinetic_j + self.contact_j + self.bond_j + self.broken_j + self.absorbed_j
     }
 }
 
@@ -175,15 +162,6 @@ pub struct Simulation {
     /// symmetry ([`crate::symmetry`]). Energies, bond counts and momentum are reported for
     /// the full scene.
     pub symmetry: Symmetry,
-    /// Per-fragment free flight (`flight`): base steps between checks (0: off), the step of
-    /// first contact (checks start after it), the rim by id (the residual plate never flies),
-    /// the watched pairs, the frozen internal energy, J, and the counts.
-    free_flight_every: u64,
-    contact_step: u64,
-    rim_by_id: Vec<bool>,
-    free_flight_watch: Vec<(u32, u32)>,
-    frozen_energy: f64,
-    free_flight_stats: FreeFlightStats,
 }
 
 /// How often each bound of the adaptive step ([`Simulation::step_until`]) set the stride's
@@ -224,16 +202,6 @@ impl Simulation {
             rim_ids,
         } = setup;
         let mut sim = Self::from_parts(particles, interaction, derived, &spec.run)?;
-        if spec.run.free_flight_every_s > 0.0 {
-            let n = sim.particles.len();
-            sim.free_flight_every = ((spec.run.free_flight_every_s / sim.dt).round() as u64).max(1);
-            sim.contact_step = (sim.derived.contact_time_s / sim.dt).ceil() as u64;
-            sim.rim_by_id = vec![false; n];
-            for &id in &rim_ids {
-                sim.rim_by_id[id as usize] = true;
-            }
-            sim.particles.free_flight = vec![ACTIVE; n];
-        }
         sim.rim_ids = rim_ids;
         if let Some(band) = AbsorbingBand::of_scene(&spec) {
             sim.damping_by_id = band.damping_by_id(&sim.particles, &sim.interaction);
@@ -304,12 +272,6 @@ impl Simulation {
             contact_min_r2: vec![f64::INFINITY; nchunks],
             disp_partials: vec![0.0; nchunks],
             symmetry,
-            free_flight_every: 0,
-            contact_step: 0,
-            rim_by_id: Vec::new(),
-            free_flight_watch: Vec::new(),
-            frozen_energy: 0.0,
-            free_flight_stats: FreeFlightStats::default(),
         };
         sim.min_mass = sim
             .particles
@@ -404,7 +366,6 @@ impl Simulation {
     fn bond_forces(&mut self) {
         let ia = self.interaction;
         let pos = &self.particles.pos;
-        let ff = &self.particles.free_flight;
         self.bond_force_over_r
             .par_chunks_mut(CHUNK * OWNED_BONDS)
             .zip(
@@ -415,8 +376,7 @@ impl Simulation {
             .zip(self.bond_partials.par_iter_mut())
             .enumerate()
             .for_each(|(c, ((fr, bonds), out))| {
-                let flying = ff.get(c * CHUNK..).unwrap_or(&[]);
-                *out = bond_chunk(&ia, pos, c * CHUNK, bonds, fr, flying);
+                *out = bond_chunk(&ia, pos, c * CHUNK, bonds, fr);
             });
         if self.symmetry == Symmetry::Quarter {
             self.break_image_bonds();
@@ -470,7 +430,6 @@ impl Simulation {
         let damp = !damping.is_empty() && half_dt > 0.0;
         let image_bonds = &p.image_bonds;
         let mirrored = self.symmetry == Symmetry::Quarter;
-        let ff = &p.free_flight;
         p.force
             .par_chunks_mut(CHUNK)
             .zip(p.vel.par_chunks_mut(CHUNK))
@@ -483,11 +442,6 @@ impl Simulation {
                 let mut absorbed = 0.0;
                 for (k, (f_out, v)) in force.iter_mut().zip(vel.iter_mut()).enumerate() {
                     let i = base + k;
-                    if ff.get(i).is_some_and(|&f| f != ACTIVE) {
-                        // In free flight: no force, the velocity stays (see `flight`).
-                        *f_out = DVec3::ZERO;
-                        continue;
-                    }
                     let f = contact_force(&ia, pos, i, nl.of(i), &mut min_r2);
                     let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
                     let mut f = add_bond_forces(f, pos, i, slots, fr_bond);
@@ -609,19 +563,8 @@ impl Simulation {
             return Err(self.unstable("non-finite or runaway particle position".into()));
         }
         let rebuilt = self.rebuild_if_stale(max_d2, since, max_e2)?;
-        let mut refresh = adaptive
-            && !rebuilt
-            && 2.0 * max_w2.sqrt() > SPEED_REFRESH * self.neighbours.pair_speed;
-        if self.free_flight_every > 0 {
-            if rebuilt {
-                self.refresh_watch();
-            }
-            // Wakes first (no force may act on one side of a pair), then new flights; either
-            // changes which pairs the speed bound covers, so the speed is measured again.
-            refresh |= self.wake_touching() | (self.free_flight_due(m) && self.start_free_flight());
-            refresh &= adaptive;
-        }
-        if refresh {
+        if adaptive && !rebuilt && 2.0 * max_w2.sqrt() > SPEED_REFRESH * self.neighbours.pair_speed
+        {
             self.refresh_pair_speed();
         }
         self.compute_forces(half)?;
@@ -721,11 +664,15 @@ impl Simulation {
     /// the largest change of any velocity since the build.
     fn refresh_pair_speed(&mut self) {
         let t = Instant::now();
-        let w = self.neighbours.interacting_pair_speed(&self.particles);
+        let vel = &self.particles.vel;
+        let w = self.neighbours.interacting_pair_speed(
+            vel,
+            &self.particles.bonds,
+            &self.particles.image_bonds,
+        );
         self.neighbours.pair_speed = w;
         self.vel_at_build.clear();
-        self.vel_at_build
-            .par_extend(self.particles.vel.par_iter().copied());
+        self.vel_at_build.par_extend(vel.par_iter().copied());
         self.speed_refreshes += 1;
         self.timing.integrate += t.elapsed();
     }
@@ -843,7 +790,6 @@ impl Simulation {
         let mut e = Energy {
             broken_j: self.broken_energy,
             absorbed_j: self.absorbed_energy,
-            frozen_j: self.frozen_energy,
             ..Default::default()
         };
         for [k, c, b] in partials {
@@ -859,7 +805,6 @@ impl Simulation {
             &mut e.bond_j,
             &mut e.broken_j,
             &mut e.absorbed_j,
-            &mut e.frozen_j,
         ] {
             *x *= copies;
         }
@@ -1001,17 +946,12 @@ impl Simulation {
 
 /// The bond kernel over one chunk of particles starting at index `base`: F/r of each owned
 /// slot into `fr`, in blocks of `BLOCK_BONDS` bonds; breaks are booked in the result.
-///
-/// `flying` is `Particles::free_flight` from the chunk's first particle on (empty without free
-/// flight): the bonds a particle in free flight owns are left out (F/r 0; their partners fly
-/// with it, and rigid motion cannot break them).
 fn bond_chunk(
     ia: &Interaction,
     pos: &[DVec3],
     base: usize,
     bonds: &mut [u32],
     fr: &mut [f64],
-    flying: &[u32],
 ) -> BondPartial {
     let r_eq2 = ia.r_eq2();
     let rcut2 = ia.rcut2();
@@ -1034,7 +974,7 @@ fn bond_chunk(
             let (k, m) = (owned / OWNED_BONDS, owned % OWNED_BONDS);
             let slot = &mut bonds[k * BONDS_PER_PARTICLE + 2 * m];
             let s = *slot;
-            if s == NO_BOND || flying.get(k).is_some_and(|&f| f != ACTIVE) {
+            if s == NO_BOND {
                 continue;
             }
             let d = pos[base + k] - pos[(s & INDEX_MASK) as usize];

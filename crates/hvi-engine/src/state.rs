@@ -18,8 +18,6 @@ pub const NO_BOND: u32 = u32::MAX;
 pub const BROKEN_FLAG: u32 = 1 << 31;
 /// Mask of the partner index in a slot.
 pub const INDEX_MASK: u32 = !BROKEN_FLAG;
-/// `Particles::free_flight` of a particle that is not in free flight.
-pub const ACTIVE: u32 = u32::MAX;
 
 /// Which body a particle belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -58,11 +56,6 @@ pub struct Particles {
     /// its broken-since-the-build flag); empty for a full scene.
     #[serde(default)]
     pub image_bonds: Vec<u8>,
-    /// Under per-fragment free flight (`run.free_flight_every_s`, see `crate::sim`), the
-    /// fragment label of each particle in free flight, or [`ACTIVE`]; empty when the scene
-    /// has no free flight.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub free_flight: Vec<u32>,
 }
 
 impl Particles {
@@ -90,7 +83,6 @@ impl Particles {
             id: (0..n as u32).collect(),
             bonds,
             image_bonds: Vec::new(),
-            free_flight: Vec::new(),
         }
     }
 
@@ -192,9 +184,6 @@ impl Particles {
         if !self.image_bonds.is_empty() {
             gather(&mut self.image_bonds, &mut scratch.flags, perm);
         }
-        if !self.free_flight.is_empty() {
-            gather(&mut self.free_flight, &mut scratch.index, perm);
-        }
         let inv = &scratch.inv;
         let src = &self.bonds;
         scratch.bonds.resize(n * BONDS_PER_PARTICLE, NO_BOND);
@@ -216,18 +205,6 @@ impl Particles {
                 }
             });
         std::mem::swap(&mut self.bonds, &mut scratch.bonds);
-    }
-}
-
-/// Whether particles `i` and `j`, `d` = x_i - x_j apart with relative velocity `w` = v_i - v_j,
-/// can never meet: both are in free flight (`free_flight`, empty when the scene has none) and
-/// either of one fragment (which moves rigidly) or receding (at constant velocities a receding
-/// pair only moves further apart). The adaptive step's speed bound leaves such pairs out.
-#[inline]
-pub(crate) fn never_meet(free_flight: &[u32], i: usize, j: usize, d: DVec3, w: DVec3) -> bool {
-    match (free_flight.get(i), free_flight.get(j)) {
-        (Some(&a), Some(&b)) => a != ACTIVE && b != ACTIVE && (a == b || d.dot(w) >= 0.0),
-        _ => false,
     }
 }
 

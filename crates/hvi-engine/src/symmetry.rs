@@ -159,7 +159,6 @@ pub fn unfold(p: &Particles) -> Particles {
         id: Vec::with_capacity(4 * n),
         bonds: vec![NO_BOND; 4 * n * BONDS_PER_PARTICLE],
         image_bonds: Vec::new(),
-        free_flight: Vec::new(),
     };
     for k in 0..4u32 {
         let shift = k * n as u32;

@@ -68,11 +68,7 @@ pub struct EnergyRow {
     /// Energy the absorbing band took out (`run.absorbing_band_over_d`; 0 without one), J.
     #[serde(default)]
     pub absorbed_j: f64,
-    /// Internal kinetic energy frozen by per-fragment free flight (`run.free_flight_every_s`;
-    /// 0 without it), J.
-    #[serde(default)]
-    pub frozen_j: f64,
-    /// Sum of the six, J.
+    /// Sum of the five, J.
     pub total_j: f64,
     /// Bonds broken so far.
     pub bonds_broken: u64,
@@ -111,9 +107,6 @@ pub struct EnergySummary {
     /// Energy the absorbing band took out by the end, J (0 without one).
     #[serde(default)]
     pub absorbed_j: f64,
-    /// Internal kinetic energy frozen by per-fragment free flight by the end, J (0 without it).
-    #[serde(default)]
-    pub frozen_j: f64,
     /// Ledger total at t = 0, J.
     #[serde(deserialize_with = "nan_if_null")]
     pub total_initial_j: f64,
@@ -223,9 +216,6 @@ pub struct Summary {
     /// Time since first contact at which the ballistic cut-off began free flight, s (null when
     /// it did not, or was off).
     pub ballistic_cutoff_tau_s: Option<f64>,
-    /// What per-fragment free flight did (`run.free_flight_every_s`; absent when off).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub free_flight: Option<hvi_engine::sim::FreeFlightStats>,
     /// Energy ledger.
     pub energy: EnergySummary,
     /// Momentum.
@@ -318,7 +308,6 @@ fn row(sim: &Simulation, e: &Energy) -> EnergyRow {
         bond_j: e.bond_j,
         broken_j: e.broken_j,
         absorbed_j: e.absorbed_j,
-        frozen_j: e.frozen_j,
         total_j: e.total_j(),
         bonds_broken: sim.bonds_broken,
         dt_s: sim.dt * sim.stride as f64,
@@ -1062,7 +1051,6 @@ fn energy_summary(last: &EnergyRow, e0: f64, max_drift: f64) -> EnergySummary {
         bond_j: last.bond_j,
         broken_j: last.broken_j,
         absorbed_j: last.absorbed_j,
-        frozen_j: last.frozen_j,
         total_initial_j: e0,
         total_final_j: last.total_j,
         relative_drift: (last.total_j - e0) / e0,
@@ -1206,7 +1194,6 @@ fn summarise(spec: &SceneSpec, sim: &Simulation, counts: Counts, m: Measured) ->
         neighbour_builds: sim.neighbour_builds(),
         speed_refreshes: sim.speed_refreshes,
         stride_limits: sim.stride_limits,
-        free_flight: sim.has_free_flight().then(|| sim.free_flight_stats()),
         ballistic_cutoff_tau_s: sim
             .coasting_since()
             .map(|step| step as f64 * d.dt_s - d.contact_time_s),

@@ -153,7 +153,6 @@ impl SceneSpec {
         let run = &self.run;
         run.validate()?;
         self.validate_band()?;
-        self.validate_free_flight()?;
         self.analysis.validate(run.end_time_s)?;
         let stiffness = sized.kappa_n_m.max(interaction.contact_stiffness_at_r_eq());
         let dt_max = stability_bound_s(sigma, v0, mass_imp.min(mass_tgt), stiffness);

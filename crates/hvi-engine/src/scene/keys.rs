@@ -358,17 +358,6 @@ pub const KEYS: &[Key] = &[
         default: "0 (no band)",
     },
     Key {
-        name: "run.free_flight_every_s",
-        meaning: "per-fragment free flight: every this long after first contact, the fragments \
-                  that have separated for good (no contact, receding from every neighbour, too \
-                  little internal energy to break a bond; never the residual plate) move on \
-                  rigidly without force evaluations, woken by any contact; their internal \
-                  kinetic energy is booked as `frozen_j` (full scenes only; its error against \
-                  the full model: [model decisions](model-decisions.md#per-fragment-free-flight))",
-        allowed: Allowed::Text("0 (off) or a time in (0, 1e-3] s"),
-        default: "0 (off)",
-    },
-    Key {
         name: "run.symmetry",
         meaning: "`quarter` simulates the quarter x > 0, y > 0 of a normal impact on a square \
                   plate with mirror images across both planes (a quarter of the particles; \

@@ -312,12 +312,6 @@ pub struct RunSettings {
     /// 0, so runs without a band keep their fingerprints.
     #[serde(skip_serializing_if = "is_zero")]
     pub absorbing_band_over_d: f64,
-    /// Per-fragment free flight: every this long after first contact, s, the fragments that
-    /// have separated for good move on rigidly and cost no force evaluation (0: off; full
-    /// scenes only; see `crate::sim` and docs/model-decisions.md). Omitted from the scene as
-    /// written when 0, so runs without it keep their fingerprints.
-    #[serde(default, skip_serializing_if = "is_zero")]
-    pub free_flight_every_s: f64,
     /// Which part of the scene is simulated: `full`, or `quarter` (the quarter x > 0, y > 0
     /// with mirror images across both planes; normal impact on a square plate; see
     /// [`crate::symmetry`]). Omitted from the scene as written when full.
@@ -346,7 +340,6 @@ impl Default for RunSettings {
             cutoff_quiet_s: 2e-6,
             cutoff_break_fraction: 1e-3,
             absorbing_band_over_d: 0.0,
-            free_flight_every_s: 0.0,
             symmetry: Symmetry::Full,
         }
     }

@@ -126,29 +126,6 @@ impl RunSettings {
 }
 
 impl SceneSpec {
-    /// Per-fragment free flight: 0, or a positive interval up to 1 ms, on a full scene.
-    pub(super) fn validate_free_flight(&self) -> Result<()> {
-        let every = self.run.free_flight_every_s;
-        if every == 0.0 {
-            return Ok(());
-        }
-        if !(every > 0.0 && every <= 1e-3) {
-            return Err(EngineError::invalid(
-                "run.free_flight_every_s",
-                every,
-                "0 (off) or a time in (0, 1e-3] s",
-            ));
-        }
-        if self.run.symmetry != crate::symmetry::Symmetry::Full {
-            return Err(EngineError::invalid(
-                "run.free_flight_every_s",
-                every,
-                "0 under run.symmetry = \"quarter\" (free flight runs on full scenes only)",
-            ));
-        }
-        Ok(())
-    }
-
     /// The absorbing band: in range, narrower than half the plate, on a sphere-on-plate scene.
     pub(super) fn validate_band(&self) -> Result<()> {
         let band = keys::check("run.absorbing_band_over_d", self.run.absorbing_band_over_d)?;

@@ -9,7 +9,7 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use super::{Energy, FreeFlightStats, Simulation, StrideLimits, Timing};
+use super::{Energy, Simulation, StrideLimits, Timing};
 use crate::error::{EngineError, Result};
 use crate::neighbour::NeighbourState;
 use crate::state::{Particles, BONDS_PER_PARTICLE, INDEX_MASK, NO_BOND};
@@ -36,10 +36,6 @@ pub struct SimState {
     broken_energy: f64,
     #[serde(default)]
     absorbed_energy: f64,
-    #[serde(default)]
-    frozen_energy: f64,
-    #[serde(default)]
-    free_flight_stats: FreeFlightStats,
     energy_initial: Energy,
     momentum_initial: DVec3,
     timing: Timing,
@@ -97,9 +93,6 @@ impl SimState {
                 return Err(format!("its {what} are not of {n} particles"));
             }
         }
-        if !p.free_flight.is_empty() && p.free_flight.len() != n {
-            return Err(format!("its free-flight labels are not of {n} particles"));
-        }
         if self.stride == 0 || self.steps_taken > self.step {
             return Err("its step counters are inconsistent".into());
         }
@@ -128,8 +121,6 @@ impl Simulation {
             coast_from_step: self.coast_from_step,
             broken_energy: self.broken_energy,
             absorbed_energy: self.absorbed_energy,
-            frozen_energy: self.frozen_energy,
-            free_flight_stats: self.free_flight_stats,
             energy_initial: self.energy_initial,
             momentum_initial: self.momentum_initial,
             timing: self.timing,
@@ -176,15 +167,10 @@ impl Simulation {
         self.coast_from_step = s.coast_from_step;
         self.broken_energy = s.broken_energy;
         self.absorbed_energy = s.absorbed_energy;
-        self.frozen_energy = s.frozen_energy;
-        self.free_flight_stats = s.free_flight_stats;
         self.energy_initial = s.energy_initial;
         self.momentum_initial = s.momentum_initial;
         self.timing = s.timing;
         self.refresh_damping();
-        if self.has_free_flight() {
-            self.refresh_watch();
-        }
         Ok(())
     }
 }
