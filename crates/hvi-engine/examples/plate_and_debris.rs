@@ -9,10 +9,7 @@
 //!
 //! `cargo run --release -p hvi-engine --example plate_and_debris -- [PARTICLES] [T_OVER_D]`
 //! (the calibration scene, 3e4 particles and its t/D by default).
-use std::collections::HashSet;
-
-use glam::DVec3;
-use hvi_engine::cloud::{label_fragments, quantile, CloudReference};
+use hvi_engine::cloud::{find_cloud, quantile, CloudReference};
 use hvi_engine::paper;
 use hvi_engine::scene::{Geometry, SceneSpec};
 use hvi_engine::sim::Simulation;
@@ -88,38 +85,22 @@ impl Look {
     fn of(sim: &Simulation, reference: &CloudReference) -> Look {
         let p = &sim.particles;
         let n = p.len();
-        let labels = label_fragments(p);
-        let mut mass = vec![0.0; n];
-        let mut momentum = vec![DVec3::ZERO; n];
+        // The residual plate as the cloud's measurement defines it, and the fragments held by
+        // a contact or a neighbour closing in as the ballistic cut-off judges them.
+        let members = find_cloud(p, reference);
+        let labels = &members.labels;
+        let in_plate = |i: usize| members.in_residual_plate[i];
+        let held_label = sim.fragments_held(labels);
+        let held = |i: usize| in_plate(i) || held_label[labels[i] as usize];
         let mut size = vec![0usize; n];
-        for ((&l, &m), &v) in labels.iter().zip(&p.mass).zip(&p.vel) {
-            let l = l as usize;
-            mass[l] += m;
-            momentum[l] += v * m;
-            size[l] += 1;
+        for &l in labels {
+            size[l as usize] += 1;
         }
-        let cm = |l: u32| momentum[l as usize] / mass[l as usize];
-        let plate: HashSet<u32> = (0..n)
-            .filter(|&i| reference.is_rim(p.id[i]))
-            .map(|i| labels[i])
-            .collect();
-        let r_eq2 = sim.interaction.r_eq2();
         let nl = sim.neighbour_list();
-        let mut held: HashSet<u32> = plate.clone();
-        for i in 0..n {
-            for &j in nl.of(i) {
-                let (li, lj) = (labels[i], labels[j as usize]);
-                let d = p.pos[i] - p.pos[j as usize];
-                if li != lj && (d.length_squared() < r_eq2 || d.dot(cm(li) - cm(lj)) < 0.0) {
-                    held.insert(li);
-                }
-            }
-        }
         let kind = |i: usize, j: usize| {
-            let (li, lj) = (labels[i], labels[j]);
-            if plate.contains(&li) && plate.contains(&lj) {
+            if in_plate(i) && in_plate(j) {
                 0
-            } else if !held.contains(&li) && !held.contains(&lj) {
+            } else if !held(i) && !held(j) {
                 1
             } else {
                 2
@@ -140,14 +121,13 @@ impl Look {
             }
         }
         for (i, j) in p.intact_bond_pairs() {
-            if plate.contains(&labels[i]) {
+            if in_plate(i) {
                 plate_bond_speeds.push((p.vel[i] - p.vel[j]).length());
             }
         }
-        let in_plate = (0..n).filter(|&i| plate.contains(&labels[i])).count();
-        let separated: Vec<usize> = (0..n).filter(|&i| !held.contains(&labels[i])).collect();
+        let separated: Vec<usize> = (0..n).filter(|&i| !held(i)).collect();
         Look {
-            plate: in_plate,
+            plate: (0..n).filter(|&i| in_plate(i)).count(),
             lone: separated
                 .iter()
                 .filter(|&&i| size[labels[i] as usize] == 1)

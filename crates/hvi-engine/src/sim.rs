@@ -825,40 +825,56 @@ impl Simulation {
         Ok(drift)
     }
 
-    /// Whether the debris is in free flight (the ballistic cut-off): no pair of
-    /// particles of *different* fragments is in contact (closer than r_eq), and no such pair
-    /// within the neighbour-list radius is closing in, judged by the fragments' centre-of-mass
-    /// velocities. `labels[i]` is the fragment of particle i (any id below the particle count,
-    /// e.g. [`crate::cloud::label_fragments`]). Bonds breaking recently is the caller's check.
+    /// Whether the debris is in free flight (the ballistic cut-off): no fragment is held
+    /// ([`Self::fragments_held`]). `labels` as there. Bonds breaking recently is the caller's
+    /// check.
+    pub fn fragments_separating(&self, labels: &[u32]) -> bool {
+        !self.fragments_held(labels).contains(&true)
+    }
+
+    /// Per fragment label, whether the fragment is held: a particle of it is in contact
+    /// (closer than r_eq) with a particle of another fragment, or closing in on one within
+    /// the neighbour-list radius or across a bond slot, judged by the fragments'
+    /// centre-of-mass velocities. `labels[i]` is the fragment of particle i (any id below the
+    /// particle count, e.g. [`crate::cloud::label_fragments`]); the result is indexed by label.
     ///
     /// Under quarter symmetry the pairs with images count too: particle i and the image M j
     /// are of one fragment of the full scene when j is of i's fragment and that fragment spans
     /// every plane M reflects across (it is bonded to its own image there).
-    pub fn fragments_separating(&self, labels: &[u32]) -> bool {
+    pub fn fragments_held(&self, labels: &[u32]) -> Vec<bool> {
         let p = &self.particles;
         let (cm, spans) = fragment_velocities(p, labels);
         let r_eq2 = self.interaction.r_eq2();
         let nl = &self.neighbours;
-        (0..p.len()).into_par_iter().all(|i| {
-            let li = labels[i];
-            let touching = |j: usize, code: u32| {
-                let lj = labels[j];
-                if lj == li && code & !spans[li as usize] == 0 {
-                    return false;
-                }
-                let d = p.pos[i] - reflect(p.pos[j], code);
-                let closing = cm[li as usize] - reflect(cm[lj as usize], code);
-                d.length_squared() < r_eq2 || d.dot(closing) < 0.0
-            };
-            !nl.of(i).iter().any(|&j| touching(j as usize, 0))
-                && !nl.images_of(i).iter().any(|&e| {
-                    let (j, code) = split_image(e);
-                    touching(j, code)
-                })
-                && !p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE]
-                    .iter()
-                    .any(|&s| s != NO_BOND && touching((s & INDEX_MASK) as usize, 0))
-        })
+        let held_labels: Vec<u32> = (0..p.len())
+            .into_par_iter()
+            .filter(|&i| {
+                let li = labels[i];
+                let touching = |j: usize, code: u32| {
+                    let lj = labels[j];
+                    if lj == li && code & !spans[li as usize] == 0 {
+                        return false;
+                    }
+                    let d = p.pos[i] - reflect(p.pos[j], code);
+                    let closing = cm[li as usize] - reflect(cm[lj as usize], code);
+                    d.length_squared() < r_eq2 || d.dot(closing) < 0.0
+                };
+                nl.of(i).iter().any(|&j| touching(j as usize, 0))
+                    || nl.images_of(i).iter().any(|&e| {
+                        let (j, code) = split_image(e);
+                        touching(j, code)
+                    })
+                    || p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE]
+                        .iter()
+                        .any(|&s| s != NO_BOND && touching((s & INDEX_MASK) as usize, 0))
+            })
+            .map(|i| labels[i])
+            .collect();
+        let mut held = vec![false; p.len()];
+        for l in held_labels {
+            held[l as usize] = true;
+        }
+        held
     }
 
     /// Switches to free flight (the ballistic cut-off): from now on every step
