@@ -55,10 +55,10 @@ const COORD_BITS: u32 = 21;
 const COORD_OFFSET: i64 = 1 << (COORD_BITS - 1);
 const COORD_MAX: i64 = (1 << COORD_BITS) - 2;
 /// Cells per chunk of the parallel search (fixed, for reproducible work units).
-const CELL_CHUNK: usize = 2048;
-/// Candidates per block of the branch-free distance filter (one bit each in a `u64`).
-const HIT_BLOCK: usize = 64;
-const _: () = assert!(HIT_BLOCK <= 64);
+const CELL_CHUNK: usize = 256;
+/// Candidates per block of the branch-free distance filter (one bit each in a `u32`); the
+/// search's coordinate arrays carry this many padding entries past the last particle.
+const LANES: usize = 8;
 
 /// The neighbour list in compressed-row form over the current particle order.
 #[derive(Debug, Default)]
@@ -296,19 +296,26 @@ impl NeighbourList {
         }
         let t = since_build_s + ahead_s;
         let ahead = max_s * ahead_s;
-        let e = |b: u32| {
-            f64::from_bits(self.block_disp[b as usize].load(Ordering::Relaxed)).sqrt() + ahead
-        };
+        // Each block's E plus the look-ahead, once per block.
+        let e: Vec<f64> = self
+            .block_disp
+            .par_iter()
+            .with_min_len(1024)
+            .map(|d| f64::from_bits(d.load(Ordering::Relaxed)).sqrt() + ahead)
+            .collect();
         let skin = self.radius - contact_radius;
         // A block with itself: E_a + E_a.
-        let largest = (0..self.block_disp.len() as u32).fold(0.0f64, |a, b| a.max(e(b)));
+        let largest = e.iter().fold(0.0f64, |a, &b| a.max(b));
         if 2.0 * largest >= skin {
             return true;
         }
+        // Maxima do not depend on the order, so any thread count gives the same.
         let near = self
             .block_pairs
-            .iter()
-            .fold(0.0f64, |m, &(a, b, dv)| m.max(e(a) + e(b) + dv * t));
+            .par_iter()
+            .with_min_len(4096)
+            .map(|&(a, b, dv)| e[a as usize] + e[b as usize] + dv * t)
+            .reduce(|| 0.0, f64::max);
         near >= skin || 2.0 * largest + self.far_dv * t >= self.block - contact_radius
     }
 
@@ -525,6 +532,10 @@ impl NeighbourList {
         self.xs.par_extend(p.pos.par_iter().map(|x| x.x));
         self.ys.par_extend(p.pos.par_iter().map(|x| x.y));
         self.zs.par_extend(p.pos.par_iter().map(|x| x.z));
+        // Padding for the search's fixed blocks of lanes (never within the radius; masked).
+        for c in [&mut self.xs, &mut self.ys, &mut self.zs] {
+            c.extend([f64::INFINITY; LANES]);
+        }
     }
 
     /// The pairs found from the cells of chunk `chunk` (`CELL_CHUNK` cells), and the largest
@@ -832,16 +843,21 @@ impl PairSearch<'_> {
             // The own row holds cells x - 1 .. x + 1: only j > i is forward.
             let a = if r == 0 { a.max(i + 1) } else { a };
             // Branch-free compaction of the candidates within the radius (a sixth of them,
-            // so a branch would be mispredicted often), in blocks; then the few hits are
-            // checked against the bonds.
+            // so a branch would be mispredicted often), a fixed block of lanes at a time (the
+            // coordinate arrays are padded, and lanes past the range are masked off); then the
+            // few hits are checked against the bonds.
             let mut a0 = a;
             while a0 < b {
-                let a1 = (a0 + HIT_BLOCK).min(b);
-                let (cx, cy, cz) = (&xs[a0..a1], &ys[a0..a1], &zs[a0..a1]);
-                let mut mask = 0u64;
-                for k in 0..cx.len() {
+                let cx: &[f64; LANES] = xs[a0..a0 + LANES].try_into().expect("padded");
+                let cy: &[f64; LANES] = ys[a0..a0 + LANES].try_into().expect("padded");
+                let cz: &[f64; LANES] = zs[a0..a0 + LANES].try_into().expect("padded");
+                let mut mask = 0u32;
+                for k in 0..LANES {
                     let (dx, dy, dz) = (px - cx[k], py - cy[k], pz - cz[k]);
-                    mask |= u64::from(dx * dx + dy * dy + dz * dz < self.r2) << k;
+                    mask |= u32::from(dx * dx + dy * dy + dz * dz < self.r2) << k;
+                }
+                if b - a0 < LANES {
+                    mask &= (1u32 << (b - a0)) - 1;
                 }
                 while mask != 0 {
                     let j = (a0 + mask.trailing_zeros() as usize) as u32;
@@ -856,7 +872,7 @@ impl PairSearch<'_> {
                         found.push((i as u32, j));
                     }
                 }
-                a0 = a1;
+                a0 += LANES;
             }
         }
     }

@@ -375,6 +375,7 @@ impl Simulation {
             )
             .zip(self.bond_partials.par_iter_mut())
             .enumerate()
+            .with_max_len(1)
             .for_each(|(c, ((fr, bonds), out))| {
                 *out = bond_chunk(&ia, pos, c * CHUNK, bonds, fr);
             });
@@ -436,6 +437,7 @@ impl Simulation {
             .zip(self.contact_min_r2.par_iter_mut())
             .zip(self.absorbed_partials.par_iter_mut())
             .enumerate()
+            .with_max_len(1)
             .for_each(|(c, (((force, vel), min_out), absorbed_out))| {
                 let base = c * CHUNK;
                 let mut min_r2 = f64::INFINITY;
@@ -590,6 +592,7 @@ impl Simulation {
             .zip(self.disp_partials.par_iter_mut())
             .zip(self.speed_partials.par_iter_mut())
             .enumerate()
+            .with_max_len(1)
             .for_each(|(c, (((pos, vel), out), speed_out))| {
                 let base = c * CHUNK;
                 let mut max_d2: f64 = 0.0;
