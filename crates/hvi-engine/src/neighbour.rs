@@ -97,6 +97,14 @@ pub struct NeighbourList {
     image_nbrs: Vec<u32>,
     scratch: PermuteScratch,
     order: Vec<(u64, u32)>,
+    /// Each particle's cell key at the last build, in the particle order since then (with
+    /// the cell side's inverse `sorted_inv_h`): the sort's hint.
+    sorted_keys: Vec<u64>,
+    sorted_inv_h: f64,
+    /// The sort's buffers: particles whose cell is unchanged since the last build, and the
+    /// others.
+    kept: Vec<(u64, u32)>,
+    moved: Vec<(u64, u32)>,
     perm: Vec<u32>,
     cell_start: Vec<u32>,
     cell_keys: Vec<u64>,
@@ -502,9 +510,16 @@ impl NeighbourList {
                 out as usize
             })
             .sum();
-        // A merge sort finds the long sorted runs of a nearly sorted input (rayon's parallel
-        // quicksort does not: ten times the work here); rayon's merges in parallel.
-        order.par_sort();
+        if self.sorted_keys.len() == n && self.sorted_inv_h == inv_h {
+            sort_by_hint(order, &self.sorted_keys, &mut self.kept, &mut self.moved);
+        } else {
+            // A merge sort finds the long sorted runs of a nearly sorted input (rayon's
+            // parallel quicksort does not: ten times the work here).
+            order.par_sort();
+        }
+        self.sorted_keys.clear();
+        self.sorted_keys.par_extend(order.par_iter().map(|o| o.0));
+        self.sorted_inv_h = inv_h;
         let perm = &mut self.perm;
         perm.clear();
         perm.par_extend(order.par_iter().map(|o| o.1));
@@ -739,6 +754,45 @@ fn around(
         .copied()
 }
 
+/// Sorts `order` ((key, index) of each particle, in index order) by key, then index, given
+/// `hint`: each particle's key at the last sort, which left the particles in key order. The
+/// particles whose key equals their hint form a sequence already in order (checked as it is
+/// taken: one whose key falls below the last kept is moved instead); only the others, those
+/// that changed cells, are sorted, then the two are merged. Elements are distinct, so the
+/// result is the one sorted order whatever the hint.
+fn sort_by_hint(
+    order: &mut Vec<(u64, u32)>,
+    hint: &[u64],
+    kept: &mut Vec<(u64, u32)>,
+    moved: &mut Vec<(u64, u32)>,
+) {
+    kept.clear();
+    moved.clear();
+    let mut last = 0u64;
+    for &o in order.iter() {
+        if o.0 == hint[o.1 as usize] && o.0 >= last {
+            last = o.0;
+            kept.push(o);
+        } else {
+            moved.push(o);
+        }
+    }
+    moved.par_sort_unstable();
+    order.clear();
+    let (mut a, mut b) = (0, 0);
+    while a < kept.len() && b < moved.len() {
+        if kept[a] < moved[b] {
+            order.push(kept[a]);
+            a += 1;
+        } else {
+            order.push(moved[b]);
+            b += 1;
+        }
+    }
+    order.extend_from_slice(&kept[a..]);
+    order.extend_from_slice(&moved[b..]);
+}
+
 /// The key of each position's block (side `block`) into `keys`.
 fn block_keys_of<'k>(pos: &[DVec3], block: f64, keys: &'k mut Vec<u64>) -> &'k [u64] {
     let inv_b = 1.0 / block;
@@ -881,6 +935,39 @@ impl PairSearch<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sort_by_hint_is_the_sort_whatever_the_hint() {
+        // Keys from a small generator, hints that are right, partly right, or not sorted.
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move |m: u64| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x % m
+        };
+        for case in 0..40 {
+            let n = 1 + next(500) as usize;
+            let mut hint: Vec<u64> = (0..n).map(|_| next(60)).collect();
+            if case % 2 == 0 {
+                hint.sort_unstable();
+            }
+            let keys: Vec<u64> = hint
+                .iter()
+                .map(|&h| if next(4) == 0 { next(60) } else { h })
+                .collect();
+            let input: Vec<(u64, u32)> = keys
+                .iter()
+                .enumerate()
+                .map(|(i, &k)| (k, i as u32))
+                .collect();
+            let mut want = input.clone();
+            want.sort_unstable();
+            let mut got = input;
+            sort_by_hint(&mut got, &hint, &mut Vec::new(), &mut Vec::new());
+            assert_eq!(got, want, "case {case}");
+        }
+    }
     use crate::state::{Body, NO_BOND};
 
     /// Unit-mass target particles without bonds.
