@@ -67,6 +67,8 @@ pub struct NeighbourList {
     pub start: Vec<u32>,
     /// Neighbour indices.
     pub neighbours: Vec<u32>,
+    /// `later[i]..start[i + 1]` indexes particle i's partners j > i (lists are ascending).
+    later: Vec<u32>,
     /// Positions at the last build.
     pub pos_at_build: Vec<DVec3>,
     /// Velocity of each particle's frame (its block's mean velocity at the last build), m/s.
@@ -248,6 +250,12 @@ impl NeighbourList {
         self.mirrors = s.mirrors;
         self.image_start = s.image_start;
         self.image_nbrs = s.image_nbrs;
+        let (start, neighbours) = (&self.start, &self.neighbours);
+        self.later.clear();
+        self.later.par_extend((0..self.pos_at_build.len()).into_par_iter().map(|i| {
+            let list = &neighbours[start[i] as usize..start[i + 1] as usize];
+            start[i] + list.partition_point(|&j| (j as usize) < i) as u32
+        }));
         // The blocks derive from the positions and frames at the build, which are saved.
         if self.block > 0.0 {
             let keys = block_keys_of(&self.pos_at_build, self.block, &mut self.block_keys);
@@ -606,12 +614,18 @@ impl NeighbourList {
         let fill = &mut self.fill;
         fill.clear();
         fill.resize(n + 1, 0);
+        // Partners before each particle (k < i): they lead its list.
+        let later = &mut self.later;
+        later.clear();
+        later.resize(n, 0);
         for &(i, j) in pairs.iter().flat_map(|c| &c.0) {
             fill[i as usize + 1] += 1;
             fill[j as usize + 1] += 1;
+            later[j as usize] += 1;
         }
         for k in 0..n {
             fill[k + 1] += fill[k];
+            later[k] += fill[k];
         }
         self.start.clear();
         self.start.extend_from_slice(fill);
@@ -707,9 +721,8 @@ impl NeighbourList {
             .map(|i| {
                 let vi = vel[i];
                 let mut w2: f64 = 0.0;
-                let list = self.of(i);
-                let later = list.partition_point(|&j| (j as usize) < i);
-                for &j in &list[later..] {
+                let later = &self.neighbours[self.later[i] as usize..self.start[i + 1] as usize];
+                for &j in later {
                     w2 = w2.max((vi - vel[j as usize]).length_squared());
                 }
                 let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
