@@ -252,10 +252,11 @@ impl NeighbourList {
         self.image_nbrs = s.image_nbrs;
         let (start, neighbours) = (&self.start, &self.neighbours);
         self.later.clear();
-        self.later.par_extend((0..self.pos_at_build.len()).into_par_iter().map(|i| {
-            let list = &neighbours[start[i] as usize..start[i + 1] as usize];
-            start[i] + list.partition_point(|&j| (j as usize) < i) as u32
-        }));
+        self.later
+            .par_extend((0..self.pos_at_build.len()).into_par_iter().map(|i| {
+                let list = &neighbours[start[i] as usize..start[i + 1] as usize];
+                start[i] + list.partition_point(|&j| (j as usize) < i) as u32
+            }));
         // The blocks derive from the positions and frames at the build, which are saved.
         if self.block > 0.0 {
             let keys = block_keys_of(&self.pos_at_build, self.block, &mut self.block_keys);
@@ -714,38 +715,70 @@ impl NeighbourList {
     ///
     /// Under quarter symmetry the image pairs and image bonds (`image_bonds`, empty for a full
     /// scene) are included: |v_i - M v_j|.
-    pub fn interacting_pair_speed(&self, vel: &[DVec3], bonds: &[u32], image_bonds: &[u8]) -> f64 {
-        (0..vel.len())
-            .into_par_iter()
-            .with_min_len(1024)
-            .map(|i| {
-                let vi = vel[i];
+    ///
+    /// Also copies `vel` into `vel_now` in the same pass (the velocities the measurement was
+    /// taken at, which the adaptive step keeps).
+    pub fn interacting_pair_speed(
+        &self,
+        vel: &[DVec3],
+        bonds: &[u32],
+        image_bonds: &[u8],
+        vel_now: &mut Vec<DVec3>,
+    ) -> f64 {
+        const PARTICLES: usize = 1024;
+        vel_now.resize(vel.len(), DVec3::ZERO);
+        vel_now
+            .par_chunks_mut(PARTICLES)
+            .enumerate()
+            .with_max_len(1)
+            .map(|(c, copy)| {
                 let mut w2: f64 = 0.0;
-                let later = &self.neighbours[self.later[i] as usize..self.start[i + 1] as usize];
-                for &j in later {
-                    w2 = w2.max((vi - vel[j as usize]).length_squared());
-                }
-                let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
-                for &s in slots.iter().step_by(2) {
-                    if s != NO_BOND {
-                        w2 = w2.max((vi - vel[(s & !BROKEN_FLAG) as usize]).length_squared());
-                    }
-                }
-                for &e in self.images_of(i) {
-                    let (j, code) = split_image(e);
-                    w2 = w2.max((vi - reflect(vel[j], code)).length_squared());
-                }
-                if let Some(&flags) = image_bonds.get(i) {
-                    for code in [MIRROR_X, MIRROR_Y] {
-                        if flags & image_bond_flags(code).0 != 0 {
-                            w2 = w2.max((vi - reflect(vi, code)).length_squared());
-                        }
-                    }
+                for (k, out) in copy.iter_mut().enumerate() {
+                    let i = c * PARTICLES + k;
+                    let vi = vel[i];
+                    *out = vi;
+                    w2 = w2.max(self.largest_pair_speed2(i, vel, bonds, image_bonds));
                 }
                 w2
             })
             .reduce(|| 0.0, f64::max)
             .sqrt()
+    }
+
+    /// The largest squared relative speed of particle i's pairs counted once (partners j > i
+    /// on its list, its owned bond slots, its image pairs and image bonds), m^2/s^2.
+    #[inline]
+    fn largest_pair_speed2(
+        &self,
+        i: usize,
+        vel: &[DVec3],
+        bonds: &[u32],
+        image_bonds: &[u8],
+    ) -> f64 {
+        let vi = vel[i];
+        let mut w2: f64 = 0.0;
+        let later = &self.neighbours[self.later[i] as usize..self.start[i + 1] as usize];
+        for &j in later {
+            w2 = w2.max((vi - vel[j as usize]).length_squared());
+        }
+        let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
+        for &s in slots.iter().step_by(2) {
+            if s != NO_BOND {
+                w2 = w2.max((vi - vel[(s & !BROKEN_FLAG) as usize]).length_squared());
+            }
+        }
+        for &e in self.images_of(i) {
+            let (j, code) = split_image(e);
+            w2 = w2.max((vi - reflect(vel[j], code)).length_squared());
+        }
+        if let Some(&flags) = image_bonds.get(i) {
+            for code in [MIRROR_X, MIRROR_Y] {
+                if flags & image_bond_flags(code).0 != 0 {
+                    w2 = w2.max((vi - reflect(vi, code)).length_squared());
+                }
+            }
+        }
+        w2
     }
 
     /// Neighbours of particle i.
@@ -1085,10 +1118,12 @@ mod tests {
                 }
             }
         }
+        let mut copied = Vec::new();
         assert_eq!(
-            nl.interacting_pair_speed(&p.vel, &p.bonds, &p.image_bonds),
+            nl.interacting_pair_speed(&p.vel, &p.bonds, &p.image_bonds, &mut copied),
             interacting
         );
+        assert_eq!(copied, p.vel, "the velocities the measurement was taken at");
         let brute = assert_lists_exact(&nl, &p, radius);
         assert!(
             brute > n,

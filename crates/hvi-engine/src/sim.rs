@@ -667,15 +667,13 @@ impl Simulation {
     /// the largest change of any velocity since the build.
     fn refresh_pair_speed(&mut self) {
         let t = Instant::now();
-        let vel = &self.particles.vel;
         let w = self.neighbours.interacting_pair_speed(
-            vel,
+            &self.particles.vel,
             &self.particles.bonds,
             &self.particles.image_bonds,
+            &mut self.vel_at_build,
         );
         self.neighbours.pair_speed = w;
-        self.vel_at_build.clear();
-        self.vel_at_build.par_extend(vel.par_iter().copied());
         self.speed_refreshes += 1;
         self.timing.integrate += t.elapsed();
     }
