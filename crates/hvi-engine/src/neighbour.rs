@@ -493,8 +493,6 @@ impl NeighbourList {
             self.image_nbrs.clear();
         }
         self.pair_speed = max_w2.sqrt();
-        self.pos_at_build.clear();
-        self.pos_at_build.par_extend(p.pos.par_iter().copied());
         self.build_frames(p, block);
     }
 
@@ -504,19 +502,20 @@ impl NeighbourList {
         let n = p.len();
         // Sort by (key, index); the input is nearly sorted from the previous build. Elements are
         // distinct, so the result does not depend on the algorithm or the thread count.
+        // One pass each (a parallel loop wakes the pool: few and full ones share two threads
+        // best): the keys with the count of out-of-range particles; after the sort, the
+        // permutation, the keys in the new order (the next sort's hint) and whether it moves
+        // anything.
         let order = &mut self.order;
-        order.clear();
-        order.par_extend(p.pos.par_iter().enumerate().map(|(i, &x)| {
-            let (key, ok) = cell_key(x, inv_h);
-            // Out-of-range particles are counted through the flag bit below.
-            (key, i as u32 | if ok { 0 } else { 1 << 31 })
-        }));
+        order.resize(n, (0, 0));
         self.out_of_range = order
             .par_iter_mut()
-            .map(|o| {
-                let out = o.1 >> 31;
-                o.1 &= !(1 << 31);
-                out as usize
+            .zip(p.pos.par_iter())
+            .enumerate()
+            .map(|(i, (o, &x))| {
+                let (key, ok) = cell_key(x, inv_h);
+                *o = (key, i as u32);
+                usize::from(!ok)
             })
             .sum();
         if self.sorted_keys.len() == n && self.sorted_inv_h == inv_h {
@@ -526,13 +525,22 @@ impl NeighbourList {
             // parallel quicksort does not: ten times the work here).
             order.par_sort();
         }
-        self.sorted_keys.clear();
-        self.sorted_keys.par_extend(order.par_iter().map(|o| o.0));
         self.sorted_inv_h = inv_h;
         let perm = &mut self.perm;
-        perm.clear();
-        perm.par_extend(order.par_iter().map(|o| o.1));
-        if perm.par_iter().enumerate().any(|(k, &o)| k as u32 != o) {
+        perm.resize(n, 0);
+        self.sorted_keys.resize(n, 0);
+        let moves = perm
+            .par_iter_mut()
+            .zip(self.sorted_keys.par_iter_mut())
+            .zip(order.par_iter())
+            .enumerate()
+            .map(|(k, ((q, key), o))| {
+                *q = o.1;
+                *key = o.0;
+                o.1 != k as u32
+            })
+            .reduce(|| false, |a, b| a | b);
+        if moves {
             p.permute(perm, &mut self.scratch);
         }
         // Cells: runs of equal key.
@@ -547,19 +555,26 @@ impl NeighbourList {
         self.cell_start.push(n as u32);
     }
 
-    /// Coordinates as separate arrays: the candidate loop of the search runs over contiguous
-    /// ranges of them.
+    /// Coordinates as separate arrays (the candidate loop of the search runs over contiguous
+    /// ranges of them), and the positions at the build, in one pass.
     fn split_coordinates(&mut self, p: &Particles) {
-        self.xs.clear();
-        self.ys.clear();
-        self.zs.clear();
-        self.xs.par_extend(p.pos.par_iter().map(|x| x.x));
-        self.ys.par_extend(p.pos.par_iter().map(|x| x.y));
-        self.zs.par_extend(p.pos.par_iter().map(|x| x.z));
+        let n = p.len();
         // Padding for the search's fixed blocks of lanes (never within the radius; masked).
         for c in [&mut self.xs, &mut self.ys, &mut self.zs] {
+            c.resize(n, 0.0);
             c.extend([f64::INFINITY; LANES]);
         }
+        self.pos_at_build.resize(n, DVec3::ZERO);
+        self.xs[..n]
+            .par_iter_mut()
+            .zip(self.ys[..n].par_iter_mut())
+            .zip(self.zs[..n].par_iter_mut())
+            .zip(self.pos_at_build.par_iter_mut())
+            .zip(p.pos.par_iter())
+            .for_each(|((((x, y), z), at_build), &r)| {
+                (*x, *y, *z) = (r.x, r.y, r.z);
+                *at_build = r;
+            });
     }
 
     /// The pairs found from the cells of chunk `chunk` (`CELL_CHUNK` cells), and the largest

@@ -161,50 +161,69 @@ impl Particles {
     pub(crate) fn permute(&mut self, perm: &[u32], scratch: &mut PermuteScratch) {
         use rayon::prelude::*;
         let n = self.len();
+        if n == 0 {
+            return;
+        }
         scratch.inv.resize(n, 0);
         for (k, &old) in perm.iter().enumerate() {
             scratch.inv[old as usize] = k as u32;
         }
-        fn gather<T: Copy + Send + Sync>(v: &mut Vec<T>, out: &mut Vec<T>, perm: &[u32]) {
-            out.resize(v.len(), v[0]);
-            out.par_iter_mut()
-                .zip(perm.par_iter())
-                .for_each(|(o, &p)| *o = v[p as usize]);
-            std::mem::swap(v, out);
-        }
-        if n == 0 {
-            return;
-        }
-        gather(&mut self.pos, &mut scratch.vec3, perm);
-        gather(&mut self.vel, &mut scratch.vec3, perm);
-        gather(&mut self.mass, &mut scratch.scalar, perm);
-        gather(&mut self.inv_mass, &mut scratch.scalar, perm);
-        gather(&mut self.body, &mut scratch.body, perm);
-        gather(&mut self.id, &mut scratch.index, perm);
-        if !self.image_bonds.is_empty() {
-            gather(&mut self.image_bonds, &mut scratch.flags, perm);
-        }
-        let inv = &scratch.inv;
-        let src = &self.bonds;
-        scratch.bonds.resize(n * BONDS_PER_PARTICLE, NO_BOND);
-        scratch
-            .bonds
-            .par_chunks_mut(BONDS_PER_PARTICLE)
+        // Every array in one parallel pass (each loop wakes the thread pool).
+        let s = &mut *scratch;
+        s.pos.resize(n, DVec3::ZERO);
+        s.vel.resize(n, DVec3::ZERO);
+        s.mass.resize(n, 0.0);
+        s.inv_mass.resize(n, 0.0);
+        s.body.resize(n, Body::Target);
+        s.id.resize(n, 0);
+        s.bonds.resize(n * BONDS_PER_PARTICLE, NO_BOND);
+        let inv = &s.inv;
+        let old = &*self;
+        s.pos
+            .par_iter_mut()
+            .zip(s.vel.par_iter_mut())
+            .zip(s.mass.par_iter_mut())
+            .zip(s.inv_mass.par_iter_mut())
+            .zip(s.body.par_iter_mut())
+            .zip(s.id.par_iter_mut())
+            .zip(s.bonds.par_chunks_mut(BONDS_PER_PARTICLE))
             .zip(perm.par_iter())
-            .for_each(|(dst, &old)| {
-                let old = old as usize;
-                for (d, &s) in dst
-                    .iter_mut()
-                    .zip(&src[old * BONDS_PER_PARTICLE..(old + 1) * BONDS_PER_PARTICLE])
-                {
-                    *d = if s == NO_BOND {
+            .with_min_len(1024)
+            .for_each(|(((((((x, v), m), im), b), id), dst), &k)| {
+                let k = k as usize;
+                (*x, *v, *m, *im, *b, *id) = (
+                    old.pos[k],
+                    old.vel[k],
+                    old.mass[k],
+                    old.inv_mass[k],
+                    old.body[k],
+                    old.id[k],
+                );
+                let src = &old.bonds[k * BONDS_PER_PARTICLE..(k + 1) * BONDS_PER_PARTICLE];
+                for (d, &b) in dst.iter_mut().zip(src) {
+                    *d = if b == NO_BOND {
                         NO_BOND
                     } else {
-                        inv[(s & INDEX_MASK) as usize] | (s & BROKEN_FLAG)
+                        inv[(b & INDEX_MASK) as usize] | (b & BROKEN_FLAG)
                     };
                 }
             });
-        std::mem::swap(&mut self.bonds, &mut scratch.bonds);
+        std::mem::swap(&mut self.pos, &mut s.pos);
+        std::mem::swap(&mut self.vel, &mut s.vel);
+        std::mem::swap(&mut self.mass, &mut s.mass);
+        std::mem::swap(&mut self.inv_mass, &mut s.inv_mass);
+        std::mem::swap(&mut self.body, &mut s.body);
+        std::mem::swap(&mut self.id, &mut s.id);
+        std::mem::swap(&mut self.bonds, &mut s.bonds);
+        if !self.image_bonds.is_empty() {
+            s.flags.resize(n, 0);
+            let flags = &self.image_bonds;
+            s.flags
+                .par_iter_mut()
+                .zip(perm.par_iter())
+                .for_each(|(f, &k)| *f = flags[k as usize]);
+            std::mem::swap(&mut self.image_bonds, &mut s.flags);
+        }
     }
 }
 
@@ -212,10 +231,12 @@ impl Particles {
 #[derive(Debug, Default, Clone)]
 pub struct PermuteScratch {
     inv: Vec<u32>,
-    vec3: Vec<DVec3>,
-    scalar: Vec<f64>,
+    pos: Vec<DVec3>,
+    vel: Vec<DVec3>,
+    mass: Vec<f64>,
+    inv_mass: Vec<f64>,
     body: Vec<Body>,
-    index: Vec<u32>,
+    id: Vec<u32>,
     bonds: Vec<u32>,
     flags: Vec<u8>,
 }
