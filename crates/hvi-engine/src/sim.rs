@@ -1049,7 +1049,8 @@ fn contact_force(
         let mut contact = 0u64;
         for (k, &j) in list.iter().enumerate() {
             let r2 = (pi - pos[j as usize]).length_squared();
-            closest = closest.min(r2);
+            // Not f64::min: a NaN r2 leaves `closest` as f64::min would, without its fix-up.
+            closest = if r2 < closest { r2 } else { closest };
             contact |= u64::from(r2 < r_eq2) << k;
         }
         while contact != 0 {
@@ -1068,11 +1069,15 @@ fn contact_force(
 #[inline]
 fn add_bond_forces(mut f: DVec3, pos: &[DVec3], i: usize, slots: &[u32], fr_bond: &[f64]) -> DVec3 {
     let pi = pos[i];
+    let slots: &[u32; BONDS_PER_PARTICLE] = slots.try_into().expect("a particle's slots");
+    let own: &[f64; OWNED_BONDS] = fr_bond[i * OWNED_BONDS..(i + 1) * OWNED_BONDS]
+        .try_into()
+        .expect("a particle's owned bonds");
     for m in 0..OWNED_BONDS {
         let owned = slots[2 * m];
         if owned != NO_BOND {
             let d = pi - pos[(owned & INDEX_MASK) as usize];
-            f += d * fr_bond[i * OWNED_BONDS + m];
+            f += d * own[m];
         }
         let mirror = slots[2 * m + 1];
         if mirror != NO_BOND {
