@@ -124,6 +124,8 @@ pub struct NeighbourList {
     /// the bits of a non-negative f64 (their order is the numbers' order), as
     /// [`Self::measure_block_displacement`] last measured it.
     block_disp: Vec<AtomicU64>,
+    /// [`Self::stale_by_blocks`]'s buffer: each block's displacement plus the look-ahead.
+    block_reach: Vec<f64>,
 }
 
 #[inline]
@@ -301,7 +303,7 @@ impl NeighbourList {
     /// measured. With `block = 0` (one frame at rest) it is [`Self::stale`]
     /// with `max_e`, the largest displacement of any particle.
     pub fn stale_by_blocks(
-        &self,
+        &mut self,
         max_e: f64,
         since_build_s: f64,
         contact_radius: f64,
@@ -313,13 +315,14 @@ impl NeighbourList {
         }
         let t = since_build_s + ahead_s;
         let ahead = max_s * ahead_s;
-        // Each block's E plus the look-ahead, once per block.
-        let e: Vec<f64> = self
-            .block_disp
-            .par_iter()
+        // Each block's E plus the look-ahead, once per block (into a buffer kept between calls:
+        // this runs in the step loop).
+        let e = &mut self.block_reach;
+        e.resize(self.block_disp.len(), 0.0);
+        e.par_iter_mut()
+            .zip(self.block_disp.par_iter())
             .with_min_len(1024)
-            .map(|d| f64::from_bits(d.load(Ordering::Relaxed)).sqrt() + ahead)
-            .collect();
+            .for_each(|(r, d)| *r = f64::from_bits(d.load(Ordering::Relaxed)).sqrt() + ahead);
         let skin = self.radius - contact_radius;
         // A block with itself: E_a + E_a.
         let largest = e.iter().fold(0.0f64, |a, &b| a.max(b));
@@ -997,6 +1000,8 @@ impl PairSearch<'_> {
 mod tests {
     use super::*;
 
+    use crate::state::{Body, NO_BOND};
+
     #[test]
     fn sort_by_hint_is_the_sort_whatever_the_hint() {
         // Keys from a small generator, hints that are right, partly right, or not sorted.
@@ -1029,7 +1034,6 @@ mod tests {
             assert_eq!(got, want, "case {case}");
         }
     }
-    use crate::state::{Body, NO_BOND};
 
     /// Unit-mass target particles without bonds.
     fn unbonded(pos: Vec<DVec3>, vel: Vec<DVec3>) -> Particles {
