@@ -40,6 +40,7 @@ pub mod sim;
 pub mod state;
 pub mod step;
 pub mod symmetry;
+pub mod threads;
 pub mod witness;
 
 pub use error::{EngineError, Result};

@@ -27,6 +27,7 @@ use crate::symmetry::{
     image_bond_flags, image_bond_intact, intact_image_bonds, reflect, unfold, unfold_ids, Symmetry,
     MIRROR_X, MIRROR_Y,
 };
+use crate::threads;
 
 // The adaptive step's raise delay, also at the path it had when it was defined here.
 pub use crate::step::STRIDE_RAISE_AFTER;
@@ -366,19 +367,14 @@ impl Simulation {
     fn bond_forces(&mut self) {
         let ia = self.interaction;
         let pos = &self.particles.pos;
-        self.bond_force_over_r
-            .par_chunks_mut(CHUNK * OWNED_BONDS)
-            .zip(
-                self.particles
-                    .bonds
-                    .par_chunks_mut(CHUNK * BONDS_PER_PARTICLE),
-            )
-            .zip(self.bond_partials.par_iter_mut())
-            .enumerate()
-            .with_max_len(1)
-            .for_each(|(c, ((fr, bonds), out))| {
-                *out = bond_chunk(&ia, pos, c * CHUNK, bonds, fr);
-            });
+        let chunks = self
+            .bond_force_over_r
+            .chunks_mut(CHUNK * OWNED_BONDS)
+            .zip(self.particles.bonds.chunks_mut(CHUNK * BONDS_PER_PARTICLE))
+            .zip(self.bond_partials.iter_mut());
+        threads::for_each_chunk(chunks, |c, ((fr, bonds), out)| {
+            *out = bond_chunk(&ia, pos, c * CHUNK, bonds, fr);
+        });
         if self.symmetry == Symmetry::Quarter {
             self.break_image_bonds();
         }
@@ -431,34 +427,33 @@ impl Simulation {
         let damp = !damping.is_empty() && half_dt > 0.0;
         let image_bonds = &p.image_bonds;
         let mirrored = self.symmetry == Symmetry::Quarter;
-        p.force
-            .par_chunks_mut(CHUNK)
-            .zip(p.vel.par_chunks_mut(CHUNK))
-            .zip(self.contact_min_r2.par_iter_mut())
-            .zip(self.absorbed_partials.par_iter_mut())
-            .enumerate()
-            .with_max_len(1)
-            .for_each(|(c, (((force, vel), min_out), absorbed_out))| {
-                let base = c * CHUNK;
-                let mut min_r2 = f64::INFINITY;
-                let mut absorbed = 0.0;
-                for (k, (f_out, v)) in force.iter_mut().zip(vel.iter_mut()).enumerate() {
-                    let i = base + k;
-                    let f = contact_force(&ia, pos, i, nl.of(i), &mut min_r2);
-                    let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
-                    let mut f = add_bond_forces(f, pos, i, slots, fr_bond);
-                    if mirrored {
-                        f += image_force(&ia, pos, i, nl.images_of(i), image_bonds[i], &mut min_r2);
-                    }
-                    *f_out = f;
-                    *v += f * (half_dt * inv_mass[i]);
-                    if damp && damping[i] > 0.0 {
-                        absorbed += band::damp(v, damping[i], 2.0 * half_dt, mass[i]);
-                    }
+        let chunks = p
+            .force
+            .chunks_mut(CHUNK)
+            .zip(p.vel.chunks_mut(CHUNK))
+            .zip(self.contact_min_r2.iter_mut())
+            .zip(self.absorbed_partials.iter_mut());
+        threads::for_each_chunk(chunks, |c, (((force, vel), min_out), absorbed_out)| {
+            let base = c * CHUNK;
+            let mut min_r2 = f64::INFINITY;
+            let mut absorbed = 0.0;
+            for (k, (f_out, v)) in force.iter_mut().zip(vel.iter_mut()).enumerate() {
+                let i = base + k;
+                let f = contact_force(&ia, pos, i, nl.of(i), &mut min_r2);
+                let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
+                let mut f = add_bond_forces(f, pos, i, slots, fr_bond);
+                if mirrored {
+                    f += image_force(&ia, pos, i, nl.images_of(i), image_bonds[i], &mut min_r2);
                 }
-                *min_out = min_r2;
-                *absorbed_out = absorbed;
-            });
+                *f_out = f;
+                *v += f * (half_dt * inv_mass[i]);
+                if damp && damping[i] > 0.0 {
+                    absorbed += band::damp(v, damping[i], 2.0 * half_dt, mass[i]);
+                }
+            }
+            *min_out = min_r2;
+            *absorbed_out = absorbed;
+        });
     }
 
     /// Books the chunks' broken bonds and their energy, in chunk order, and returns the
@@ -586,41 +581,40 @@ impl Simulation {
         let frame = &self.neighbours.frame_vel;
         let adaptive = self.max_stride > 1;
         let vel_built = &self.vel_at_build;
-        p.pos
-            .par_chunks_mut(CHUNK)
-            .zip(p.vel.par_chunks_mut(CHUNK))
-            .zip(self.disp_partials.par_iter_mut())
-            .zip(self.speed_partials.par_iter_mut())
-            .enumerate()
-            .with_max_len(1)
-            .for_each(|(c, (((pos, vel), out), speed_out))| {
-                let base = c * CHUNK;
-                let mut max_d2: f64 = 0.0;
-                let (mut max_e2, mut max_w2): (f64, f64) = (0.0, 0.0);
-                for k in 0..pos.len() {
-                    let i = base + k;
-                    let v = vel[k] + p.force[i] * (half * p.inv_mass[i]);
-                    vel[k] = v;
-                    if adaptive {
-                        max_e2 = max_e2.max((v - frame[i]).length_squared());
-                        max_w2 = max_w2.max((v - vel_built[i]).length_squared());
-                    }
-                    let x = pos[k] + v * dt;
-                    pos[k] = x;
-                    // Displacement relative to the particle's frame (see `neighbour`).
-                    let d2 = (x - built[i] - frame[i] * since).length_squared();
-                    // NaN fails every comparison: make it win the max so it is caught below.
-                    max_d2 = if d2 <= max_d2 {
-                        max_d2
-                    } else if d2.is_nan() {
-                        f64::INFINITY
-                    } else {
-                        d2
-                    };
+        let chunks = p
+            .pos
+            .chunks_mut(CHUNK)
+            .zip(p.vel.chunks_mut(CHUNK))
+            .zip(self.disp_partials.iter_mut())
+            .zip(self.speed_partials.iter_mut());
+        threads::for_each_chunk(chunks, |c, (((pos, vel), out), speed_out)| {
+            let base = c * CHUNK;
+            let mut max_d2: f64 = 0.0;
+            let (mut max_e2, mut max_w2): (f64, f64) = (0.0, 0.0);
+            for k in 0..pos.len() {
+                let i = base + k;
+                let v = vel[k] + p.force[i] * (half * p.inv_mass[i]);
+                vel[k] = v;
+                if adaptive {
+                    max_e2 = max_e2.max((v - frame[i]).length_squared());
+                    max_w2 = max_w2.max((v - vel_built[i]).length_squared());
                 }
-                *out = max_d2;
-                *speed_out = [max_e2, max_w2];
-            });
+                let x = pos[k] + v * dt;
+                pos[k] = x;
+                // Displacement relative to the particle's frame (see `neighbour`).
+                let d2 = (x - built[i] - frame[i] * since).length_squared();
+                // NaN fails every comparison: make it win the max so it is caught below.
+                max_d2 = if d2 <= max_d2 {
+                    max_d2
+                } else if d2.is_nan() {
+                    f64::INFINITY
+                } else {
+                    d2
+                };
+            }
+            *out = max_d2;
+            *speed_out = [max_e2, max_w2];
+        });
         let max_d2 = self.disp_partials.iter().fold(0.0f64, |a, &b| a.max(b));
         let [max_e2, max_w2] = self
             .speed_partials

@@ -811,12 +811,42 @@ impl Gathered {
         opts: &RunOptions,
         n: usize,
     ) -> Result<f64> {
+        let bar = progress_bar(opts, sim.derived.steps);
+        let step_wall0 = Instant::now();
+        // The pool's other workers spin between the step's parallel loops instead of
+        // sleeping (see `hvi_engine::threads`); results do not depend on it.
+        hvi_engine::threads::with_awake_workers(|| {
+            self.step_loop(sim, spec, opts, n, bar.as_ref(), step_wall0)
+        })?;
+        if let Some(b) = &bar {
+            b.finish_and_clear();
+        }
+        if let Some(t) = self.trajectory.take() {
+            let t0 = Instant::now();
+            t.finish()?;
+            self.output_time += t0.elapsed();
+        }
+        let observed_in_loop = self.observer.as_ref().map_or(Duration::ZERO, |o| o.elapsed);
+        Ok((self.loop_before + step_wall0.elapsed())
+            .saturating_sub(observed_in_loop + self.render_time)
+            .as_secs_f64())
+    }
+
+    /// The loop of [`Self::step_to_end`]: steps, samples, observes, dumps and checkpoints to
+    /// the end of the run or its first failure (kept in `failure`).
+    fn step_loop(
+        &mut self,
+        sim: &mut Simulation,
+        spec: &SceneSpec,
+        opts: &RunOptions,
+        n: usize,
+        bar: Option<&ProgressBar>,
+        step_wall0: Instant,
+    ) -> Result<()> {
         let d = sim.derived;
-        let bar = progress_bar(opts, d.steps);
         let thermo_every = (d.steps / 20).max(1);
         let dump_every = opts.dump_every.unwrap_or(0);
         let energy_every = spec.run.energy_every;
-        let step_wall0 = Instant::now();
         let from = (sim.step, sim.steps_taken);
         let mut next_thermo = next_multiple(sim.step, thermo_every);
         while sim.step < d.steps {
@@ -851,21 +881,10 @@ impl Gathered {
             }
             if opts.progress && (s >= next_thermo || s == d.steps) {
                 next_thermo = next_multiple(s, thermo_every);
-                self.output_time += thermo(bar.as_ref(), sim, n, from, step_wall0);
+                self.output_time += thermo(bar, sim, n, from, step_wall0);
             }
         }
-        if let Some(b) = &bar {
-            b.finish_and_clear();
-        }
-        if let Some(t) = self.trajectory.take() {
-            let t0 = Instant::now();
-            t.finish()?;
-            self.output_time += t0.elapsed();
-        }
-        let observed_in_loop = self.observer.as_ref().map_or(Duration::ZERO, |o| o.elapsed);
-        Ok((self.loop_before + step_wall0.elapsed())
-            .saturating_sub(observed_in_loop + self.render_time)
-            .as_secs_f64())
+        Ok(())
     }
 
     /// The next base step after `s` at which the scene samples something (the end, an energy
