@@ -629,7 +629,14 @@ impl NeighbourList {
     /// in ascending order: the pairs arrive ordered by their first particle, and within it by
     /// the second, so particle i's partners k < i (entered from k's pairs) precede its own
     /// pairs (i, j > i).
+    ///
+    /// The counting and the filling each split the particles into one contiguous range per
+    /// thread: every thread walks the pairs in their order and handles the entries of its own
+    /// range's particles (its part of the counts and of the lists), so each list gets its
+    /// entries in pair order whatever the split.
     fn fill_lists(&mut self, pairs: &[(Vec<(u32, u32)>, f64)], n: usize) {
+        let parts = rayon::current_num_threads().clamp(1, n.max(1));
+        let bounds: Vec<usize> = (0..=parts).map(|t| n * t / parts).collect();
         let fill = &mut self.fill;
         fill.clear();
         fill.resize(n + 1, 0);
@@ -637,11 +644,22 @@ impl NeighbourList {
         let later = &mut self.later;
         later.clear();
         later.resize(n, 0);
-        for &(i, j) in pairs.iter().flat_map(|c| &c.0) {
-            fill[i as usize + 1] += 1;
-            fill[j as usize + 1] += 1;
-            later[j as usize] += 1;
-        }
+        let ranges = split_at_bounds(&mut fill[1..], &bounds)
+            .into_iter()
+            .zip(split_at_bounds(later, &bounds))
+            .zip(bounds.windows(2));
+        crate::threads::for_each_chunk(ranges, |_, ((count, earlier), r)| {
+            let (a, b) = (r[0] as u32, r[1] as u32);
+            for (i, j) in pairs_until(pairs, b) {
+                if i >= a {
+                    count[(i - a) as usize] += 1;
+                }
+                if (a..b).contains(&j) {
+                    count[(j - a) as usize] += 1;
+                    earlier[(j - a) as usize] += 1;
+                }
+            }
+        });
         for k in 0..n {
             fill[k + 1] += fill[k];
             later[k] += fill[k];
@@ -650,12 +668,27 @@ impl NeighbourList {
         self.start.extend_from_slice(fill);
         self.neighbours.clear();
         self.neighbours.resize(fill[n] as usize, 0);
-        for &(i, j) in pairs.iter().flat_map(|c| &c.0) {
-            self.neighbours[fill[i as usize] as usize] = j;
-            fill[i as usize] += 1;
-            self.neighbours[fill[j as usize] as usize] = i;
-            fill[j as usize] += 1;
-        }
+        let list_bounds: Vec<usize> = bounds.iter().map(|&x| fill[x] as usize).collect();
+        let ranges = split_at_bounds(&mut self.neighbours, &list_bounds)
+            .into_iter()
+            .zip(split_at_bounds(&mut fill[..n], &bounds))
+            .zip(bounds.windows(2).zip(&list_bounds));
+        crate::threads::for_each_chunk(ranges, |_, ((lists, cursor), (r, &base))| {
+            let (a, b) = (r[0] as u32, r[1] as u32);
+            let mut put = |x: u32, partner: u32| {
+                let c = &mut cursor[(x - a) as usize];
+                lists[*c as usize - base] = partner;
+                *c += 1;
+            };
+            for (i, j) in pairs_until(pairs, b) {
+                if i >= a {
+                    put(i, j);
+                }
+                if (a..b).contains(&j) {
+                    put(j, i);
+                }
+            }
+        });
     }
 
     /// Pairs closer than `contact_radius` that are neither joined by a bond slot (intact, or
@@ -858,6 +891,28 @@ fn sort_by_hint(
 }
 
 /// The key of each position's block (side `block`) into `keys`.
+/// The pairs of the search's chunks in order, up to the first whose particle `i` is `b` or
+/// more (pairs come ordered by `i`: those after it have both ends at `b` or more).
+fn pairs_until(pairs: &[(Vec<(u32, u32)>, f64)], b: u32) -> impl Iterator<Item = (u32, u32)> + '_ {
+    pairs
+        .iter()
+        .flat_map(|c| &c.0)
+        .copied()
+        .take_while(move |&(i, _)| i < b)
+}
+
+/// `s` cut at the ascending offsets `bounds` (first 0, last `s.len()`): the pieces between
+/// consecutive bounds.
+fn split_at_bounds<'a, T>(mut s: &'a mut [T], bounds: &[usize]) -> Vec<&'a mut [T]> {
+    let mut pieces = Vec::with_capacity(bounds.len().saturating_sub(1));
+    for w in bounds.windows(2) {
+        let (piece, rest) = s.split_at_mut(w[1] - w[0]);
+        pieces.push(piece);
+        s = rest;
+    }
+    pieces
+}
+
 fn block_keys_of<'k>(pos: &[DVec3], block: f64, keys: &'k mut Vec<u64>) -> &'k [u64] {
     let inv_b = 1.0 / block;
     keys.clear();
@@ -1257,7 +1312,8 @@ mod tests {
     }
 
     /// Each particle's frame is the mean velocity of its block's particles (to round-off: the
-    /// engine adds runs' sums), bit for bit the same on one thread and on four.
+    /// engine adds runs' sums), bit for bit the same on one thread, three and four; so are the
+    /// lists.
     #[test]
     fn frames_are_block_means_at_any_thread_count() {
         let n = 3000;
@@ -1301,10 +1357,26 @@ mod tests {
                 sum / count
             );
         }
-        let (p4, nl4) = build(4);
-        assert_eq!(p4.pos, p.pos);
-        assert_eq!(nl4.frame_vel, nl.frame_vel);
-        assert_eq!((nl4.near_dv, nl4.far_dv), (nl.near_dv, nl.far_dv));
-        assert_eq!(nl4.neighbours, nl.neighbours);
+        // The lists too: filled by one range of particles per thread (3: uneven ranges).
+        assert!(nl.neighbours.len() > n / 2, "the test must list pairs");
+        for threads in [3, 4] {
+            let (pt, nlt) = build(threads);
+            assert_eq!(pt.pos, p.pos);
+            assert_eq!(nlt.frame_vel, nl.frame_vel);
+            assert_eq!((nlt.near_dv, nlt.far_dv), (nl.near_dv, nl.far_dv));
+            assert_eq!(nlt.start, nl.start, "{threads} threads");
+            assert_eq!(nlt.neighbours, nl.neighbours, "{threads} threads");
+            assert_eq!(nlt.later, nl.later, "{threads} threads");
+        }
+        // Each list ascending, its partners j > i from `later` on.
+        for i in 0..n {
+            let list = nl.of(i);
+            assert!(
+                list.windows(2).all(|w| w[0] < w[1]),
+                "list of {i} ascending"
+            );
+            let split = nl.later[i] - nl.start[i];
+            assert_eq!(split as usize, list.partition_point(|&j| (j as usize) < i));
+        }
     }
 }
