@@ -388,7 +388,7 @@ impl NeighbourList {
             self.block_disp.clear();
             return;
         }
-        let blocks = self.block_means(p, block);
+        let blocks = self.block_means(p);
         self.link_blocks(&blocks);
     }
 
@@ -426,9 +426,10 @@ impl NeighbourList {
     }
 
     /// Each block's key and mean velocity (by dense index: order of first appearance), and
-    /// each particle's frame velocity (its block's mean) into `frame_vel`.
-    fn block_means(&mut self, p: &Particles, block: f64) -> Vec<(u64, DVec3)> {
-        let keys = block_keys_of(&p.pos, block, &mut self.block_keys);
+    /// each particle's frame velocity (its block's mean) into `frame_vel`. The particles'
+    /// block keys are those [`Self::split_coordinates`] found.
+    fn block_means(&mut self, p: &Particles) -> Vec<(u64, DVec3)> {
+        let keys = &self.block_keys[..];
         let firsts = dense_blocks(keys, &mut self.block_of);
         // Sums in particle order (fixed by the sort), one add per run of equal block: runs
         // are common in cell order.
@@ -472,7 +473,7 @@ impl NeighbourList {
         let n = p.len();
         p.clear_broken_slots();
         self.sort_into_cells(p, 1.0 / radius);
-        self.split_coordinates(p);
+        self.split_coordinates(p, block);
         let search = PairSearch {
             xs: &self.xs,
             ys: &self.ys,
@@ -559,8 +560,9 @@ impl NeighbourList {
     }
 
     /// Coordinates as separate arrays (the candidate loop of the search runs over contiguous
-    /// ranges of them), and the positions at the build, in one pass.
-    fn split_coordinates(&mut self, p: &Particles) {
+    /// ranges of them), the positions at the build and, with frames (`block` > 0), each
+    /// particle's block key, in one pass.
+    fn split_coordinates(&mut self, p: &Particles, block: f64) {
         let n = p.len();
         // Padding for the search's fixed blocks of lanes (never within the radius; masked).
         for c in [&mut self.xs, &mut self.ys, &mut self.zs] {
@@ -568,15 +570,22 @@ impl NeighbourList {
             c.extend([f64::INFINITY; LANES]);
         }
         self.pos_at_build.resize(n, DVec3::ZERO);
+        let frames = block > 0.0;
+        let inv_b = 1.0 / block;
+        self.block_keys.resize(n, 0);
         self.xs[..n]
             .par_iter_mut()
             .zip(self.ys[..n].par_iter_mut())
             .zip(self.zs[..n].par_iter_mut())
             .zip(self.pos_at_build.par_iter_mut())
+            .zip(self.block_keys.par_iter_mut())
             .zip(p.pos.par_iter())
-            .for_each(|((((x, y), z), at_build), &r)| {
+            .for_each(|(((((x, y), z), at_build), key), &r)| {
                 (*x, *y, *z) = (r.x, r.y, r.z);
                 *at_build = r;
+                if frames {
+                    *key = cell_key(r, inv_b).0;
+                }
             });
     }
 
