@@ -899,7 +899,6 @@ fn sort_by_hint(
     order.extend_from_slice(&moved[b..]);
 }
 
-/// The key of each position's block (side `block`) into `keys`.
 /// The pairs of the search's chunks in order, up to the first whose particle `i` is `b` or
 /// more (pairs come ordered by `i`: those after it have both ends at `b` or more).
 fn pairs_until(pairs: &[(Vec<(u32, u32)>, f64)], b: u32) -> impl Iterator<Item = (u32, u32)> + '_ {
@@ -922,6 +921,7 @@ fn split_at_bounds<'a, T>(mut s: &'a mut [T], bounds: &[usize]) -> Vec<&'a mut [
     pieces
 }
 
+/// The key of each position's block (side `block`) into `keys`.
 fn block_keys_of<'k>(pos: &[DVec3], block: f64, keys: &'k mut Vec<u64>) -> &'k [u64] {
     let inv_b = 1.0 / block;
     keys.clear();
