@@ -506,8 +506,8 @@ impl NeighbourList {
         let n = p.len();
         // Sort by (key, index); the input is nearly sorted from the previous build. Elements are
         // distinct, so the result does not depend on the algorithm or the thread count.
-        // One pass each (a parallel loop wakes the pool: few and full ones share two threads
-        // best): the keys with the count of out-of-range particles; after the sort, the
+        // One pass each (each parallel loop costs a start and an end on every thread: few and
+        // full ones share the threads best): the keys with the count of out-of-range particles; after the sort, the
         // permutation, the keys in the new order (the next sort's hint) and whether it moves
         // anything.
         let order = &mut self.order;
@@ -1063,7 +1063,6 @@ impl PairSearch<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
     use crate::state::{Body, NO_BOND};
 
     #[test]

@@ -168,7 +168,8 @@ impl Particles {
         for (k, &old) in perm.iter().enumerate() {
             scratch.inv[old as usize] = k as u32;
         }
-        // Every array in one parallel pass (each loop wakes the thread pool).
+        // Every array in one parallel pass (each parallel loop costs a start and an end on every
+        // thread).
         let s = &mut *scratch;
         s.pos.resize(n, DVec3::ZERO);
         s.vel.resize(n, DVec3::ZERO);

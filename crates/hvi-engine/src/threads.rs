@@ -3,17 +3,21 @@
 //! A step runs three to five short parallel loops (drift, bonds, contacts and, at builds, the
 //! neighbour search) with short serial parts between them. Between two loops rayon's idle
 //! worker yields a few dozen times and then sleeps, and waking it again costs tens of
-//! microseconds on the virtual machines these runs are measured on: about once per loop, which
-//! at 3e4 particles is most of the difference between 1.67x and 2x on two threads.
+//! microseconds on virtual machines: about once per loop, a large part of a small scene's
+//! step (measured: `reports/benchmark-0.6.0`).
 //!
 //! [`with_awake_workers`] runs a closure (a run's step loop) while every other worker of the
 //! current pool runs a spinner: a task that keeps asking rayon for work
 //! ([`rayon::yield_now`]) and, when there is none, yields its core to the operating system
-//! instead of sleeping on rayon's condition variable. The parallel loops stay rayon's, so the
-//! results are the same at any thread count as before (each chunk's partial results are
-//! combined in chunk order). A spinner holds its core while the run lasts, as an OpenMP
-//! program does under `OMP_WAIT_POLICY=active`; `sched_yield` hands the core over whenever
-//! another thread wants it.
+//! instead of sleeping on rayon's condition variable. A spinner holds its core while the run
+//! lasts, as an OpenMP program does under `OMP_WAIT_POLICY=active`; `sched_yield` hands the
+//! core over whenever another thread wants it.
+//!
+//! [`for_each_chunk`] runs the step's kernels over their chunks of particles: the stepping
+//! thread takes chunks from the front, the others from the back, and it waits for their last
+//! chunks by spinning. Each chunk writes its own partial results, which the caller combines
+//! in chunk order, so results are the same whichever thread took a chunk, at any thread
+//! count.
 //!
 //! A spinner never runs on a thread that is inside a [`with_awake_workers`] closure or another
 //! spinner (it returns at once there): a closure waiting on its own loop must not be buried
@@ -61,7 +65,8 @@ pub fn with_awake_workers<R>(body: impl FnOnce() -> R) -> R {
 }
 
 /// Calls `f(k, item)` for each of `items` (numbered from 0) on the current pool's threads,
-/// each item on one thread, taken in turn as threads come free. For the step's kernels, whose
+/// each item on one thread: the caller takes items from the front, the other threads from the
+/// back, as they come free (one lock of a queue per item). For the step's kernels, whose
 /// items are chunks of particles each writing its own results: unlike a rayon parallel
 /// iterator, the calling thread waits for the other threads' last items by spinning, not on
 /// rayon's latch, where it would go to sleep after a few dozen yields and wake tens of
