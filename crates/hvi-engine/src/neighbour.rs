@@ -114,6 +114,8 @@ pub struct NeighbourList {
     ys: Vec<f64>,
     zs: Vec<f64>,
     fill: Vec<u32>,
+    /// The search's pairs, one entry per chunk of cells (kept from build to build).
+    found: Vec<ChunkPairs>,
     block_keys: Vec<u64>,
     /// Each particle's block (dense index, in order of first appearance at the build).
     block_of: Vec<u32>,
@@ -484,12 +486,14 @@ impl NeighbourList {
             measure_speed,
         };
         let ncell = self.cell_keys.len();
-        let pairs: Vec<(Vec<(u32, u32)>, f64)> = (0..ncell.div_ceil(CELL_CHUNK))
-            .into_par_iter()
-            .map(|chunk| self.search_cells(&search, chunk))
-            .collect();
-        let mut max_w2 = pairs.iter().fold(0.0f64, |a, c| a.max(c.1));
-        self.fill_lists(&pairs, n);
+        let mut found = std::mem::take(&mut self.found);
+        found.resize_with(ncell.div_ceil(CELL_CHUNK), ChunkPairs::default);
+        crate::threads::for_each_chunk(found.iter_mut(), |chunk, out| {
+            self.search_cells(&search, chunk, out);
+        });
+        let mut max_w2 = found.iter().fold(0.0f64, |a, c| a.max(c.max_w2));
+        self.fill_lists(&found, n);
+        self.found = found;
         if self.mirrors {
             max_w2 = max_w2.max(self.search_images(p, radius * radius, measure_speed));
         } else {
@@ -547,16 +551,7 @@ impl NeighbourList {
         if moves {
             p.permute(perm, &mut self.scratch);
         }
-        // Cells: runs of equal key.
-        self.cell_start.clear();
-        self.cell_keys.clear();
-        for (i, o) in order.iter().enumerate() {
-            if i == 0 || o.0 != order[i - 1].0 {
-                self.cell_start.push(i as u32);
-                self.cell_keys.push(o.0);
-            }
-        }
-        self.cell_start.push(n as u32);
+        find_cells(&self.order, &mut self.cell_start, &mut self.cell_keys);
     }
 
     /// Coordinates as separate arrays (the candidate loop of the search runs over contiguous
@@ -589,18 +584,19 @@ impl NeighbourList {
             });
     }
 
-    /// The pairs found from the cells of chunk `chunk` (`CELL_CHUNK` cells), and the largest
-    /// squared relative speed among them when measured.
+    /// The pairs found from the cells of chunk `chunk` (`CELL_CHUNK` cells) into `out`, with
+    /// the largest squared relative speed among them when measured.
     ///
     /// Half stencil: rows whose keys follow the cell's own (same row from x - 1, the next
     /// row, and the three rows of the next plane). Sorted order is key order, so these hold
     /// exactly the candidates j > i: each pair is examined once and entered on both lists.
-    fn search_cells(&self, search: &PairSearch, chunk: usize) -> (Vec<(u32, u32)>, f64) {
+    fn search_cells(&self, search: &PairSearch, chunk: usize, out: &mut ChunkPairs) {
         let (cell_start, cell_keys) = (&self.cell_start, &self.cell_keys);
         let ncell = cell_keys.len();
         let c0 = chunk * CELL_CHUNK;
         let c1 = (c0 + CELL_CHUNK).min(ncell);
-        let mut found = Vec::with_capacity((cell_start[c1] - cell_start[c0]) as usize * 2);
+        let found = &mut out.pairs;
+        found.clear();
         let mut max_w2: f64 = 0.0;
         let offsets = forward_rows();
         let k0 = cell_keys[c0] as i64;
@@ -627,10 +623,11 @@ impl NeighbourList {
                 ranges[r] = (cell_start[a] as usize, cell_start[b] as usize);
             }
             for i in cell_start[c] as usize..cell_start[c + 1] as usize {
-                search.scan(i, &ranges, &mut found, &mut max_w2);
+                search.scan(i, &ranges, found, &mut max_w2);
             }
         }
-        (found, max_w2)
+        out.max_w2 = max_w2;
+        out.max_j = found.iter().fold(0, |m, &(_, j)| m.max(j));
     }
 
     /// Full lists in compressed-row form: count, prefix-sum, fill in pair order (fixed by
@@ -639,27 +636,30 @@ impl NeighbourList {
     /// the second, so particle i's partners k < i (entered from k's pairs) precede its own
     /// pairs (i, j > i).
     ///
-    /// The counting and the filling each split the particles into one contiguous range per
-    /// thread: every thread walks the pairs in their order and handles the entries of its own
-    /// range's particles (its part of the counts and of the lists), so each list gets its
-    /// entries in pair order whatever the split.
-    fn fill_lists(&mut self, pairs: &[(Vec<(u32, u32)>, f64)], n: usize) {
+    /// Each step splits the particles into one contiguous range per thread: every thread
+    /// walks the pairs that can touch its range in their order and handles the entries of its
+    /// range's particles (its part of the counts, the prefix sums and the lists), so each list
+    /// gets its entries in pair order whatever the split. Only the ranges' totals are added up
+    /// serially.
+    fn fill_lists(&mut self, pairs: &[ChunkPairs], n: usize) {
         let parts = rayon::current_num_threads().clamp(1, n.max(1));
         let bounds: Vec<usize> = (0..=parts).map(|t| n * t / parts).collect();
-        let fill = &mut self.fill;
-        fill.clear();
-        fill.resize(n + 1, 0);
-        // Partners before each particle (k < i): they lead its list.
-        let later = &mut self.later;
+        // Counts first: `start[i + 1]` the length of i's list, `later[i]` its partners k < i
+        // (they lead its list); then both become offsets into `neighbours`.
+        let (start, later, fill) = (&mut self.start, &mut self.later, &mut self.fill);
+        start.clear();
+        start.resize(n + 1, 0);
         later.clear();
         later.resize(n, 0);
-        let ranges = split_at_bounds(&mut fill[1..], &bounds)
+        fill.resize(n, 0);
+        let mut totals = vec![0u32; parts];
+        let ranges = split_at_bounds(&mut start[1..], &bounds)
             .into_iter()
             .zip(split_at_bounds(later, &bounds))
-            .zip(bounds.windows(2));
-        crate::threads::for_each_chunk(ranges, |_, ((count, earlier), r)| {
+            .zip(totals.iter_mut().zip(bounds.windows(2)));
+        crate::threads::for_each_chunk(ranges, |_, ((count, earlier), (total, r))| {
             let (a, b) = (r[0] as u32, r[1] as u32);
-            for (i, j) in pairs_until(pairs, b) {
+            for (i, j) in pairs_touching(pairs, a, b) {
                 if i >= a {
                     count[(i - a) as usize] += 1;
                 }
@@ -668,36 +668,53 @@ impl NeighbourList {
                     earlier[(j - a) as usize] += 1;
                 }
             }
+            *total = count.iter().sum();
         });
-        for k in 0..n {
-            fill[k + 1] += fill[k];
-            later[k] += fill[k];
+        let mut list_bounds = Vec::with_capacity(parts + 1);
+        list_bounds.push(0usize);
+        for &t in &totals {
+            list_bounds.push(list_bounds[list_bounds.len() - 1] + t as usize);
         }
-        self.start.clear();
-        self.start.extend_from_slice(fill);
-        self.neighbours.clear();
-        self.neighbours.resize(fill[n] as usize, 0);
-        let list_bounds: Vec<usize> = bounds.iter().map(|&x| fill[x] as usize).collect();
+        // Every entry is written below: no need to clear what a longer list left.
+        self.neighbours.resize(list_bounds[parts], 0);
         let ranges = split_at_bounds(&mut self.neighbours, &list_bounds)
             .into_iter()
-            .zip(split_at_bounds(&mut fill[..n], &bounds))
+            .zip(split_at_bounds(&mut start[1..], &bounds))
+            .zip(split_at_bounds(later, &bounds))
+            .zip(split_at_bounds(fill, &bounds))
             .zip(bounds.windows(2).zip(&list_bounds));
-        crate::threads::for_each_chunk(ranges, |_, ((lists, cursor), (r, &base))| {
-            let (a, b) = (r[0] as u32, r[1] as u32);
-            let mut put = |x: u32, partner: u32| {
-                let c = &mut cursor[(x - a) as usize];
-                lists[*c as usize - base] = partner;
-                *c += 1;
-            };
-            for (i, j) in pairs_until(pairs, b) {
-                if i >= a {
-                    put(i, j);
+        crate::threads::for_each_chunk(
+            ranges,
+            |_, ((((lists, ends), earlier), cursor), (r, &base))| {
+                let (a, b) = (r[0] as u32, r[1] as u32);
+                // Prefix sums from the range's first offset: `cursor` the next free entry of each
+                // list, `ends` where each ends, `earlier` where its partners j > i begin.
+                let mut at = base as u32;
+                for ((end, e), c) in ends
+                    .iter_mut()
+                    .zip(earlier.iter_mut())
+                    .zip(cursor.iter_mut())
+                {
+                    *c = at;
+                    *e += at;
+                    at += *end;
+                    *end = at;
                 }
-                if (a..b).contains(&j) {
-                    put(j, i);
+                let mut put = |x: u32, partner: u32| {
+                    let c = &mut cursor[(x - a) as usize];
+                    lists[*c as usize - base] = partner;
+                    *c += 1;
+                };
+                for (i, j) in pairs_touching(pairs, a, b) {
+                    if i >= a {
+                        put(i, j);
+                    }
+                    if (a..b).contains(&j) {
+                        put(j, i);
+                    }
                 }
-            }
-        });
+            },
+        );
     }
 
     /// Pairs closer than `contact_radius` that are neither joined by a bond slot (intact, or
@@ -860,51 +877,194 @@ fn around(
         .copied()
 }
 
+/// The cells of the sorted `order`: runs of equal key, each's first index into `start` (and
+/// `n` after the last) and its key into `keys`. One contiguous range of particles per thread,
+/// counted then written; without branches on whether a particle starts a cell (most do, not
+/// all: a branch on it is often mispredicted).
+fn find_cells(order: &[(u64, u32)], start: &mut Vec<u32>, keys: &mut Vec<u64>) {
+    let n = order.len();
+    let new_cell = |i: usize| i == 0 || order[i].0 != order[i - 1].0;
+    // Writes the cells starting in `range` to `s` and `k` (room for at least as many) and
+    // returns their number. Every particle writes at the next free place, which moves on
+    // only at a new cell; the last place may be written again after the range's last new
+    // cell, so it is put right at the end.
+    let write = |range: std::ops::Range<usize>, s: &mut [u32], k: &mut [u64]| {
+        let Some(last) = s.len().checked_sub(1) else {
+            return 0;
+        };
+        let (mut c, mut last_start) = (0, range.start);
+        for i in range {
+            let fresh = new_cell(i);
+            s[c.min(last)] = i as u32;
+            k[c.min(last)] = order[i].0;
+            last_start = if fresh { i } else { last_start };
+            c += usize::from(fresh);
+        }
+        if c > 0 {
+            s[c - 1] = last_start as u32;
+            k[c - 1] = order[last_start].0;
+        }
+        c
+    };
+    let parts = rayon::current_num_threads().clamp(1, n.max(1));
+    if parts == 1 {
+        // One pass into room for all, then cut to size.
+        start.resize(n, 0);
+        keys.resize(n, 0);
+        let c = write(0..n, start, keys);
+        start.truncate(c);
+        keys.truncate(c);
+    } else {
+        // One contiguous range of particles per thread: count, then write in place.
+        let bounds: Vec<usize> = (0..=parts).map(|t| n * t / parts).collect();
+        let mut counts = vec![0usize; parts];
+        let ranges = counts.iter_mut().zip(bounds.windows(2));
+        crate::threads::for_each_chunk(ranges, |_, (count, r)| {
+            *count = (r[0]..r[1]).map(|i| usize::from(new_cell(i))).sum();
+        });
+        let mut at = vec![0usize];
+        for &c in &counts {
+            at.push(at[at.len() - 1] + c);
+        }
+        start.resize(at[parts], 0);
+        keys.resize(at[parts], 0);
+        let ranges = split_at_bounds(start, &at)
+            .into_iter()
+            .zip(split_at_bounds(keys, &at))
+            .zip(bounds.windows(2));
+        crate::threads::for_each_chunk(ranges, |_, ((s, k), r)| {
+            write(r[0]..r[1], s, k);
+        });
+    }
+    start.push(n as u32);
+}
+
 /// Sorts `order` ((key, index) of each particle, in index order) by key, then index, given
-/// `hint`: each particle's key at the last sort, which left the particles in key order. The
-/// particles whose key equals their hint form a sequence already in order (checked as it is
-/// taken: one whose key falls below the last kept is moved instead); only the others, those
-/// that changed cells, are sorted, then the two are merged. Elements are distinct, so the
-/// result is the one sorted order whatever the hint.
+/// `hint`: each particle's key at the last sort, which left the particles in key order, so the
+/// hint ascends with the index. The particles whose key equals their hint then form a
+/// sequence already in order (checked: if it is not, everything is sorted); only the others,
+/// those that changed cells, are sorted, then the two are merged. Elements are distinct, so
+/// the result is the one sorted order whatever the hint.
 fn sort_by_hint(
-    order: &mut Vec<(u64, u32)>,
+    order: &mut [(u64, u32)],
     hint: &[u64],
     kept: &mut Vec<(u64, u32)>,
     moved: &mut Vec<(u64, u32)>,
 ) {
-    kept.clear();
-    moved.clear();
-    let mut last = 0u64;
-    for &o in order.iter() {
-        if o.0 == hint[o.1 as usize] && o.0 >= last {
-            last = o.0;
-            kept.push(o);
-        } else {
-            moved.push(o);
+    let n = order.len();
+    let unchanged = |o: &(u64, u32)| o.0 == hint[o.1 as usize];
+    // Copies a range of `order` to the two sides; returns how many went to each and whether
+    // the kept ones ascend.
+    let split = |part: &[(u64, u32)], k: &mut [(u64, u32)], m: &mut [(u64, u32)]| {
+        let (mut a, mut b, mut up) = (0, 0, true);
+        for o in part {
+            if unchanged(o) {
+                up &= a == 0 || k[a - 1] < *o;
+                k[a] = *o;
+                a += 1;
+            } else {
+                m[b] = *o;
+                b += 1;
+            }
         }
+        (a, b, up)
+    };
+    let parts = rayon::current_num_threads().clamp(1, n.max(1));
+    let ascending = if parts == 1 {
+        // One pass into room for all, then cut to size.
+        kept.resize(n, (0, 0));
+        moved.resize(n, (0, 0));
+        let (a, b, up) = split(order, kept, moved);
+        kept.truncate(a);
+        moved.truncate(b);
+        up
+    } else {
+        // One contiguous range of `order` per thread: count, then copy each side to its
+        // place.
+        let bounds: Vec<usize> = (0..=parts).map(|t| n * t / parts).collect();
+        let mut counts = vec![0usize; parts];
+        let ranges = counts.iter_mut().zip(bounds.windows(2));
+        crate::threads::for_each_chunk(ranges, |_, (count, r)| {
+            *count = order[r[0]..r[1]].iter().filter(|o| unchanged(o)).count();
+        });
+        let (mut kept_at, mut moved_at) = (vec![0usize], vec![0usize]);
+        for (t, &c) in counts.iter().enumerate() {
+            kept_at.push(kept_at[t] + c);
+            moved_at.push(moved_at[t] + (bounds[t + 1] - bounds[t]) - c);
+        }
+        kept.resize(kept_at[parts], (0, 0));
+        moved.resize(moved_at[parts], (0, 0));
+        let mut ascending = vec![true; parts];
+        let ranges = split_at_bounds(kept, &kept_at)
+            .into_iter()
+            .zip(split_at_bounds(moved, &moved_at))
+            .zip(ascending.iter_mut().zip(bounds.windows(2)));
+        crate::threads::for_each_chunk(ranges, |_, ((k, m), (up, r))| {
+            *up = split(&order[r[0]..r[1]], k, m).2;
+        });
+        // Across the ranges' joins too.
+        let joined = kept_at[1..parts]
+            .iter()
+            .all(|&c| c == 0 || c == kept.len() || kept[c - 1] < kept[c]);
+        joined && ascending.iter().all(|&u| u)
+    };
+    if !ascending {
+        order.par_sort();
+        return;
     }
     moved.par_sort_unstable();
-    order.clear();
-    let (mut a, mut b) = (0, 0);
-    while a < kept.len() && b < moved.len() {
-        if kept[a] < moved[b] {
-            order.push(kept[a]);
-            a += 1;
-        } else {
-            order.push(moved[b]);
-            b += 1;
-        }
-    }
-    order.extend_from_slice(&kept[a..]);
-    order.extend_from_slice(&moved[b..]);
+    merge(kept, moved, order);
 }
 
-/// The pairs of the search's chunks in order, up to the first whose particle `i` is `b` or
-/// more (pairs come ordered by `i`: those after it have both ends at `b` or more).
-fn pairs_until(pairs: &[(Vec<(u32, u32)>, f64)], b: u32) -> impl Iterator<Item = (u32, u32)> + '_ {
+/// Merges the ascending sequences `a` and `b` of distinct elements into `out` (of their
+/// combined length), one contiguous piece of `out` per thread: each piece's share of `a` and
+/// `b` is found by bisection (the merge path).
+fn merge<T: Ord + Copy + Send + Sync>(a: &[T], b: &[T], out: &mut [T]) {
+    let n = out.len();
+    debug_assert_eq!(n, a.len() + b.len());
+    let parts = rayon::current_num_threads().clamp(1, n.max(1));
+    let bounds: Vec<usize> = (0..=parts).map(|t| n * t / parts).collect();
+    // How many of the first p merged elements come from `a`: the least i whose a[i] does not
+    // come before b[p - i - 1] (the test flips once as i grows).
+    let from_a = |p: usize| {
+        let (mut lo, mut hi) = (p.saturating_sub(b.len()), p.min(a.len()));
+        while lo < hi {
+            let i = (lo + hi) / 2;
+            if a[i] < b[p - i - 1] {
+                lo = i + 1;
+            } else {
+                hi = i;
+            }
+        }
+        lo
+    };
+    let cuts: Vec<usize> = bounds.iter().map(|&p| from_a(p)).collect();
+    let pieces = split_at_bounds(out, &bounds)
+        .into_iter()
+        .zip(bounds.windows(2).zip(cuts.windows(2)));
+    crate::threads::for_each_chunk(pieces, |_, (out, (p, c))| {
+        let (mut a, mut b) = (&a[c[0]..c[1]], &b[p[0] - c[0]..p[1] - c[1]]);
+        for o in out.iter_mut() {
+            // The piece holds exactly its share: one side runs out only at the end.
+            if b.is_empty() || (!a.is_empty() && a[0] < b[0]) {
+                *o = a[0];
+                a = &a[1..];
+            } else {
+                *o = b[0];
+                b = &b[1..];
+            }
+        }
+    });
+}
+
+/// The pairs of the search's chunks in order that can have an end in `a..b`: pairs come
+/// ordered by their first particle `i` (and j > i), so it stops at the first with `i` at `b`
+/// or more, and skips the chunks whose every `j` is below `a`.
+fn pairs_touching(pairs: &[ChunkPairs], a: u32, b: u32) -> impl Iterator<Item = (u32, u32)> + '_ {
     pairs
         .iter()
-        .flat_map(|c| &c.0)
+        .filter(move |c| c.max_j >= a)
+        .flat_map(|c| &c.pairs)
         .copied()
         .take_while(move |&(i, _)| i < b)
 }
@@ -991,6 +1151,15 @@ fn adjacent_blocks(blocks: &[(u64, DVec3, u32)]) -> Vec<(u32, u32, f64)> {
     chunks.concat()
 }
 
+/// The pairs (i, j > i) one chunk of cells found, in order, with the largest j among them
+/// and the largest squared relative speed measured.
+#[derive(Debug, Default)]
+struct ChunkPairs {
+    pairs: Vec<(u32, u32)>,
+    max_j: u32,
+    max_w2: f64,
+}
+
 /// What the pair search reads, in the sorted particle order: the coordinates as separate
 /// arrays, the bond slots and the velocities; and the squared list radius.
 struct PairSearch<'a> {
@@ -1066,7 +1235,7 @@ mod tests {
     use crate::state::{Body, NO_BOND};
 
     #[test]
-    fn sort_by_hint_is_the_sort_whatever_the_hint() {
+    fn sort_by_hint_is_the_sort_whatever_the_hint_and_threads() {
         // Keys from a small generator, hints that are right, partly right, or not sorted.
         let mut x = 0x2545_f491_4f6c_dd1du64;
         let mut next = move |m: u64| {
@@ -1092,9 +1261,28 @@ mod tests {
                 .collect();
             let mut want = input.clone();
             want.sort_unstable();
-            let mut got = input;
-            sort_by_hint(&mut got, &hint, &mut Vec::new(), &mut Vec::new());
-            assert_eq!(got, want, "case {case}");
+            // The cells: runs of equal key.
+            let mut want_start: Vec<u32> = (0..n as u32)
+                .filter(|&i| i == 0 || want[i as usize].0 != want[i as usize - 1].0)
+                .collect();
+            let want_keys: Vec<u64> = want_start.iter().map(|&i| want[i as usize].0).collect();
+            want_start.push(n as u32);
+            // One range per thread: one, two, and more ranges than cores.
+            for threads in [1, 2, 3, 7] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .expect("a pool");
+                pool.install(|| {
+                    let mut got = input.clone();
+                    sort_by_hint(&mut got, &hint, &mut Vec::new(), &mut Vec::new());
+                    assert_eq!(got, want, "case {case}, {threads} threads");
+                    let (mut start, mut keys) = (vec![9; 3], Vec::new());
+                    find_cells(&got, &mut start, &mut keys);
+                    assert_eq!(start, want_start, "case {case}, {threads} threads");
+                    assert_eq!(keys, want_keys, "case {case}, {threads} threads");
+                });
+            }
         }
     }
 
