@@ -119,6 +119,8 @@ pub struct NeighbourList {
     block_keys: Vec<u64>,
     /// Each particle's block (dense index, in order of first appearance at the build).
     block_of: Vec<u32>,
+    /// The runs of particles in one block, at the build.
+    block_runs: BlockRuns,
     /// Adjacent blocks (a, b) in the forward half (each unordered pair once, no block with
     /// itself) and |u_a - u_b|, m/s.
     block_pairs: Vec<(u32, u32, f64)>,
@@ -264,7 +266,7 @@ impl NeighbourList {
         // The blocks derive from the positions and frames at the build, which are saved.
         if self.block > 0.0 {
             let keys = block_keys_of(&self.pos_at_build, self.block, &mut self.block_keys);
-            let firsts = dense_blocks(keys, &mut self.block_of);
+            let firsts = self.block_runs.find(keys, &mut self.block_of);
             let blocks: Vec<(u64, DVec3)> = firsts
                 .iter()
                 .map(|&i| (keys[i], self.frame_vel[i]))
@@ -432,24 +434,24 @@ impl NeighbourList {
     /// block keys are those [`Self::split_coordinates`] found.
     fn block_means(&mut self, p: &Particles) -> Vec<(u64, DVec3)> {
         let keys = &self.block_keys[..];
-        let firsts = dense_blocks(keys, &mut self.block_of);
-        // Sums in particle order (fixed by the sort), one add per run of equal block: runs
-        // are common in cell order.
-        let mut sums = vec![(DVec3::ZERO, 0.0f64); firsts.len()];
-        let block_of = &self.block_of;
-        let n = p.len();
-        let mut i = 0;
-        while i < n {
-            let mut j = i;
+        let firsts = self.block_runs.find(keys, &mut self.block_of);
+        // Sums in particle order (fixed by the sort): each run's in turn, then the runs' of a
+        // block in run order. Runs are common in cell order.
+        let runs = &self.block_runs;
+        let vel = &p.vel;
+        let mut run_sums = Vec::with_capacity(runs.block.len());
+        run_sums.par_extend(runs.start.par_windows(2).map(|w| {
             let mut sum = DVec3::ZERO;
-            while j < n && block_of[j] == block_of[i] {
-                sum += p.vel[j];
-                j += 1;
+            for v in &vel[w[0] as usize..w[1] as usize] {
+                sum += *v;
             }
-            let e = &mut sums[block_of[i] as usize];
+            sum
+        }));
+        let mut sums = vec![(DVec3::ZERO, 0.0f64); firsts.len()];
+        for ((&b, &sum), w) in runs.block.iter().zip(&run_sums).zip(runs.start.windows(2)) {
+            let e = &mut sums[b as usize];
             e.0 += sum;
-            e.1 += (j - i) as f64;
-            i = j;
+            e.1 += (w[1] - w[0]) as f64;
         }
         let blocks: Vec<(u64, DVec3)> = firsts
             .iter()
@@ -878,31 +880,41 @@ fn around(
 }
 
 /// The cells of the sorted `order`: runs of equal key, each's first index into `start` (and
-/// `n` after the last) and its key into `keys`. One contiguous range of particles per thread,
-/// counted then written; without branches on whether a particle starts a cell (most do, not
-/// all: a branch on it is often mispredicted).
+/// `n` after the last) and its key into `keys`.
 fn find_cells(order: &[(u64, u32)], start: &mut Vec<u32>, keys: &mut Vec<u64>) {
-    let n = order.len();
-    let new_cell = |i: usize| i == 0 || order[i].0 != order[i - 1].0;
-    // Writes the cells starting in `range` to `s` and `k` (room for at least as many) and
-    // returns their number. Every particle writes at the next free place, which moves on
-    // only at a new cell; the last place may be written again after the range's last new
-    // cell, so it is put right at the end.
+    find_runs(order.len(), |i| order[i].0, start, keys);
+}
+
+/// The runs of equal `key(i)` among `0..n`: each run's first index into `start` (and `n`
+/// after the last) and its key into `keys`. One contiguous range of indices per thread,
+/// counted then written; without branches on whether an index starts a run (a branch on it
+/// is often mispredicted).
+fn find_runs(
+    n: usize,
+    key: impl Fn(usize) -> u64 + Sync,
+    start: &mut Vec<u32>,
+    keys: &mut Vec<u64>,
+) {
+    let new_run = |i: usize| i == 0 || key(i) != key(i - 1);
+    // Writes the runs starting in `range` to `s` and `k` (room for at least as many) and
+    // returns their number. Every index writes at the next free place, which moves on only
+    // at a new run; the last place may be written again after the range's last new run, so
+    // it is put right at the end.
     let write = |range: std::ops::Range<usize>, s: &mut [u32], k: &mut [u64]| {
         let Some(last) = s.len().checked_sub(1) else {
             return 0;
         };
         let (mut c, mut last_start) = (0, range.start);
         for i in range {
-            let fresh = new_cell(i);
+            let fresh = new_run(i);
             s[c.min(last)] = i as u32;
-            k[c.min(last)] = order[i].0;
+            k[c.min(last)] = key(i);
             last_start = if fresh { i } else { last_start };
             c += usize::from(fresh);
         }
         if c > 0 {
             s[c - 1] = last_start as u32;
-            k[c - 1] = order[last_start].0;
+            k[c - 1] = key(last_start);
         }
         c
     };
@@ -915,12 +927,12 @@ fn find_cells(order: &[(u64, u32)], start: &mut Vec<u32>, keys: &mut Vec<u64>) {
         start.truncate(c);
         keys.truncate(c);
     } else {
-        // One contiguous range of particles per thread: count, then write in place.
+        // One contiguous range of indices per thread: count, then write in place.
         let bounds: Vec<usize> = (0..=parts).map(|t| n * t / parts).collect();
         let mut counts = vec![0usize; parts];
         let ranges = counts.iter_mut().zip(bounds.windows(2));
         crate::threads::for_each_chunk(ranges, |_, (count, r)| {
-            *count = (r[0]..r[1]).map(|i| usize::from(new_cell(i))).sum();
+            *count = (r[0]..r[1]).map(|i| usize::from(new_run(i))).sum();
         });
         let mut at = vec![0usize];
         for &c in &counts {
@@ -1089,27 +1101,40 @@ fn block_keys_of<'k>(pos: &[DVec3], block: f64, keys: &'k mut Vec<u64>) -> &'k [
     keys
 }
 
-/// Dense block indices in order of first appearance into `block_of`; returns each block's
-/// first particle.
-fn dense_blocks(keys: &[u64], block_of: &mut Vec<u32>) -> Vec<usize> {
-    let mut index: FxHashMap<u64, u32> = FxHashMap::default();
-    let mut firsts = Vec::new();
-    block_of.clear();
-    block_of.resize(keys.len(), 0);
-    let mut i = 0;
-    while i < keys.len() {
-        let mut j = i;
-        while j < keys.len() && keys[j] == keys[i] {
-            j += 1;
+/// Runs of particles in one block (`keys` each particle's block key): each run's first
+/// particle (and `n` after the last), key and dense block index, the blocks numbered in order of
+/// first appearance.
+#[derive(Debug, Default)]
+struct BlockRuns {
+    start: Vec<u32>,
+    keys: Vec<u64>,
+    block: Vec<u32>,
+}
+
+impl BlockRuns {
+    /// The runs of `keys`, and each particle's dense block index into `block_of`; returns
+    /// each block's first particle.
+    fn find(&mut self, keys: &[u64], block_of: &mut Vec<u32>) -> Vec<usize> {
+        find_runs(keys.len(), |i| keys[i], &mut self.start, &mut self.keys);
+        // Numbering in order of first appearance: one lookup per run.
+        let mut index: FxHashMap<u64, u32> = FxHashMap::default();
+        let mut firsts = Vec::new();
+        self.block.clear();
+        for (r, &k) in self.keys.iter().enumerate() {
+            let b = *index.entry(k).or_insert_with(|| {
+                firsts.push(self.start[r] as usize);
+                (firsts.len() - 1) as u32
+            });
+            self.block.push(b);
         }
-        let b = *index.entry(keys[i]).or_insert_with(|| {
-            firsts.push(i);
-            (firsts.len() - 1) as u32
-        });
-        block_of[i..j].fill(b);
-        i = j;
+        block_of.resize(keys.len(), 0);
+        let bounds: Vec<usize> = self.start.iter().map(|&i| i as usize).collect();
+        split_at_bounds(block_of, &bounds)
+            .into_par_iter()
+            .zip(self.block.par_iter())
+            .for_each(|(run, &b)| run.fill(b));
+        firsts
     }
-    firsts
 }
 
 /// The adjacent pairs among `blocks` (key, frame velocity, dense index; sorted by key), each
