@@ -644,8 +644,8 @@ impl NeighbourList {
     /// gets its entries in pair order whatever the split. Only the ranges' totals are added up
     /// serially.
     fn fill_lists(&mut self, pairs: &[ChunkPairs], n: usize) {
-        let parts = rayon::current_num_threads().clamp(1, n.max(1));
-        let bounds: Vec<usize> = (0..=parts).map(|t| n * t / parts).collect();
+        let bounds = thread_bounds(n);
+        let parts = bounds.len() - 1;
         // Counts first: `start[i + 1]` the length of i's list, `later[i]` its partners k < i
         // (they lead its list); then both become offsets into `neighbours`.
         let (start, later, fill) = (&mut self.start, &mut self.later, &mut self.fill);
@@ -672,11 +672,7 @@ impl NeighbourList {
             }
             *total = count.iter().sum();
         });
-        let mut list_bounds = Vec::with_capacity(parts + 1);
-        list_bounds.push(0usize);
-        for &t in &totals {
-            list_bounds.push(list_bounds[list_bounds.len() - 1] + t as usize);
-        }
+        let list_bounds = offsets(totals.iter().map(|&t| t as usize));
         // Every entry is written below: no need to clear what a longer list left.
         self.neighbours.resize(list_bounds[parts], 0);
         let ranges = split_at_bounds(&mut self.neighbours, &list_bounds)
@@ -918,7 +914,8 @@ fn find_runs(
         }
         c
     };
-    let parts = rayon::current_num_threads().clamp(1, n.max(1));
+    let bounds = thread_bounds(n);
+    let parts = bounds.len() - 1;
     if parts == 1 {
         // One pass into room for all, then cut to size.
         start.resize(n, 0);
@@ -928,16 +925,12 @@ fn find_runs(
         keys.truncate(c);
     } else {
         // One contiguous range of indices per thread: count, then write in place.
-        let bounds: Vec<usize> = (0..=parts).map(|t| n * t / parts).collect();
         let mut counts = vec![0usize; parts];
         let ranges = counts.iter_mut().zip(bounds.windows(2));
         crate::threads::for_each_chunk(ranges, |_, (count, r)| {
             *count = (r[0]..r[1]).map(|i| usize::from(new_run(i))).sum();
         });
-        let mut at = vec![0usize];
-        for &c in &counts {
-            at.push(at[at.len() - 1] + c);
-        }
+        let at = offsets(counts);
         start.resize(at[parts], 0);
         keys.resize(at[parts], 0);
         let ranges = split_at_bounds(start, &at)
@@ -981,7 +974,8 @@ fn sort_by_hint(
         }
         (a, b, up)
     };
-    let parts = rayon::current_num_threads().clamp(1, n.max(1));
+    let bounds = thread_bounds(n);
+    let parts = bounds.len() - 1;
     let ascending = if parts == 1 {
         // One pass into room for all, then cut to size.
         kept.resize(n, (0, 0));
@@ -993,17 +987,18 @@ fn sort_by_hint(
     } else {
         // One contiguous range of `order` per thread: count, then copy each side to its
         // place.
-        let bounds: Vec<usize> = (0..=parts).map(|t| n * t / parts).collect();
         let mut counts = vec![0usize; parts];
         let ranges = counts.iter_mut().zip(bounds.windows(2));
         crate::threads::for_each_chunk(ranges, |_, (count, r)| {
             *count = order[r[0]..r[1]].iter().filter(|o| unchanged(o)).count();
         });
-        let (mut kept_at, mut moved_at) = (vec![0usize], vec![0usize]);
-        for (t, &c) in counts.iter().enumerate() {
-            kept_at.push(kept_at[t] + c);
-            moved_at.push(moved_at[t] + (bounds[t + 1] - bounds[t]) - c);
-        }
+        let kept_at = offsets(counts.iter().copied());
+        let moved_at = offsets(
+            counts
+                .iter()
+                .zip(bounds.windows(2))
+                .map(|(&c, r)| r[1] - r[0] - c),
+        );
         kept.resize(kept_at[parts], (0, 0));
         moved.resize(moved_at[parts], (0, 0));
         let mut ascending = vec![true; parts];
@@ -1034,8 +1029,7 @@ fn sort_by_hint(
 fn merge<T: Ord + Copy + Send + Sync>(a: &[T], b: &[T], out: &mut [T]) {
     let n = out.len();
     debug_assert_eq!(n, a.len() + b.len());
-    let parts = rayon::current_num_threads().clamp(1, n.max(1));
-    let bounds: Vec<usize> = (0..=parts).map(|t| n * t / parts).collect();
+    let bounds = thread_bounds(n);
     // How many of the first p merged elements come from `a`: the least i whose a[i] does not
     // come before b[p - i - 1] (the test flips once as i grows).
     let from_a = |p: usize| {
@@ -1079,6 +1073,23 @@ fn pairs_touching(pairs: &[ChunkPairs], a: u32, b: u32) -> impl Iterator<Item = 
         .flat_map(|c| &c.pairs)
         .copied()
         .take_while(move |&(i, _)| i < b)
+}
+
+/// Bounds of one contiguous range of `0..n` per thread of the current pool (first 0, last
+/// `n`; at least one range).
+fn thread_bounds(n: usize) -> Vec<usize> {
+    let parts = rayon::current_num_threads().clamp(1, n.max(1));
+    (0..=parts).map(|t| n * t / parts).collect()
+}
+
+/// Where each of a sequence of pieces of the given `sizes` starts when laid end to end, and
+/// their total last.
+fn offsets(sizes: impl IntoIterator<Item = usize>) -> Vec<usize> {
+    let mut at = vec![0usize];
+    for c in sizes {
+        at.push(at[at.len() - 1] + c);
+    }
+    at
 }
 
 /// `s` cut at the ascending offsets `bounds` (first 0, last `s.len()`): the pieces between
