@@ -113,6 +113,7 @@ pub struct NeighbourList {
     xs: Vec<f64>,
     ys: Vec<f64>,
     zs: Vec<f64>,
+    /// Each list's next free entry while the lists are filled.
     fill: Vec<u32>,
     /// The search's pairs, one entry per chunk of cells (kept from build to build).
     found: Vec<ChunkPairs>,

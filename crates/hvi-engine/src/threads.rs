@@ -13,9 +13,10 @@
 //! lasts, as an OpenMP program does under `OMP_WAIT_POLICY=active`; `sched_yield` hands the
 //! core over whenever another thread wants it.
 //!
-//! [`for_each_chunk`] runs the step's kernels over their chunks of particles: the stepping
-//! thread takes chunks from the front, the others from the back, and it waits for their last
-//! chunks by spinning. Each chunk writes its own partial results, which the caller combines
+//! [`for_each_chunk`] runs the step's kernels over their chunks of particles, and the
+//! neighbour build over its chunks of cells and its one range of particles per thread: the
+//! stepping thread takes chunks from the front, the others from the back, and it waits for
+//! their last chunks by spinning. Each chunk writes its own partial results, which the caller combines
 //! in chunk order, so results are the same whichever thread took a chunk, at any thread
 //! count.
 //!
@@ -66,8 +67,8 @@ pub fn with_awake_workers<R>(body: impl FnOnce() -> R) -> R {
 
 /// Calls `f(k, item)` for each of `items` (numbered from 0) on the current pool's threads,
 /// each item on one thread: the caller takes items from the front, the other threads from the
-/// back, as they come free (one lock of a queue per item). For the step's kernels, whose
-/// items are chunks of particles each writing its own results: unlike a rayon parallel
+/// back, as they come free (one lock of a queue per item). For the step's kernels and the
+/// neighbour build, whose items each write their own results: unlike a rayon parallel
 /// iterator, the calling thread waits for the other threads' last items by spinning, not on
 /// rayon's latch, where it would go to sleep after a few dozen yields and wake tens of
 /// microseconds late (see the module's doc).
