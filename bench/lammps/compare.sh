@@ -26,7 +26,8 @@
 #                      test: over long runs the trajectories part, as chaotic ones do)
 #       --skip-lammps  only run hvi
 #       --skip-hvi     only run LAMMPS (the data file is still made by hvi's probe run)
-#   HVI_STUDY=path  hvi-study binary (default target/release/hvi-study)
+#   HVI_STUDY=path  hvi-study binary (default $CARGO_TARGET_DIR/release/hvi-study, else
+#                   target/release/hvi-study)
 #   LMP=path        LAMMPS binary (default lmp)
 #
 # Everything runs serially unless --threads says otherwise; prefix with `nice -n 19` to be
@@ -88,7 +89,11 @@ if [[ -n "$STEPS" && -n "$END_TIME" ]]; then die "give STEPS or --end-time, not 
 [[ "$TABLEN" =~ ^[0-9]+$ ]] || die "--tablen must be an integer"
 
 # ---- tools -------------------------------------------------------------------------------
-HVI="${HVI_STUDY:-$ROOT/target/release/hvi-study}"
+# Where cargo put it: CARGO_TARGET_DIR when set (relative to the repository root, where the
+# README builds), else the repository's target/.
+TARGET_DIR="${CARGO_TARGET_DIR:-target}"
+[[ "$TARGET_DIR" = /* ]] || TARGET_DIR="$ROOT/$TARGET_DIR"
+HVI="${HVI_STUDY:-$TARGET_DIR/release/hvi-study}"
 LMP="${LMP:-lmp}"
 command -v python3 >/dev/null || die "python3 not found (needed for the bond table and log parsing)"
 [[ -x "$HVI" ]] || die "hvi-study binary not found at $HVI; build it with: cargo build --release -p hvi-study"
