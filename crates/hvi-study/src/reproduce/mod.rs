@@ -237,6 +237,10 @@ fn print_estimate(e: &Estimate) {
         report::fmt_num(e.particle_steps()),
         fmt_duration(e.seconds())
     );
+    if !e.source.is_empty() {
+        println!("  rate from: {}", e.source);
+        println!("  one machine's rate: on another CPU the time differs (docs/reproduction.md)");
+    }
 }
 
 /// The calibration study's targets (experiments_data): Figs. 11-12 score the best fit
