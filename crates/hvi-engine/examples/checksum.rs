@@ -1,6 +1,7 @@
 //! Runs the README's default scene (`studies/scenes/default.toml`: the calibration scene at 1e4
 //! particles, 32 us after first contact) to the end with a [`CloudObserver`], landing on every
-//! energy sample and cloud sample as `hvi-study run` does, and prints with full precision
+//! energy sample, cloud sample and render time (`analysis.render_times_s`) as `hvi-study run`
+//! does, so that its steps, bonds and cloud are those of the run's `summary.json`, and prints with full precision
 //! (`{:?}`) the steps, bonds broken, the final energy ledger, a checksum of positions and
 //! velocities and the cloud measurement.
 //!
@@ -8,7 +9,7 @@
 //! and comparing the output, which must be identical (it prints no timings):
 //!
 //! `cargo run --release -p hvi-engine --example checksum > after.txt`
-use hvi_engine::cloud::CloudObserver;
+use hvi_engine::cloud::{step_at_tau, CloudObserver};
 use hvi_engine::potential::ContactForm;
 use hvi_engine::scene::{
     Analysis, Geometry, Material, Resolution, RunSettings, SceneSpec, SizingRule, TimeStep,
@@ -60,6 +61,14 @@ fn main() {
     let mut observer = CloudObserver::new(&sim, &spec.analysis, spec.run.end_time_s);
     observer.observe(&sim);
     let energy_every = spec.run.energy_every;
+    // The run lands on the scene's render times whether or not it renders (they are the
+    // scene's, so pictures never change the trajectory).
+    let render_steps: Vec<u64> = spec
+        .analysis
+        .render_times_s
+        .iter()
+        .map(|&t| step_at_tau(&d, t))
+        .collect();
     let next_multiple = |s: u64, every: u64| (s / every + 1).saturating_mul(every);
     let mut max_drift: f64 = 0.0;
     let mut ledger_sum = 0.0;
@@ -68,6 +77,9 @@ fn main() {
         let mut next = d.steps.min(next_multiple(s, energy_every));
         if let Some(due) = observer.next_due(s) {
             next = next.min(due);
+        }
+        if let Some(&r) = render_steps.iter().filter(|&&r| r > s).min() {
+            next = next.min(r);
         }
         sim.step_until(next).expect("stable");
         let s = sim.step;
