@@ -1,9 +1,9 @@
 //! Runs the README's default scene (`studies/scenes/default.toml`: the calibration scene at 1e4
 //! particles, 32 us after first contact) to the end with a [`CloudObserver`], landing on every
 //! energy sample, cloud sample and render time (`analysis.render_times_s`) as `hvi-study run`
-//! does, so that its steps, bonds and cloud are those of the run's `summary.json`, and prints with full precision
-//! (`{:?}`) the steps, bonds broken, the final energy ledger, a checksum of positions and
-//! velocities and the cloud measurement.
+//! does, so that its steps, bonds and cloud are those of the run's `summary.json`, and prints
+//! with full precision (`{:?}`) the steps, bonds broken, the final energy ledger, a checksum of
+//! positions and velocities and the cloud measurement.
 //!
 //! A refactoring that must not change any number is checked by running this before and after
 //! and comparing the output, which must be identical (it prints no timings):
