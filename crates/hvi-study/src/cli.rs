@@ -7,10 +7,13 @@ use anyhow::{bail, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use hvi_run::checkpoint::Every;
 use hvi_run::exec::ExecOptions;
-use hvi_run::plan::{build_plan, Plan, PlanRequest};
+use hvi_run::plan::Plan;
 use hvi_run::slurm::SlurmOptions;
 use hvi_run::spec::Study;
-use hvi_run::study::default_out_dir;
+
+use crate::study::calibrate::config::Method;
+use crate::study::calibrate::CalibrateOptions;
+use crate::study::options::StudyOptions;
 
 /// Hypervelocity impact with the discrete element method (Watson & Steinhauser 2017).
 #[derive(Parser, Debug)]
@@ -119,45 +122,35 @@ pub struct StudyArgs {
 }
 
 impl StudyArgs {
+    /// The plain options these flags give.
+    pub fn options(&self) -> StudyOptions {
+        StudyOptions {
+            study: self.study.clone(),
+            tier: self.tier.clone(),
+            particles: self.particles,
+            sets: self.sets.clone(),
+            out: self.out.clone(),
+            threads: self.threads,
+            jobs: self.jobs,
+            checkpoint_every: self.checkpoint_every,
+            quiet: self.quiet,
+        }
+    }
+
     /// Loads the study, builds and validates its plan, and writes `plan.json`.
     pub fn plan(&self) -> Result<(Study, Plan, PathBuf)> {
-        let (study, plan, out) = self.build_plan()?;
-        plan.write(&out)?;
-        Ok((study, plan, out))
+        self.options().plan()
     }
 
     /// Loads the study and builds and validates its plan; returns it with the output
     /// directory, writing nothing.
     pub fn build_plan(&self) -> Result<(Study, Plan, PathBuf)> {
-        if self.threads == Some(0) {
-            anyhow::bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
-        }
-        if self.jobs == Some(0) {
-            anyhow::bail!("invalid value for `--jobs`: 0 (allowed: an integer >= 1)");
-        }
-        let study = Study::load(&self.study)?;
-        let plan = build_plan(
-            &study,
-            &PlanRequest {
-                tier: self.tier.clone(),
-                particles: self.particles,
-                set: self.sets.clone(),
-            },
-        )?;
-        let out = self
-            .out
-            .clone()
-            .unwrap_or_else(|| default_out_dir(&plan.study, &plan.tier, self.particles));
-        Ok((study, plan, out))
+        self.options().build_plan()
     }
 
     /// Execution options from the flags.
     pub fn exec_options(&self) -> ExecOptions {
-        ExecOptions {
-            threads: self.threads.unwrap_or(0),
-            jobs: self.jobs,
-            progress: !self.quiet,
-        }
+        self.options().exec_options()
     }
 }
 
@@ -172,13 +165,17 @@ pub struct CalibrateArgs {
     pub no_refine: bool,
     /// The search after the grid (overrides calibrate.method).
     #[arg(long, value_enum)]
-    pub method: Option<crate::study::calibrate::Method>,
+    pub method: Option<Method>,
     /// Nelder-Mead iterations at most (overrides calibrate.max_iters).
     #[arg(long)]
     pub max_iters: Option<u64>,
     /// Surrogate-search batches at most (overrides calibrate.max_batches).
     #[arg(long)]
     pub max_batches: Option<usize>,
+    /// Keep the searched box: an optimum or a confidence region on its edge is reported as
+    /// such instead of extending the axis beyond the grid (see docs/calibration.md).
+    #[arg(long)]
+    pub no_extend: bool,
     /// The seeds every point of the surrogate search runs at, e.g. `1,2,3` (overrides
     /// calibrate.seeds; one seed: the noise is calibrate.noise_floor).
     #[arg(long, value_delimiter = ',', value_name = "SEEDS")]
@@ -194,6 +191,42 @@ pub struct CalibrateArgs {
     /// With --slurm: seconds between looks at the queue while a batch runs (0.2 to 3600).
     #[arg(long, value_name = "S", default_value_t = 10.0)]
     pub poll: f64,
+}
+
+impl CalibrateArgs {
+    /// The plain options these flags give, checked: the Slurm flags only with `--slurm`,
+    /// `--threads` and `--jobs` only without.
+    pub fn options(&self) -> Result<CalibrateOptions> {
+        let slurm = if self.slurm {
+            if self.study.threads.is_some() {
+                bail!("calibrate --slurm: --threads is not used (each run gets --cpus-per-task threads)");
+            }
+            if self.study.jobs.is_some() {
+                bail!(
+                    "calibrate --slurm: --jobs is not used (--array-limit K caps the runs at once)"
+                );
+            }
+            Some((
+                self.slurm_flags.options(false, self.study.quiet)?,
+                self.poll,
+            ))
+        } else {
+            if self.slurm_flags.any_set() {
+                bail!("--partition, --time, --cpus-per-task, --array-limit and --sbatch-option are options of the Slurm job arrays: add --slurm");
+            }
+            None
+        };
+        Ok(CalibrateOptions {
+            study: self.study.options(),
+            no_refine: self.no_refine,
+            method: self.method,
+            max_iters: self.max_iters,
+            max_batches: self.max_batches,
+            seeds: self.seeds.clone(),
+            extend: !self.no_extend,
+            slurm,
+        })
+    }
 }
 
 /// `hvi-study validity-map` arguments.

@@ -51,13 +51,16 @@ pub fn dispatch(command: Command) -> Result<()> {
                 args.out.join("stability.md").display()
             );
         }),
-        Command::Plan(args) => crate::study::sweep::plan(&args),
+        Command::Plan(args) => crate::study::sweep::plan(&args.options()),
         Command::Sweep(args) => {
-            let r = crate::study::sweep::sweep(&args);
+            let r = crate::study::sweep::sweep(&args.options());
             tables_if_interrupted(&args, CollectAs::Sweep, r)
         }
         Command::Calibrate(args) => {
-            let r = crate::study::calibrate::calibrate(&args).map(|_| ());
+            let r = args
+                .options()
+                .and_then(|o| crate::study::calibrate::calibrate(&o))
+                .map(|_| ());
             tables_if_interrupted(&args.study, CollectAs::Calibrate, r)
         }
         Command::ValidityMap(args) => {

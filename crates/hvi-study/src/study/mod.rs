@@ -2,10 +2,9 @@
 //! the calibration maps ([`figures`]), `validity-map`, `stability` and `reanalyse`.
 
 pub mod calibrate;
-pub mod calibration;
 pub mod collect;
-pub mod ego;
 pub mod figures;
+pub mod options;
 pub mod reanalyse;
 pub mod stability;
 pub mod sweep;

@@ -1,7 +1,7 @@
 //! `hvi-study plan`, `sweep` and `run-unit`: a study planned, run whole, or one of its runs
 //! executed for an external scheduler.
 
-use crate::cli::StudyArgs;
+use super::options::StudyOptions;
 use anyhow::Result;
 
 use hvi_run::plan::Plan;
@@ -9,7 +9,7 @@ use hvi_run::store::{RunStatus, Store};
 use hvi_run::study::{execute_plan, job_of};
 
 /// `hvi-study plan`: validates a study and writes its plan.json without running anything.
-pub fn plan(args: &StudyArgs) -> Result<()> {
+pub fn plan(args: &StudyOptions) -> Result<()> {
     let (_, plan, out) = args.plan()?;
     let store = Store::open(&out)?;
     let mut done = 0;
@@ -36,7 +36,7 @@ pub fn plan(args: &StudyArgs) -> Result<()> {
 }
 
 /// `hvi-study sweep`: plans and executes every run of a study, writes results.csv/json.
-pub fn sweep(args: &StudyArgs) -> Result<()> {
+pub fn sweep(args: &StudyOptions) -> Result<()> {
     let (_, plan, out) = args.plan()?;
     let (_, report) = execute_plan(&plan, &out, &args.exec_options())?;
     eprintln!("{}", report.line());

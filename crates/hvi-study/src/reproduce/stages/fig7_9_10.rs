@@ -16,9 +16,8 @@ use hvi_run::store::{read_summary, Record};
 use super::Ctx;
 use super::{axis, completed_runs, index_of, mean, plan_records, timing};
 use super::{keeps_large_fragment, largest_fragment_bound};
-use crate::cli::CalibrateArgs;
 use crate::reproduce::report::{fmt_num, judge, short, Check, Figure, StageTiming, Value, Verdict};
-use crate::study::calibrate::calibrate;
+use crate::study::calibrate::{calibrate, CalibrateOptions};
 use crate::study::figures::field_of;
 
 /// Paper text of Fig. 7.
@@ -85,17 +84,9 @@ pub fn fig7_9_10(
     let t0 = Instant::now();
     let dir = ctx.runs.join(&plan.study);
     let cached = completed_runs(plan, &dir).unwrap_or(0);
-    let calibration = calibrate(&CalibrateArgs {
-        study: ctx.study_args(study_path, sref, &dir),
-        no_refine: true,
-        method: None,
-        max_iters: None,
-        max_batches: None,
-        seeds: None,
-        slurm: false,
-        slurm_flags: Default::default(),
-        poll: 10.0,
-    })?;
+    let calibration = calibrate(&CalibrateOptions::grid_only(
+        ctx.study_args(study_path, sref, &dir).options(),
+    ))?;
     // `calibrate` returns its result but not the grid's records: those are the store's.
     let records = plan_records(plan, &dir)?;
     let bound = largest_fragment_bound(&calibration.targets);

@@ -29,10 +29,9 @@ use hvi_analysis::surrogate::{
     self, converged, propose, seed_mean_noise, Observation, SearchBox, Surrogate,
 };
 use hvi_run::store::{Job, Record, RunStatus};
-use serde::{Deserialize, Serialize};
 
-use super::calibrate::{fmt_params, Refinement};
-use super::calibration::Evaluation;
+use super::problem::{fmt_params, Refinement};
+use super::result::{Evaluation, ParamRegion, Spread, Surface};
 
 /// The search's settings (`[calibrate]`).
 #[derive(Debug, Clone)]
@@ -45,37 +44,6 @@ pub(super) struct EgoSettings {
     pub max_batches: usize,
     /// The least noise assumed for the objective (a seed mean's standard error).
     pub noise_floor: f64,
-}
-
-/// The calibrated parameters' confidence region, in the parameters' own units.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct ParamRegion {
-    /// Per refined key, the lowest and highest value of the region.
-    pub intervals: BTreeMap<String, (f64, f64)>,
-    /// Per refined key, whether the region reaches the search box's edge there (the interval
-    /// may extend beyond what was searched).
-    pub at_boundary: BTreeMap<String, bool>,
-    /// The surrogate's minimum.
-    pub predicted_minimum: BTreeMap<String, f64>,
-    /// The predicted objective J at the minimum and the standard deviation of its log10.
-    pub predicted_objective: (f64, f64),
-    /// The region holds every point predicted below this objective J.
-    pub threshold: f64,
-    /// The share of the searched box inside the region.
-    pub share_of_box: f64,
-}
-
-/// A target's observable over the seeds at the best point.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Spread {
-    /// The target.
-    pub target: String,
-    /// The observable's seed mean.
-    pub mean: f64,
-    /// Its standard deviation over the seeds (0 with one seed).
-    pub sd: f64,
-    /// Seeds with a value.
-    pub seeds: usize,
 }
 
 /// What the search found.
@@ -209,17 +177,6 @@ pub(super) fn search(
 
 /// Points per axis of [`Surface`].
 const SURFACE_POINTS: usize = 33;
-
-/// The surrogate's prediction over the first two searched axes, the others at the chosen
-/// point: what the search believes J looks like between the runs (the calibration's objective
-/// map draws it).
-#[derive(Debug, Clone)]
-pub struct Surface {
-    /// The keys along x and y.
-    pub keys: (String, String),
-    /// Predicted log10 J over the box, in the keys' own units.
-    pub field: hvi_analysis::contour::Field,
-}
 
 /// The [`Surface`] of the final model (None with fewer than two searched axes, or when the
 /// prediction fails).

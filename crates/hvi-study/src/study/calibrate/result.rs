@@ -78,17 +78,59 @@ pub struct CalibrationResult {
     pub noise_source: Option<String>,
     /// The surrogate's predicted log10 J over two searched axes (ego; `surrogate.csv`).
     #[serde(skip)]
-    pub surface: Option<super::ego::Surface>,
+    pub surface: Option<Surface>,
     /// The calibrated parameters' confidence region (ego).
     #[serde(default)]
-    pub region: Option<super::ego::ParamRegion>,
+    pub region: Option<ParamRegion>,
     /// At the best point, each target's observable over the seeds.
     #[serde(default)]
-    pub best_spread: Vec<super::ego::Spread>,
+    pub best_spread: Vec<Spread>,
     /// Runs simulated by this invocation (grid, search and the paper's point).
     #[serde(default)]
     pub runs_made: usize,
     /// Wall time of this invocation, s.
     #[serde(default)]
     pub wall_seconds: f64,
+}
+
+/// The calibrated parameters' confidence region, in the parameters' own units.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ParamRegion {
+    /// Per refined key, the lowest and highest value of the region.
+    pub intervals: BTreeMap<String, (f64, f64)>,
+    /// Per refined key, whether the region reaches the search box's edge there (the interval
+    /// may extend beyond what was searched).
+    pub at_boundary: BTreeMap<String, bool>,
+    /// The surrogate's minimum.
+    pub predicted_minimum: BTreeMap<String, f64>,
+    /// The predicted objective J at the minimum and the standard deviation of its log10.
+    pub predicted_objective: (f64, f64),
+    /// The region holds every point predicted below this objective J.
+    pub threshold: f64,
+    /// The share of the searched box inside the region.
+    pub share_of_box: f64,
+}
+
+/// A target's observable over the seeds at the best point.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Spread {
+    /// The target.
+    pub target: String,
+    /// The observable's seed mean.
+    pub mean: f64,
+    /// Its standard deviation over the seeds (0 with one seed).
+    pub sd: f64,
+    /// Seeds with a value.
+    pub seeds: usize,
+}
+
+/// The surrogate's prediction over the first two searched axes, the others at the chosen
+/// point: what the search believes J looks like between the runs (the calibration's objective
+/// map draws it).
+#[derive(Debug, Clone)]
+pub struct Surface {
+    /// The keys along x and y.
+    pub keys: (String, String),
+    /// Predicted log10 J over the box, in the keys' own units.
+    pub field: hvi_analysis::contour::Field,
 }

@@ -1,0 +1,163 @@
+//! The `[calibrate]` section of a study file, and the search method it names.
+//!
+//! ```toml
+//! [calibrate]
+//! targets = "../experiments_data/calibration-shot.toml"   # relative to the study file
+//! weights = { fragment_size = 0.5 }       # optional: override target weights by name
+//! refine = ["material.eps_j", "material.kappa_n_m"]   # default: every axis with > 1 value
+//! log_axes = ["material.eps_j", "material.kappa_n_m"] # searched in log10 (default these two)
+//! method = "ego"          # or "nelder-mead"
+//! ```
+//!
+//! Every key is listed in docs/calibration.md.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use anyhow::{anyhow, bail, Result};
+use hvi_run::spec::Study;
+use serde::Deserialize;
+
+fn default_log_axes() -> Vec<String> {
+    vec!["material.eps_j".into(), "material.kappa_n_m".into()]
+}
+
+fn default_max_iters() -> u64 {
+    8
+}
+
+fn default_sd_tolerance() -> f64 {
+    0.02
+}
+
+fn default_batch() -> usize {
+    2
+}
+
+fn default_max_batches() -> usize {
+    8
+}
+
+fn default_noise_floor() -> f64 {
+    0.02
+}
+
+/// The search after the grid.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Efficient global optimisation: a kriging model of the objective, batches of runs by
+    /// expected improvement, stopped when the improvement left is below the seed noise.
+    #[default]
+    Ego,
+    /// Nelder-Mead (argmin) from the best grid point, one run at a time.
+    NelderMead,
+}
+
+impl Method {
+    /// The name as the study file and calibration.json spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Ego => "ego",
+            Method::NelderMead => "nelder-mead",
+        }
+    }
+}
+
+/// `[calibrate]` of a study file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrateConfig {
+    /// The target file, relative to the study file.
+    pub targets: PathBuf,
+    /// Weights by target name, overriding the target file's.
+    #[serde(default)]
+    pub weights: BTreeMap<String, f64>,
+    /// The axes the refinement moves (default: every axis with more than one value).
+    #[serde(default)]
+    pub refine: Option<Vec<String>>,
+    /// Axes refined in log10.
+    #[serde(default = "default_log_axes")]
+    pub log_axes: Vec<String>,
+    /// Nelder-Mead iterations at most.
+    #[serde(default = "default_max_iters")]
+    pub max_iters: u64,
+    /// Stop when the objective's standard deviation over the simplex falls below this.
+    #[serde(default = "default_sd_tolerance")]
+    pub sd_tolerance: f64,
+    /// The search after the grid: `ego` (default) or `nelder-mead`.
+    #[serde(default)]
+    pub method: Method,
+    /// ego: points per batch (run together; a batch of runs x seeds keeps every core busy).
+    #[serde(default = "default_batch")]
+    pub batch: usize,
+    /// ego: the seeds every point runs at (empty: the scene's seed only).
+    #[serde(default)]
+    pub seeds: Vec<u64>,
+    /// ego: batches at most.
+    #[serde(default = "default_max_batches")]
+    pub max_batches: usize,
+    /// ego: the least noise assumed for log10 of the objective (a seed mean's standard error);
+    /// with one seed it is the noise.
+    #[serde(default = "default_noise_floor")]
+    pub noise_floor: f64,
+}
+
+impl CalibrateConfig {
+    /// Reads `[calibrate]` of a study.
+    pub fn of(study: &Study) -> Result<CalibrateConfig> {
+        let v = study.calibrate.clone().ok_or_else(|| {
+            anyhow!(
+                "study `{}` has no [calibrate] section (it needs at least targets = \"...\")",
+                study.name
+            )
+        })?;
+        let cfg: CalibrateConfig = serde_path_to_error::deserialize(v).map_err(|e| {
+            let p = e.path().to_string();
+            anyhow!(
+                "study key `calibrate.{p}`: {}",
+                e.into_inner().message().trim()
+            )
+        })?;
+        if !(cfg.sd_tolerance.is_finite() && cfg.sd_tolerance >= 0.0) {
+            bail!(
+                "study key `calibrate.sd_tolerance`: {} (allowed: a number >= 0)",
+                cfg.sd_tolerance
+            );
+        }
+        if !(1..=64).contains(&cfg.batch) {
+            bail!(
+                "study key `calibrate.batch`: {} (allowed: 1 to 64 points per batch)",
+                cfg.batch
+            );
+        }
+        if cfg.max_batches > 1000 {
+            bail!(
+                "study key `calibrate.max_batches`: {} (allowed: 0 to 1000)",
+                cfg.max_batches
+            );
+        }
+        if !(cfg.noise_floor.is_finite() && cfg.noise_floor >= 0.0) {
+            bail!(
+                "study key `calibrate.noise_floor`: {} (allowed: a number >= 0)",
+                cfg.noise_floor
+            );
+        }
+        cfg.check_seeds("study key `calibrate.seeds`")?;
+        Ok(cfg)
+    }
+
+    /// The seeds are distinct (`what` names where they came from in the error).
+    pub(super) fn check_seeds(&self, what: &str) -> Result<()> {
+        let mut seeds = self.seeds.clone();
+        seeds.sort_unstable();
+        seeds.dedup();
+        if seeds.len() != self.seeds.len() {
+            bail!(
+                "{what}: {:?} names a seed twice (allowed: distinct seeds)",
+                self.seeds
+            );
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,334 @@
+//! The calibration's problem: a point of the searched parameters becomes a run through the
+//! store (at the study's other settings) and is scored against the targets. The grid, the
+//! searches and the paper's point all evaluate through it.
+
+use std::cell::RefCell;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Result};
+use hvi_analysis::observable::Observable;
+use hvi_analysis::score::{objective, Targets, MISSING_TERM};
+use hvi_run::plan::{fingerprint, validated_scene, Plan};
+use hvi_run::runner::Runner;
+use hvi_run::spec::{json_to_override, round_sig, Study};
+use hvi_run::store::{Job, Record, RunStatus, Store};
+use serde_json::Value;
+
+use super::config::CalibrateConfig;
+use super::result::Evaluation;
+
+/// The cost of a point outside the grid's box or with an invalid scene (no run is made).
+pub const OUTSIDE_COST: f64 = 10.0 * MISSING_TERM;
+
+/// The paper's best fit (Figs. 11-12): eps = 0.01 J, kappa = 4.56e6 N/m, rcut = 1.5 sigma.
+pub const PAPER_BEST: [(&str, f64); 3] = [
+    ("material.eps_j", hvi_engine::paper::BEST_EPS_J),
+    ("material.kappa_n_m", hvi_engine::paper::BEST_KAPPA_N_M),
+    (
+        "material.rcut_over_sigma",
+        hvi_engine::paper::BEST_RCUT_OVER_SIGMA,
+    ),
+];
+
+/// The numeric value of a JSON axis value.
+pub(super) fn as_num(v: &Value, key: &str) -> Result<f64> {
+    v.as_f64()
+        .ok_or_else(|| anyhow!("axis `{key}`: value {v} is not a number (calibrate needs numbers)"))
+}
+
+/// The refinement's problem: parameters in transformed coordinates -> objective, each point a
+/// run through the store.
+pub(super) struct Refinement<'a> {
+    pub(super) study: &'a Study,
+    pub(super) plan: &'a Plan,
+    pub(super) store: &'a Store,
+    pub(super) targets: &'a Targets,
+    /// Fixed overrides: the plan's common ones plus the non-refined axes at the best point.
+    pub(super) fixed: Vec<String>,
+    /// Refined keys, whether each is in log10, and the box in transformed coordinates.
+    pub(super) dims: Vec<Dim>,
+    pub(super) threads: usize,
+    /// Where batches of runs execute (here or as Slurm job arrays).
+    pub(super) runner: &'a Runner,
+    /// The study directory (the store's, and the Slurm submissions').
+    pub(super) out: &'a Path,
+    pub(super) progress: bool,
+    pub(super) log: RefCell<Vec<Evaluation>>,
+    pub(super) ran: RefCell<usize>,
+}
+
+impl Refinement<'_> {
+    /// Parameter values (by key) of a point in the search's coordinates.
+    pub(super) fn values(&self, x: &[f64]) -> BTreeMap<String, f64> {
+        self.dims
+            .iter()
+            .zip(x)
+            .map(|((k, log, _, _), &u)| {
+                let v = if *log { 10f64.powf(u) } else { u };
+                (k.clone(), round_sig(v, 6))
+            })
+            .collect()
+    }
+
+    /// The run of a parameter point (by key), at `seed` (None: the scene's), or why there is
+    /// none (its scene is invalid).
+    pub(super) fn job(
+        &self,
+        params: &BTreeMap<String, f64>,
+        seed: Option<u64>,
+    ) -> Result<std::result::Result<Job, String>> {
+        let mut set = self.fixed.clone();
+        for (k, v) in params {
+            set.push(format!("{k}={}", json_to_override(&serde_json::json!(v))?));
+        }
+        let mut job_params: serde_json::Map<String, Value> = params
+            .iter()
+            .map(|(k, v)| (k.clone(), serde_json::json!(v)))
+            .collect();
+        if let Some(seed) = seed {
+            set.push(format!("run.seed={seed}"));
+            job_params.insert("run.seed".into(), serde_json::json!(seed));
+        }
+        let scene = match validated_scene(self.study, &set) {
+            Ok(s) => s,
+            Err(e) => return Ok(Err(format!("invalid scene: {e:#}"))),
+        };
+        Ok(Ok(Job {
+            fingerprint: fingerprint(&scene, &self.plan.tier)?,
+            scene,
+            study: self.plan.study.clone(),
+            tier: self.plan.tier.clone(),
+            params: job_params,
+        }))
+    }
+
+    /// Evaluates a parameter point (by key), running it if the store lacks it.
+    pub(super) fn evaluate(
+        &self,
+        stage: &str,
+        params: &BTreeMap<String, f64>,
+    ) -> Result<Evaluation> {
+        let step = self
+            .log
+            .borrow()
+            .iter()
+            .filter(|e| e.stage == stage)
+            .count();
+        let outside = |status: String| Evaluation {
+            stage: stage.into(),
+            step,
+            params: params.clone(),
+            score: None,
+            objective: OUTSIDE_COST,
+            status,
+            cached: false,
+            dir: None,
+            seeds: Vec::new(),
+            seed_objectives: Vec::new(),
+        };
+        let job = match self.job(params, None)? {
+            Ok(job) => job,
+            Err(why) => return Ok(outside(why)),
+        };
+        let fp = job.fingerprint.clone();
+        let (record, cached) = match self.store.lookup(&fp)? {
+            Some(r) if r.status == RunStatus::Completed => (r, true),
+            _ => {
+                *self.ran.borrow_mut() += 1;
+                let record = match self.runner {
+                    Runner::Local(_) => self.store.execute(&job, self.threads)?,
+                    Runner::Slurm(_) => {
+                        let describe = |_: usize| fmt_params(params);
+                        let report = self.runner.execute(
+                            self.store,
+                            self.out,
+                            self.plan,
+                            std::slice::from_ref(&job),
+                            &describe,
+                            stage,
+                        )?;
+                        report
+                            .records
+                            .into_iter()
+                            .next()
+                            .ok_or_else(|| anyhow!("the run of {stage} has no record"))?
+                    }
+                };
+                (record, false)
+            }
+        };
+        let score = objective(&self.targets.targets, |n| record.observables.get(n));
+        let e = Evaluation {
+            stage: stage.into(),
+            step,
+            params: params.clone(),
+            objective: score.objective,
+            score: Some(score),
+            status: match record.status {
+                RunStatus::Completed => "completed".into(),
+                RunStatus::Failed => format!(
+                    "failed: {}",
+                    record.error.as_deref().unwrap_or("(no message)")
+                ),
+            },
+            cached,
+            dir: Some(hvi_run::plan::run_dir_name(&fp)),
+            seeds: Vec::new(),
+            seed_objectives: Vec::new(),
+        };
+        Ok(e)
+    }
+}
+
+pub(super) fn fmt_params(p: &BTreeMap<String, f64>) -> String {
+    p.iter()
+        .map(|(k, v)| format!("{}={v:.4e}", k.rsplit('.').next().unwrap_or(k)))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+pub(super) fn describe_eval(e: &Evaluation) -> String {
+    let mut s = format!("{}  J = {:.4}", fmt_params(&e.params), e.objective);
+    if let Some(score) = &e.score {
+        for t in &score.terms {
+            s.push_str(&format!(
+                "\n      {:<18} observed {:>12}  term {:.4} (weight {})",
+                t.name,
+                t.observed.map_or("n/a".to_string(), |v| format!("{v:.4e}")),
+                t.term,
+                t.weight
+            ));
+        }
+    }
+    s
+}
+
+/// A refined axis: its key, whether it is refined in log10, and the grid's box on it in
+/// those coordinates (lowest, highest).
+pub(super) type Dim = (String, bool, f64, f64);
+
+/// The axes the refinement moves (`calibrate.refine`, default every axis with more than one
+/// value) and their coordinates.
+pub(super) fn refined_axes(plan: &Plan, cfg: &CalibrateConfig) -> Result<(Vec<String>, Vec<Dim>)> {
+    let refine_keys: Vec<String> = match &cfg.refine {
+        Some(k) => k.clone(),
+        None => plan
+            .axes
+            .iter()
+            .filter(|a| a.values.len() > 1)
+            .map(|a| a.key.clone())
+            .collect(),
+    };
+    let mut dims = Vec::new();
+    for k in &refine_keys {
+        let axis = plan
+            .axes
+            .iter()
+            .find(|a| &a.key == k)
+            .ok_or_else(|| anyhow!("study key `calibrate.refine`: `{k}` is not an axis"))?;
+        let log = cfg.log_axes.contains(k);
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        for v in &axis.values {
+            let x = as_num(v, k)?;
+            if log && x <= 0.0 {
+                bail!("axis `{k}` is refined in log10 but has the value {x} <= 0");
+            }
+            let u = if log { x.log10() } else { x };
+            lo = lo.min(u);
+            hi = hi.max(u);
+        }
+        dims.push((k.clone(), log, lo, hi));
+    }
+    Ok((refine_keys, dims))
+}
+
+/// What the stages after the grid share: where runs go and how they are scored.
+pub(super) struct Stage<'a> {
+    pub(super) study: &'a Study,
+    pub(super) plan: &'a Plan,
+    pub(super) store: &'a Store,
+    pub(super) targets: &'a Targets,
+    pub(super) threads: usize,
+    pub(super) runner: &'a Runner,
+    pub(super) out: &'a Path,
+    pub(super) progress: bool,
+}
+
+impl<'a> Stage<'a> {
+    /// A problem over `dims` with the other scene keys at `fixed`.
+    pub(super) fn problem(&self, fixed: Vec<String>, dims: Vec<Dim>) -> Refinement<'a> {
+        Refinement {
+            study: self.study,
+            plan: self.plan,
+            store: self.store,
+            targets: self.targets,
+            fixed,
+            dims,
+            threads: self.threads,
+            runner: self.runner,
+            out: self.out,
+            progress: self.progress,
+            log: RefCell::new(Vec::new()),
+            ran: RefCell::new(0),
+        }
+    }
+}
+
+/// The plan's common overrides plus every axis at the best run's value, except the axes
+/// `moved` names (those the stage sets itself).
+pub(super) fn fixed_overrides(
+    plan: &Plan,
+    best_values: &[Value],
+    moved: impl Fn(&String) -> bool,
+) -> Result<Vec<String>> {
+    let mut fixed = plan.set.clone();
+    for (a, v) in plan.axes.iter().zip(best_values) {
+        if !moved(&a.key) {
+            fixed.push(format!("{}={}", a.key, json_to_override(v)?));
+        }
+    }
+    Ok(fixed)
+}
+
+/// The paper's best fit at this tier, through the same store (a cache hit when the grid holds
+/// it): its parameters on the plan's axes and its evaluation.
+pub(super) fn paper_point(
+    stage: &Stage,
+    best_values: &[Value],
+) -> Result<(BTreeMap<String, f64>, Evaluation)> {
+    let mut paper_params = BTreeMap::new();
+    for (k, v) in PAPER_BEST {
+        if stage.plan.axes.iter().any(|a| a.key == k) {
+            paper_params.insert(k.to_string(), v);
+        }
+    }
+    let fixed = fixed_overrides(stage.plan, best_values, |k| paper_params.contains_key(k))?;
+    let paper = stage
+        .problem(fixed, Vec::new())
+        .evaluate("paper", &paper_params)?;
+    Ok((paper_params, paper))
+}
+
+/// The best scored point over the best grid point and the refinement.
+pub(super) fn best_of(best_grid: &Evaluation, refinement: &[Evaluation]) -> Evaluation {
+    std::iter::once(best_grid)
+        .chain(refinement)
+        .filter(|e| e.score.is_some() && e.objective.is_finite())
+        .min_by(|a, b| a.objective.total_cmp(&b.objective))
+        .cloned()
+        .unwrap_or_else(|| best_grid.clone())
+}
+
+/// Particles of a run, read from its record in the study directory.
+pub(super) fn particles_of(out: &Path, e: &Evaluation) -> Option<f64> {
+    e.dir
+        .as_ref()
+        .and_then(|d| {
+            std::fs::read_to_string(out.join(d).join("record.json"))
+                .ok()
+                .and_then(|t| serde_json::from_str::<Record>(&t).ok())
+        })
+        .and_then(|r| r.observables.get(Observable::Particles))
+}
