@@ -494,7 +494,7 @@ fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_n
     // Three eps values so the box has an inside; a zero noise floor so that the seeds' scatter
     // alone decides when to stop.
     let axes = format!(
-        "[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01, 0.1, 1.0]\n\n[[axes]]\nkey = \"material.kappa_n_m\"\nvalues = [2.28e6, 4.56e6]\n\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nbatch = 2\nmax_batches = 2\nnoise_floor = 0\n",
+        "[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01, 0.1, 1.0]\n\n[[axes]]\nkey = \"material.kappa_n_m\"\nvalues = [2.28e6, 4.56e6]\n\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nbatch = 2\nmax_batches = 2\nnoise_floor = 0\nmax_extensions = 0\n",
         targets.display()
     );
     let study = write_study(&dir, "ego", &axes, TINY);
@@ -513,7 +513,12 @@ fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_n
         "{termination}"
     );
     if !converged {
-        assert!(termination.contains("max_batches = 2"), "{termination}");
+        // The batches ran out, or the answer touches a side (the box is kept here:
+        // max_extensions = 0; extending is tested below).
+        assert!(
+            termination.contains("max_batches = 2") || termination.contains("touches"),
+            "{termination}"
+        );
     }
     // Every point after the grid ran at both seeds, and each is scored.
     let evals = c["refinement"].as_array().expect("evaluations");
@@ -583,6 +588,156 @@ fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_n
     let evals2 = c2["refinement"].as_array().expect("evaluations");
     assert_eq!(evals2.len(), evals.len());
     assert!(evals2.iter().all(|e| e["cached"] == true), "{evals2:?}");
+}
+
+/// A calibration of eps alone on the calibration scene at 2000 particles (a quarter of a
+/// second a run) against a length ratio of 1.2 alone: R rises with eps there (about 1.05 at
+/// 1e-4 J, 1.2 at 1e-3 J, 1.7 at 1e-2 J), so the optimum lies a decade below a first box of
+/// [0.01, 1] J.
+fn edge_study(dir: &Path, extra: &str) -> PathBuf {
+    let targets = dir.join("targets.toml");
+    std::fs::write(
+        &targets,
+        "[shot]\nid = \"test\"\ndescription = \"a test\"\nsource = \"a test\"\nimpactor_diameter_m = 9.53e-3\nv0_m_s = 6700.0\nt_over_d = 0.425\nsimulated_v0_m_s = 6700.0\nsimulated_t_over_d = 0.425\n\n[[targets]]\nname = \"length_ratio\"\nobservable = \"length_ratio\"\nkind = \"value\"\nvalue = 1.2\ntolerance = 0.1\nweight = 1.0\nsource = \"a test\"\n",
+    )
+    .expect("targets");
+    let text = format!(
+        "[study]\nname = \"edge\"\nscene = \"{}\"\n\n[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01, 0.1, 1.0]\n\n[tiers.quick]\nset = [\"resolution.particles=2000\", \"material.kappa_n_m=4.56e6\"]\n\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nbatch = 2\nmax_batches = 3\n{extra}",
+        repo().join("studies/scenes/calibration.toml").display(),
+        targets.display()
+    );
+    let path = dir.join("edge.toml");
+    std::fs::write(&path, text).expect("study");
+    path
+}
+
+#[test]
+fn an_optimum_outside_the_first_box_extends_it_and_ends_inside() {
+    let dir = scratch("calibrate-extend");
+    let study = edge_study(&dir, "");
+    let out = dir.join("out");
+    let o = calibrate(&study, &out);
+    assert_ok(&o);
+    let c = calibration_json(&out);
+    let boxes = c["boxes"].as_array().expect("boxes");
+    assert!(boxes.len() >= 2, "the first box was extended: {boxes:?}");
+    // The first box is the grid's, and the answer touched its low side.
+    assert_eq!(
+        boxes[0]["bounds"]["material.eps_j"],
+        serde_json::json!([0.01, 1.0])
+    );
+    assert_eq!(boxes[0]["edges"][0]["side"], "low", "{}", boxes[0]);
+    // Each later box reaches a decade further down; the new grid values ran at both seeds.
+    let last = &boxes[boxes.len() - 1]["bounds"]["material.eps_j"];
+    assert!(last[0].as_f64().expect("lo") <= 1.0001e-3, "{last}");
+    let evals = c["refinement"].as_array().expect("evaluations");
+    let extended: Vec<&serde_json::Value> = evals
+        .iter()
+        .filter(|e| {
+            e["stage"]
+                .as_str()
+                .is_some_and(|s| s.starts_with("extend-"))
+        })
+        .collect();
+    assert!(!extended.is_empty());
+    for e in &extended {
+        assert_eq!(e["seeds"], serde_json::json!([1, 2]), "{e}");
+        assert!(e["params"]["material.eps_j"].as_f64().expect("eps") < 0.01);
+    }
+    // It ends inside: no edge left, the best point and its interval inside the last box, and
+    // the best eps within the decade where R crosses 1.2.
+    assert_eq!(c["edges"], serde_json::json!([]), "{}", stderr(&o));
+    let best = c["best"]["params"]["material.eps_j"]
+        .as_f64()
+        .expect("best");
+    assert!((2e-4..5e-3).contains(&best), "best eps {best}");
+    let iv = &c["region"]["intervals"]["material.eps_j"];
+    let (lo, hi) = (iv[0].as_f64().expect("lo"), iv[1].as_f64().expect("hi"));
+    assert!(
+        lo > last[0].as_f64().expect("box lo") && hi < 1.0,
+        "interval {iv}, box {last}"
+    );
+    assert_eq!(
+        c["converged"].as_bool(),
+        Some(
+            c["termination"]
+                .as_str()
+                .is_some_and(|t| t.starts_with("converged"))
+        )
+    );
+    // The paper's fit is scored over the same seeds as the answer.
+    assert_eq!(
+        c["paper"]["seeds"],
+        serde_json::json!([1, 2]),
+        "{}",
+        c["paper"]
+    );
+    assert_eq!(
+        c["best_grid"]["seeds"],
+        serde_json::json!([1, 2]),
+        "{}",
+        c["best_grid"]
+    );
+}
+
+#[test]
+fn an_optimum_on_the_edge_is_never_converged() {
+    let dir = scratch("calibrate-edge");
+    let out = dir.join("out");
+    // The box kept (--no-extend), and a box allowed no step beyond the grid: both report the
+    // side and the limit, and neither says converged.
+    for (extra, flags, why) in [
+        ("", &["--no-extend"][..], "not extended (--no-extend)"),
+        (
+            "max_extensions = 0\n",
+            &[][..],
+            "calibrate.max_extensions = 0",
+        ),
+    ] {
+        let study = edge_study(&dir, extra);
+        let o = bin()
+            .arg("calibrate")
+            .arg(&study)
+            .arg("--out")
+            .arg(&out)
+            .args(["--threads", "2"])
+            .args(flags)
+            .output()
+            .expect("runs");
+        assert_ok(&o);
+        let c = calibration_json(&out);
+        assert_eq!(c["converged"], false, "{}", c["termination"]);
+        assert_eq!(c["boxes"].as_array().map(Vec::len), Some(1));
+        let edge = &c["edges"][0];
+        assert_eq!(edge["key"], "material.eps_j");
+        assert_eq!(edge["side"], "low");
+        assert_eq!(edge["value"], 0.01);
+        assert!(
+            edge["limit"].as_str().is_some_and(|l| l.contains(why)),
+            "{edge}"
+        );
+        let termination = c["termination"].as_str().expect("termination");
+        assert!(
+            termination
+                .starts_with("not converged: the answer touches the low side of material.eps_j"),
+            "{termination}"
+        );
+        assert!(
+            c["limit"]
+                .as_str()
+                .is_some_and(|l| l.contains("material.eps_j")),
+            "{}",
+            c["limit"]
+        );
+        let err = stderr(&o);
+        assert!(err.contains("NOT CONVERGED"), "{err}");
+        assert!(!err.contains(": CONVERGED"), "{err}");
+        let md = std::fs::read_to_string(out.join("calibration.md")).expect("calibration.md");
+        assert!(
+            md.contains("**NOT CONVERGED") && md.contains("Not an optimum inside the box"),
+            "{md}"
+        );
+    }
 }
 
 #[test]

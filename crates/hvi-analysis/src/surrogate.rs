@@ -314,6 +314,9 @@ pub struct Region {
     /// Whether the region touches the box's boundary on each axis (the interval may then be
     /// wider than the box shows).
     pub at_boundary: Vec<bool>,
+    /// Per axis, whether the region touches the box's lowest and its highest side.
+    #[serde(default)]
+    pub sides: Vec<(bool, bool)>,
 }
 
 /// The confidence region of the minimum: the lattice points whose predicted objective is within
@@ -338,11 +341,12 @@ pub fn region(space: &SearchBox, observations: &[Observation], noise_sd: f64) ->
             }
         }
     }
-    let at_boundary = intervals
+    let sides: Vec<(bool, bool)> = intervals
         .iter()
         .zip(&space.bounds)
-        .map(|(iv, b)| iv.0 <= b.0 || iv.1 >= b.1)
+        .map(|(iv, b)| (iv.0 <= b.0, iv.1 >= b.1))
         .collect();
+    let at_boundary = sides.iter().map(|&(lo, hi)| lo || hi).collect();
     Ok(Region {
         best: lattice[k_best].clone(),
         best_predicted: pred[k_best],
@@ -350,6 +354,7 @@ pub fn region(space: &SearchBox, observations: &[Observation], noise_sd: f64) ->
         intervals,
         share_of_box: inside as f64 / lattice.len() as f64,
         at_boundary,
+        sides,
     })
 }
 
@@ -498,6 +503,18 @@ mod tests {
         let r = region(&space, &obs, 0.02).expect("region");
         assert!(r.share_of_box > 0.9, "{}", r.share_of_box);
         assert!(r.at_boundary.iter().all(|&b| b));
+    }
+
+    #[test]
+    fn the_region_names_the_side_it_touches() {
+        // The minimum lies beyond the high side of x and inside on y.
+        let space = SearchBox::new(vec![(0.0, 1.0), (0.0, 1.0)]).expect("box");
+        let f = |x: &[f64]| (x[0] - 1.5).powi(2) + 4.0 * (x[1] - 0.5).powi(2);
+        let (obs, _) = search(&space, f, 0.01, 2, 6);
+        let r = region(&space, &obs, 0.01).expect("region");
+        assert_eq!(r.sides[0], (false, true), "x: {:?}", r.intervals[0]);
+        assert_eq!(r.sides[1], (false, false), "y: {:?}", r.intervals[1]);
+        assert_eq!(r.at_boundary, vec![true, false]);
     }
 
     #[test]

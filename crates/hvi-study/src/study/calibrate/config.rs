@@ -38,6 +38,9 @@ fn default_max_batches() -> usize {
     8
 }
 
+fn default_max_extensions() -> usize {
+    2
+}
 fn default_noise_floor() -> f64 {
     0.02
 }
@@ -101,6 +104,10 @@ pub struct CalibrateConfig {
     /// with one seed it is the noise.
     #[serde(default = "default_noise_floor")]
     pub noise_floor: f64,
+    /// ego: steps each side of the box may move beyond the grid when the answer touches it (a
+    /// decade on a log axis, the grid's spacing on a linear one).
+    #[serde(default = "default_max_extensions")]
+    pub max_extensions: usize,
 }
 
 impl CalibrateConfig {
@@ -141,6 +148,12 @@ impl CalibrateConfig {
             bail!(
                 "study key `calibrate.noise_floor`: {} (allowed: a number >= 0)",
                 cfg.noise_floor
+            );
+        }
+        if cfg.max_extensions > 10 {
+            bail!(
+                "study key `calibrate.max_extensions`: {} (allowed: 0 to 10 steps beyond the grid)",
+                cfg.max_extensions
             );
         }
         cfg.check_seeds("study key `calibrate.seeds`")?;

@@ -49,8 +49,11 @@ pub(super) struct EgoSettings {
 /// What the search found.
 #[derive(Debug, Clone)]
 pub(super) struct EgoOutcome {
-    /// The grid points at every seed, then the search's points, in order.
-    pub evaluations: Vec<Evaluation>,
+    /// Every observation: those the search started from, then its own points, in order, each
+    /// with its runs' observables.
+    pub evaluations: Vec<Scored>,
+    /// Batches run.
+    pub batches: usize,
     /// The point chosen (the evaluated point with the lowest predicted objective).
     pub best: Evaluation,
     /// Whether the stopping rule held.
@@ -72,7 +75,7 @@ pub(super) struct EgoOutcome {
 }
 
 /// An evaluated point with its runs' observables, one per seed.
-type Scored = (Evaluation, Vec<Observables>);
+pub(super) type Scored = (Evaluation, Vec<Observables>);
 
 /// One point's runs at every seed, scored on the seed means.
 struct PointRuns {
@@ -81,37 +84,53 @@ struct PointRuns {
     jobs: Vec<std::result::Result<Job, String>>,
 }
 
-/// Runs the search from the grid's `grid` evaluations (each with its record).
-pub(super) fn search(
-    problem: &Refinement,
-    settings: &EgoSettings,
-    grid: &[(Evaluation, Record)],
-) -> Result<EgoOutcome> {
-    let space = SearchBox::new(problem.dims.iter().map(|d| (d.2, d.3)).collect())?;
-    let seeds: Vec<Option<u64>> = if settings.seeds.is_empty() {
+/// The seeds a point runs at (`None`: the scene's own).
+pub(super) fn seed_list(settings: &EgoSettings) -> Vec<Option<u64>> {
+    if settings.seeds.is_empty() {
         vec![None]
     } else {
         settings.seeds.iter().copied().map(Some).collect()
-    };
-    let mut evaluations = Vec::new();
-    let mut runs = 0;
+    }
+}
+
+/// The search's first observations: the grid's scored runs (each with its record), at every
+/// seed of the search when it names several (the runs at the scene's own seed are the
+/// grid's). Returns them with the runs simulated.
+pub(super) fn seeded_grid(
+    problem: &Refinement,
+    settings: &EgoSettings,
+    grid: &[(Evaluation, Record)],
+) -> Result<(Vec<Scored>, usize)> {
     let scored_grid = grid
         .iter()
         .filter(|(e, r)| r.status == RunStatus::Completed && e.score.is_some());
     if settings.seeds.is_empty() {
-        for (e, r) in scored_grid {
-            let mut e = e.clone();
-            e.seed_objectives = vec![e.objective];
-            evaluations.push((e, vec![r.observables]));
-        }
-    } else {
-        let grid_points: Vec<BTreeMap<String, f64>> = scored_grid
-            .map(|(e, _)| refined(problem, &e.params))
+        let evaluations = scored_grid
+            .map(|(e, r)| {
+                let mut e = e.clone();
+                e.seed_objectives = vec![e.objective];
+                (e, vec![r.observables])
+            })
             .collect();
-        let (evs, n) = run_points(problem, "grid-seeds", &grid_points, &seeds)?;
-        evaluations.extend(evs);
-        runs += n;
+        return Ok((evaluations, 0));
     }
+    let grid_points: Vec<BTreeMap<String, f64>> = scored_grid
+        .map(|(e, _)| refined(problem, &e.params))
+        .collect();
+    run_points(problem, "grid-seeds", &grid_points, &seed_list(settings))
+}
+
+/// Runs the search over the problem's box from the observations so far (`evaluations`, each
+/// with its runs' observables); its batches are numbered from `first_batch` on.
+pub(super) fn search(
+    problem: &Refinement,
+    settings: &EgoSettings,
+    mut evaluations: Vec<Scored>,
+    first_batch: usize,
+) -> Result<EgoOutcome> {
+    let space = SearchBox::new(problem.dims.iter().map(|d| (d.2, d.3)).collect())?;
+    let seeds = seed_list(settings);
+    let mut runs = 0;
     let mut batch = 0;
     let (converged_now, termination, noise, noise_source) = loop {
         let obs = observations(problem, &evaluations);
@@ -141,7 +160,7 @@ pub(super) fn search(
         }
         let points: Vec<BTreeMap<String, f64>> =
             proposal.points.iter().map(|x| problem.values(x)).collect();
-        let label = format!("ego-{batch}");
+        let label = format!("ego-{}", first_batch + batch);
         let (evs, n) = run_points(problem, &label, &points, &seeds)?;
         if problem.progress {
             for (e, _) in &evs {
@@ -162,7 +181,8 @@ pub(super) fn search(
     let spread = spread_of(problem, &observables);
     let surface = coords(problem, &best.params).and_then(|at| surface(problem, &model, &at));
     Ok(EgoOutcome {
-        evaluations: evaluations.into_iter().map(|(e, _)| e).collect(),
+        evaluations,
+        batches: batch,
         best,
         converged: converged_now,
         termination,
@@ -226,7 +246,7 @@ fn refined(problem: &Refinement, params: &BTreeMap<String, f64>) -> BTreeMap<Str
 }
 
 /// A point in the search's coordinates.
-fn coords(problem: &Refinement, params: &BTreeMap<String, f64>) -> Option<Vec<f64>> {
+pub(super) fn coords(problem: &Refinement, params: &BTreeMap<String, f64>) -> Option<Vec<f64>> {
     problem
         .dims
         .iter()
@@ -291,7 +311,7 @@ fn noise_of(evaluations: &[Scored], floor: f64) -> (f64, String) {
 /// Runs `points` at every seed together (in parallel through the store) and scores each on
 /// its seed-mean observables. Returns the evaluations (with the runs' observables) and the
 /// runs simulated.
-fn run_points(
+pub(super) fn run_points(
     problem: &Refinement,
     stage: &str,
     points: &[BTreeMap<String, f64>],
@@ -455,16 +475,21 @@ fn param_region(problem: &Refinement, r: &surrogate::Region) -> ParamRegion {
     let value = |log: bool, u: f64| if log { 10f64.powf(u) } else { u };
     let mut intervals = BTreeMap::new();
     let mut at_boundary = BTreeMap::new();
+    let mut sides = BTreeMap::new();
     let mut predicted_minimum = BTreeMap::new();
     for (k, (key, log, _, _)) in problem.dims.iter().enumerate() {
         let (lo, hi) = r.intervals[k];
         intervals.insert(key.clone(), (value(*log, lo), value(*log, hi)));
         at_boundary.insert(key.clone(), r.at_boundary[k]);
+        if let Some(&side) = r.sides.get(k) {
+            sides.insert(key.clone(), side);
+        }
         predicted_minimum.insert(key.clone(), value(*log, r.best[k]));
     }
     ParamRegion {
         intervals,
         at_boundary,
+        sides,
         predicted_minimum,
         predicted_objective: (10f64.powf(r.best_predicted.0), r.best_predicted.1),
         threshold: 10f64.powf(r.threshold),

@@ -9,12 +9,14 @@
 
 pub mod config;
 pub mod ego;
+pub mod extend;
 pub mod grid;
 pub mod nelder_mead;
 pub mod problem;
 pub mod report;
 pub mod result;
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::Result;
@@ -29,10 +31,14 @@ pub use report::{report_md, report_text};
 pub use result::{CalibrationResult, Evaluation, ParamRegion, Spread, Surface};
 
 use super::options::StudyOptions;
+use extend::{
+    bounds_of, edges_of, extend, fmt_value, grid_coords, limit_line, new_lattice_points, Edge,
+    ExtendRule, SearchedBox,
+};
 use grid::{grid_stage, Grid};
 use nelder_mead::refine_stage;
 use problem::{
-    best_of, fixed_overrides, paper_point, particles_of, refined_axes, Refinement, Stage,
+    best_of, fixed_overrides, particles_of, refined_axes, Refinement, Stage, PAPER_BEST,
 };
 use report::{draw_figures, write_outputs};
 
@@ -111,9 +117,17 @@ pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
     };
     let problem = stage.problem(fixed, dims);
     let method = args.method.unwrap_or(cfg.method);
-    let search = search_stage(&problem, &cfg, args, method, &grid, &refine_keys)?;
-    let (paper_params, paper) = paper_point(&stage, &best_run.values)?;
-    let paper_runs = usize::from(!paper.cached && paper.dir.is_some());
+    let search = search_stage(&stage, &problem, &cfg, args, method, &grid, &refine_keys)?;
+    // The paper's point is scored over the seeds the answer was (like with like).
+    let (paper_params, paper, paper_runs) = paper_point(&stage, &best_run.values, &search.seeds)?;
+    // With seeds, the best grid point is the grid's best over those seeds too.
+    let best_grid = search
+        .evaluations
+        .iter()
+        .filter(|e| e.stage == "grid-seeds" && e.score.is_some() && e.objective.is_finite())
+        .min_by(|a, b| a.objective.total_cmp(&b.objective))
+        .cloned()
+        .unwrap_or(best_grid);
 
     let best = search
         .best
@@ -140,6 +154,9 @@ pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
         refinement: search.evaluations,
         method: search.method.into(),
         converged: search.converged,
+        boxes: search.boxes,
+        edges: search.edges,
+        limit: search.limit,
         noise: search.noise,
         noise_source: search.noise_source,
         surface: search.surface,
@@ -182,10 +199,19 @@ struct SearchOutcome {
     region: Option<ParamRegion>,
     spread: Vec<Spread>,
     runs: usize,
+    /// Every box searched, the first the grid's.
+    boxes: Vec<SearchedBox>,
+    /// The sides of the last box the answer touches (empty: interior).
+    edges: Vec<Edge>,
+    /// Where the extension stopped, in words.
+    limit: Option<String>,
+    /// The seeds the answer's objective is over (empty: the scene's own).
+    seeds: Vec<u64>,
 }
 
 /// Stage 2: the search after the grid (none with `--no-refine`, no axis or a zero budget).
 fn search_stage(
+    stage: &Stage,
     problem: &Refinement,
     cfg: &CalibrateConfig,
     args: &CalibrateOptions,
@@ -205,6 +231,10 @@ fn search_stage(
         region: None,
         spread: Vec::new(),
         runs: 0,
+        boxes: Vec::new(),
+        edges: Vec::new(),
+        limit: None,
+        seeds: Vec::new(),
     };
     if args.no_refine {
         return Ok(none("skipped (--no-refine)"));
@@ -216,11 +246,28 @@ fn search_stage(
         Method::NelderMead => {
             let best_grid = &grid.evaluations[grid.best];
             let termination = refine_stage(problem, cfg, args.max_iters, best_grid, refine_keys)?;
+            let evaluations = problem.log.take();
+            let best = best_of(best_grid, &evaluations);
+            let at = ego::coords(problem, &best.params);
+            let mut edges = edges_of(&problem.dims, at.as_deref(), None);
+            for e in &mut edges {
+                e.limit = Some(
+                    "Nelder-Mead searches the grid's box only (the ego search extends it)".into(),
+                );
+            }
+            let converged = termination.starts_with("Solver converged") && edges.is_empty();
             Ok(SearchOutcome {
                 method: method.name(),
-                evaluations: problem.log.take(),
+                evaluations,
                 best: None,
-                converged: termination.starts_with("Solver converged"),
+                converged,
+                boxes: vec![SearchedBox {
+                    bounds: bounds_of(&problem.dims),
+                    termination: termination.clone(),
+                    edges: edges.clone(),
+                }],
+                limit: limit_line(&edges),
+                edges,
                 termination,
                 noise: None,
                 noise_source: None,
@@ -228,50 +275,199 @@ fn search_stage(
                 region: None,
                 spread: Vec::new(),
                 runs: *problem.ran.borrow(),
+                seeds: Vec::new(),
             })
         }
-        Method::Ego => {
-            let settings = ego::EgoSettings {
-                batch: cfg.batch,
-                seeds: cfg.seeds.clone(),
-                max_batches: args.max_batches.unwrap_or(cfg.max_batches),
-                noise_floor: cfg.noise_floor,
-            };
-            if problem.progress {
+        Method::Ego => ego_boxes(stage, problem, cfg, args, grid, refine_keys),
+    }
+}
+
+/// The surrogate search, box after box: in the grid's box first, then, while the answer
+/// touches a side, in the box extended past it (its new grid points run first), until the
+/// answer is interior or every touched side is at its limit.
+fn ego_boxes(
+    stage: &Stage,
+    first: &Refinement,
+    cfg: &CalibrateConfig,
+    args: &CalibrateOptions,
+    grid: &Grid,
+    refine_keys: &[String],
+) -> Result<SearchOutcome> {
+    let settings = ego::EgoSettings {
+        batch: cfg.batch,
+        seeds: cfg.seeds.clone(),
+        max_batches: args.max_batches.unwrap_or(cfg.max_batches),
+        noise_floor: cfg.noise_floor,
+    };
+    let rule = ExtendRule {
+        extend: args.extend,
+        max_extensions: cfg.max_extensions,
+    };
+    if first.progress {
+        eprintln!(
+            "search: efficient global optimisation over {} (log10 for {:?}), batches of {} at seeds {:?}, at most {} batches a box, noise floor {}; {}",
+            refine_keys.join(", "),
+            first.dims.iter().filter(|d| d.1).map(|d| d.0.as_str()).collect::<Vec<_>>(),
+            settings.batch,
+            settings.seeds,
+            settings.max_batches,
+            settings.noise_floor,
+            if rule.extend {
+                format!("a side the answer touches moves out, up to {} steps", rule.max_extensions)
+            } else {
+                "the box is kept (--no-extend)".to_string()
+            }
+        );
+    }
+    let pairs: Vec<(Evaluation, Record)> = grid
+        .evaluations
+        .iter()
+        .cloned()
+        .zip(grid.records.iter().cloned())
+        .collect();
+    let (mut scored, mut runs) = ego::seeded_grid(first, &settings, &pairs)?;
+    let mut dims = first.dims.clone();
+    let mut values = grid_coords(first.plan, &dims)?;
+    let mut moved = BTreeMap::new();
+    let mut boxes = Vec::new();
+    let mut batches = 0;
+    let mut extension = 0;
+    let seeds = ego::seed_list(&settings);
+    loop {
+        let problem = stage.problem(first.fixed.clone(), dims.clone());
+        let o = ego::search(&problem, &settings, scored, batches)?;
+        runs += o.runs;
+        batches += o.batches;
+        let at = ego::coords(&problem, &o.best.params);
+        let mut edges = edges_of(&dims, at.as_deref(), o.region.as_ref().map(|r| &r.sides));
+        let moved_now = !edges.is_empty()
+            && extend(
+                &problem,
+                &mut dims,
+                &mut values,
+                &mut edges,
+                &mut moved,
+                rule,
+            )?;
+        boxes.push(SearchedBox {
+            bounds: bounds_of(&problem.dims),
+            termination: o.termination.clone(),
+            edges: edges.clone(),
+        });
+        if problem.progress {
+            for e in &edges {
                 eprintln!(
-                    "search: efficient global optimisation over {} (log10 for {:?}), batches of {} at seeds {:?}, at most {} batches, noise floor {}",
-                    refine_keys.join(", "),
-                    problem.dims.iter().filter(|d| d.1).map(|d| d.0.as_str()).collect::<Vec<_>>(),
-                    settings.batch,
-                    settings.seeds,
-                    settings.max_batches,
-                    settings.noise_floor
+                    "edge: {}{}",
+                    e.describe(),
+                    e.limit.as_ref().map_or(String::new(), |l| format!(": {l}"))
                 );
             }
-            let pairs: Vec<(Evaluation, Record)> = grid
-                .evaluations
-                .iter()
-                .cloned()
-                .zip(grid.records.iter().cloned())
-                .collect();
-            let o = ego::search(problem, &settings, &pairs)?;
-            Ok(SearchOutcome {
-                method: method.name(),
-                evaluations: o
-                    .evaluations
+        }
+        scored = o.evaluations;
+        if !moved_now {
+            let limit = limit_line(&edges);
+            let converged = o.converged && edges.is_empty();
+            let termination = if edges.is_empty() {
+                o.termination
+            } else {
+                format!(
+                    "not converged: the answer touches {}; {}",
+                    edges
+                        .iter()
+                        .map(Edge::describe)
+                        .collect::<Vec<_>>()
+                        .join(" and "),
+                    limit.clone().unwrap_or_default()
+                )
+            };
+            return Ok(SearchOutcome {
+                method: Method::Ego.name(),
+                evaluations: scored
                     .into_iter()
+                    .map(|(e, _)| e)
                     .filter(|e| e.stage != "grid")
                     .collect(),
                 best: Some(o.best),
-                termination: o.termination,
-                converged: o.converged,
+                termination,
+                converged,
                 noise: Some(o.noise),
                 noise_source: Some(o.noise_source),
                 surface: o.surface,
                 region: o.region,
                 spread: o.spread,
-                runs: o.runs,
-            })
+                runs,
+                boxes,
+                edges,
+                limit,
+                seeds: settings.seeds.clone(),
+            });
+        }
+        // The new grid points of the larger box, at every seed.
+        let seen: Vec<Vec<f64>> = scored
+            .iter()
+            .filter_map(|(e, _)| ego::coords(&problem, &e.params))
+            .collect();
+        let problem = stage.problem(first.fixed.clone(), dims.clone());
+        let points: Vec<BTreeMap<String, f64>> = new_lattice_points(&values, &seen)
+            .iter()
+            .map(|x| problem.values(x))
+            .collect();
+        let label = format!("extend-{extension}");
+        if problem.progress {
+            eprintln!(
+                "{label}: the box is now {}; {} new grid point(s) at {} seed(s)",
+                fmt_bounds(&bounds_of(&dims)),
+                points.len(),
+                seeds.len()
+            );
+        }
+        let (evs, n) = ego::run_points(&problem, &label, &points, &seeds)?;
+        scored.extend(evs);
+        runs += n;
+        extension += 1;
+    }
+}
+
+/// The paper's best fit at this tier, through the same store (cache hits where the grid holds
+/// it), at `seeds` (the answer's, so that the two objectives compare like with like; empty:
+/// the scene's own seed): its parameters on the plan's axes, its evaluation and the runs
+/// simulated for it.
+fn paper_point(
+    stage: &Stage,
+    best_values: &[serde_json::Value],
+    seeds: &[u64],
+) -> Result<(BTreeMap<String, f64>, Evaluation, usize)> {
+    let mut paper_params = BTreeMap::new();
+    for (k, v) in PAPER_BEST {
+        if stage.plan.axes.iter().any(|a| a.key == k) {
+            paper_params.insert(k.to_string(), v);
         }
     }
+    let fixed = fixed_overrides(stage.plan, best_values, |k| paper_params.contains_key(k))?;
+    let problem = stage.problem(fixed, Vec::new());
+    if seeds.is_empty() {
+        let paper = problem.evaluate("paper", &paper_params)?;
+        let ran = usize::from(!paper.cached && paper.dir.is_some());
+        return Ok((paper_params, paper, ran));
+    }
+    let seeds: Vec<Option<u64>> = seeds.iter().copied().map(Some).collect();
+    let (mut evs, ran) = ego::run_points(
+        &problem,
+        "paper",
+        std::slice::from_ref(&paper_params),
+        &seeds,
+    )?;
+    let (paper, _) = evs
+        .pop()
+        .ok_or_else(|| anyhow::anyhow!("the paper's point has no evaluation"))?;
+    Ok((paper_params, paper, ran))
+}
+
+/// A box in words: `material.eps_j in [0.01, 10], material.kappa_n_m in [1.14e6, 9.12e6]`.
+pub(crate) fn fmt_bounds(bounds: &BTreeMap<String, (f64, f64)>) -> String {
+    bounds
+        .iter()
+        .map(|(k, (lo, hi))| format!("{k} in [{}, {}]", fmt_value(*lo), fmt_value(*hi)))
+        .collect::<Vec<_>>()
+        .join(", ")
 }

@@ -61,8 +61,12 @@ pub(super) struct Refinement<'a> {
 impl Refinement<'_> {
     /// Parameter values (by key) of a point in the search's coordinates.
     pub(super) fn values(&self, x: &[f64]) -> BTreeMap<String, f64> {
-        self.dims
-            .iter()
+        self.values_in(&self.dims, x)
+    }
+
+    /// Parameter values (by key) of a point in the coordinates of `dims`.
+    pub(super) fn values_in(&self, dims: &[Dim], x: &[f64]) -> BTreeMap<String, f64> {
+        dims.iter()
             .zip(x)
             .map(|((k, log, _, _), &u)| {
                 let v = if *log { 10f64.powf(u) } else { u };
@@ -290,25 +294,6 @@ pub(super) fn fixed_overrides(
         }
     }
     Ok(fixed)
-}
-
-/// The paper's best fit at this tier, through the same store (a cache hit when the grid holds
-/// it): its parameters on the plan's axes and its evaluation.
-pub(super) fn paper_point(
-    stage: &Stage,
-    best_values: &[Value],
-) -> Result<(BTreeMap<String, f64>, Evaluation)> {
-    let mut paper_params = BTreeMap::new();
-    for (k, v) in PAPER_BEST {
-        if stage.plan.axes.iter().any(|a| a.key == k) {
-            paper_params.insert(k.to_string(), v);
-        }
-    }
-    let fixed = fixed_overrides(stage.plan, best_values, |k| paper_params.contains_key(k))?;
-    let paper = stage
-        .problem(fixed, Vec::new())
-        .evaluate("paper", &paper_params)?;
-    Ok((paper_params, paper))
 }
 
 /// The best scored point over the best grid point and the refinement.

@@ -82,6 +82,22 @@ pub fn report_text(r: &CalibrationResult) -> String {
         r.particles.map_or("?".into(), |n| format!("{n}")),
         verdict_line(r),
     ));
+    for (k, b) in r.boxes.iter().enumerate() {
+        s.push_str(&format!(
+            "  box {k}:       {}: {}\n",
+            super::fmt_bounds(&b.bounds),
+            b.termination
+        ));
+    }
+    for e in &r.edges {
+        s.push_str(&format!(
+            "  edge:        {}{}\n",
+            e.describe(),
+            e.limit
+                .as_ref()
+                .map_or(String::new(), |l| format!(" ({l})"))
+        ));
+    }
     s.push_str(&format!("  best:        {}\n", describe_eval(&r.best)));
     for line in interval_lines(r) {
         s.push_str(&format!("  interval:    {line}\n"));
@@ -156,6 +172,36 @@ pub fn report_md(r: &CalibrationResult) -> String {
                 ""
             }
         ));
+    }
+    if !r.boxes.is_empty() {
+        s.push_str("\n## The boxes searched\n\n| box | bounds | the search there | sides the answer touched |\n|---|---|---|---|\n");
+        for (k, b) in r.boxes.iter().enumerate() {
+            let edges = if b.edges.is_empty() {
+                "none: the answer is inside".to_string()
+            } else {
+                b.edges
+                    .iter()
+                    .map(|e| {
+                        format!(
+                            "{}{}",
+                            e.describe(),
+                            e.limit
+                                .as_ref()
+                                .map_or(String::new(), |l| format!(" ({l})"))
+                        )
+                    })
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            };
+            s.push_str(&format!(
+                "| {k} | {} | {} | {edges} |\n",
+                super::fmt_bounds(&b.bounds),
+                b.termination
+            ));
+        }
+        if let Some(limit) = &r.limit {
+            s.push_str(&format!("\nNot an optimum inside the box: {limit}.\n"));
+        }
     }
     s.push_str("\n## Every target at the best point\n\n| target | observed (seed mean) | sd over seeds | term | weight |\n|---|---|---|---|---|\n");
     if let Some(score) = &r.best.score {

@@ -67,9 +67,21 @@ pub struct CalibrationResult {
     /// The search after the grid: `ego`, `nelder-mead` or `none`.
     #[serde(default)]
     pub method: String,
-    /// Whether the search met its convergence rule (see `termination`).
+    /// Whether the search met its convergence rule with its answer inside the box (see
+    /// `termination`); never true while the answer touches a side.
     #[serde(default)]
     pub converged: bool,
+    /// Every box searched, the grid's first; each later one extended past the sides the
+    /// answer touched.
+    #[serde(default)]
+    pub boxes: Vec<super::extend::SearchedBox>,
+    /// The sides of the last box that the answer touches (empty: the answer is interior).
+    #[serde(default)]
+    pub edges: Vec<super::extend::Edge>,
+    /// Where the extension stopped, in words (e.g. the parameter lies beyond a side at its
+    /// limit).
+    #[serde(default)]
+    pub limit: Option<String>,
     /// The noise the search worked with: a seed mean's standard error of log10 J.
     #[serde(default)]
     pub noise: Option<f64>,
@@ -101,6 +113,9 @@ pub struct ParamRegion {
     /// Per refined key, whether the region reaches the search box's edge there (the interval
     /// may extend beyond what was searched).
     pub at_boundary: BTreeMap<String, bool>,
+    /// Per refined key, whether the region reaches the box's lowest and its highest side.
+    #[serde(default)]
+    pub sides: BTreeMap<String, (bool, bool)>,
     /// The surrogate's minimum.
     pub predicted_minimum: BTreeMap<String, f64>,
     /// The predicted objective J at the minimum and the standard deviation of its log10.
