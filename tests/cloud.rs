@@ -391,6 +391,40 @@ fn cloud_of_known_extent_gives_la_lr_and_r() {
 }
 
 #[test]
+fn a_ring_seen_side_on_is_narrower_than_its_radius_by_the_projection() {
+    // A thin ring of radius r, evenly around the axis: every particle is r from the axis, and
+    // seen side-on (along y or along x) at |x| = r |cos phi|, whose q-quantile is
+    // r cos(pi (1 - q) / 2) for phi uniform.
+    let (n, rear, radius) = (40_000, 4e-3, 0.05);
+    let mut b = Builder::default();
+    for k in 0..n {
+        let phi = std::f64::consts::TAU * (k as f64 + 0.5) / n as f64;
+        b.add(
+            DVec3::new(radius * phi.cos(), radius * phi.sin(), rear + 0.1),
+            Body::Target,
+            M_TARGET,
+        );
+    }
+    let p = b.in_order();
+    let derived = derived_with(rear, DENSITY, 1000.0);
+    let reference = CloudReference::new(&p, &derived, &[]);
+    let members = find_cloud(&p, &reference);
+    for q in [0.9, 0.5] {
+        let e = extent(&p, &members.in_cloud, rear, q);
+        let cylindrical = e.length_radial_m.expect("Lr");
+        assert!((cylindrical - 2.0 * radius).abs() < 1e-12, "{cylindrical}");
+        let side = e.length_radial_side_m.expect("side Lr");
+        let expected = 2.0 * radius * (std::f64::consts::PI * (1.0 - q) / 2.0).cos();
+        assert!(
+            (side - expected).abs() < 1e-4 * expected,
+            "q {q}: side Lr {side} vs {expected}"
+        );
+        let la = e.length_axial_m.expect("La");
+        assert!((e.length_ratio_side.expect("side R") - la / side).abs() < 1e-12);
+    }
+}
+
+#[test]
 fn stray_particles_do_not_move_the_quantile_extents() {
     let (n, rear, length, radius) = (10_000, 4e-3, 0.2, 0.06);
     let mut clean = Builder::default();

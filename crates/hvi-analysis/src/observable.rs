@@ -39,6 +39,10 @@ pub enum Observable {
     LengthRadial,
     /// R = La / Lr.
     LengthRatio,
+    /// Lr seen side-on (the projection a shadowgraph records).
+    LengthRadialSide,
+    /// R seen side-on.
+    LengthRatioSide,
     /// Front velocity va.
     FrontVelocity,
     /// va / v0.
@@ -107,7 +111,7 @@ const fn def(
 }
 
 /// Every observable, in table order (a plain table: the one place an observable is named).
-pub const DEFINITIONS: [Definition; 24] = {
+pub const DEFINITIONS: [Definition; 26] = {
     use Observable::*;
     [
         def(Particles, "particles", "N", "1", "particles in the run"),
@@ -152,6 +156,20 @@ pub const DEFINITIONS: [Definition; 24] = {
             "R",
             "1",
             "length ratio La / Lr",
+        ),
+        def(
+            LengthRadialSide,
+            "length_radial_side_m",
+            "Lr (side)",
+            "m",
+            "full width of the cloud seen side-on (quantile of |x| and |y|)",
+        ),
+        def(
+            LengthRatioSide,
+            "length_ratio_side",
+            "R (side)",
+            "1",
+            "length ratio La / Lr with Lr seen side-on",
         ),
         def(
             FrontVelocity,

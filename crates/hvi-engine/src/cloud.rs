@@ -281,15 +281,27 @@ pub struct Extent {
     pub length_radial_max_m: Option<f64>,
     /// La / Lr by the maxima.
     pub length_ratio_max: Option<f64>,
+    /// Lr seen side-on: twice the quantile of the particles' distance from the plane of view
+    /// through the axis (|x| and |y| pooled: two perpendicular side views), m. The width a
+    /// shadowgraph's projection records, where `length_radial_m` is a cylindrical radius no
+    /// camera sees.
+    #[serde(default)]
+    pub length_radial_side_m: Option<f64>,
+    /// R seen side-on: La / `length_radial_side_m`.
+    #[serde(default)]
+    pub length_ratio_side: Option<f64>,
 }
 
 /// The extent of the particles marked `in_cloud` (see the module's definitions).
 pub fn extent(p: &Particles, in_cloud: &[bool], plate_rear_z_m: f64, q: f64) -> Extent {
     let mut z: Vec<f64> = Vec::new();
     let mut rho: Vec<f64> = Vec::new();
+    let mut side: Vec<f64> = Vec::new();
     for (x, _) in p.pos.iter().zip(in_cloud).filter(|(_, &c)| c) {
         z.push(x.z);
         rho.push(x.x.hypot(x.y));
+        side.push(x.x.abs());
+        side.push(x.y.abs());
     }
     let n_part = z.len();
     let max = |v: &[f64]| v.iter().copied().reduce(f64::max);
@@ -297,6 +309,7 @@ pub fn extent(p: &Particles, in_cloud: &[bool], plate_rear_z_m: f64, q: f64) -> 
     let rho_max = max(&rho);
     let front_z_m = quantile(&mut z, q);
     let rho_q = quantile(&mut rho, q);
+    let side_q = quantile(&mut side, q);
     let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
         (Some(a), Some(b)) if b > 0.0 => Some(a / b),
         _ => None,
@@ -305,6 +318,7 @@ pub fn extent(p: &Particles, in_cloud: &[bool], plate_rear_z_m: f64, q: f64) -> 
     let length_radial_m = rho_q.map(|r| 2.0 * r);
     let length_axial_max_m = front_z_max_m.map(|f| f - plate_rear_z_m);
     let length_radial_max_m = rho_max.map(|r| 2.0 * r);
+    let length_radial_side_m = side_q.map(|r| 2.0 * r);
     Extent {
         n_part,
         front_z_m,
@@ -315,6 +329,8 @@ pub fn extent(p: &Particles, in_cloud: &[bool], plate_rear_z_m: f64, q: f64) -> 
         length_axial_max_m,
         length_radial_max_m,
         length_ratio_max: ratio(length_axial_max_m, length_radial_max_m),
+        length_radial_side_m,
+        length_ratio_side: ratio(length_axial_m, length_radial_side_m),
     }
 }
 
@@ -373,6 +389,12 @@ pub struct CloudMeasurement {
     pub length_radial_max_m: Option<f64>,
     /// R by the maxima.
     pub length_ratio_max: Option<f64>,
+    /// Lr seen side-on (twice the quantile of |x| and |y| pooled), m.
+    #[serde(default)]
+    pub length_radial_side_m: Option<f64>,
+    /// R seen side-on: La over the side-on Lr.
+    #[serde(default)]
+    pub length_ratio_side: Option<f64>,
     /// The cloud's mass, kg (the sum of its fragments' masses).
     pub mass_kg: f64,
     /// Share of the impactor's mass that is in the cloud.
@@ -529,6 +551,8 @@ pub fn measure(
         length_axial_max_m: ext.length_axial_max_m,
         length_radial_max_m: ext.length_radial_max_m,
         length_ratio_max: ext.length_ratio_max,
+        length_radial_side_m: ext.length_radial_side_m,
+        length_ratio_side: ext.length_ratio_side,
         mass_kg,
         impactor_mass_fraction_in_cloud: per_impactor(impactor_in_cloud),
         largest_fragment_mass_kg: largest.map(|f| f.mass_kg),

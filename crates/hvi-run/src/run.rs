@@ -250,6 +250,8 @@ impl Summary {
                 Observable::LengthAxial => m.and_then(|m| m.length_axial_m),
                 Observable::LengthRadial => m.and_then(|m| m.length_radial_m),
                 Observable::LengthRatio => m.and_then(|m| m.length_ratio),
+                Observable::LengthRadialSide => m.and_then(|m| m.length_radial_side_m),
+                Observable::LengthRatioSide => m.and_then(|m| m.length_ratio_side),
                 Observable::FrontVelocity => cloud.and_then(|c| c.front_velocity_m_s),
                 Observable::FrontVelocityRatio => cloud.and_then(|c| c.front_velocity_ratio),
                 Observable::LargestFragmentMassFraction => {
