@@ -91,6 +91,19 @@ pub struct Record {
     pub checksum: Option<String>,
 }
 
+/// The SHA-256 (hex) of a stored record's JSON text as written, canonical, with `checksum`
+/// left out: the digest [`Record::sealed`] wrote, checked against the file itself rather than
+/// against the record as this version would write it again, so that a later version that adds
+/// an observable still reads the records of an earlier one.
+fn stored_digest(text: &str) -> Result<String> {
+    let mut value: serde_json::Value = serde_json::from_str(text).context("record as JSON")?;
+    if let Some(map) = value.as_object_mut() {
+        map.remove("checksum");
+    }
+    let digest = Sha256::digest(canonical_json(&value).as_bytes());
+    Ok(digest.iter().map(|b| format!("{b:02x}")).collect())
+}
+
 impl Record {
     /// The SHA-256 (hex) of the record's canonical JSON with `checksum` left out.
     pub fn digest(&self) -> Result<String> {
@@ -372,7 +385,7 @@ impl Store {
             );
         }
         if let Some(sum) = &rec.checksum {
-            if *sum != rec.digest()? {
+            if *sum != stored_digest(&text)? {
                 return self.damaged(
                     &dir,
                     "its record.json was changed after it was written (checksum mismatch)",
@@ -606,6 +619,43 @@ mod tests {
         assert_eq!((old.host, old.alive), (None, Some(false)));
         assert!(InProgress::parse(PathBuf::from("0123456789abcdef")).is_none());
         assert!(InProgress::parse(PathBuf::from(".tmp-x-notapid-0")).is_none());
+    }
+
+    #[test]
+    fn a_record_of_a_version_with_fewer_observables_keeps_its_checksum() {
+        let rec = Record {
+            format: STUDY_FORMAT_VERSION,
+            fingerprint: "ab".repeat(32),
+            study: "s".into(),
+            tier: "quick".into(),
+            params: serde_json::Map::new(),
+            status: RunStatus::Completed,
+            error: None,
+            observables: Observables::default(),
+            wall_seconds: 1.0,
+            threads: 1,
+            engine_version: "0.6.0".into(),
+            checksum: None,
+        };
+        // As an earlier version wrote it: without an observable this version added, sealed
+        // over what it wrote.
+        let mut value = serde_json::to_value(&rec).expect("json");
+        value["observables"]
+            .as_object_mut()
+            .expect("observables")
+            .remove("length_ratio_side");
+        let sum = stored_digest(&value.to_string()).expect("digest");
+        value["checksum"] = serde_json::json!(sum);
+        let text = value.to_string();
+        assert_eq!(stored_digest(&text).expect("digest"), sum);
+        // Read back by this version, the record differs from the file (its new observable is
+        // null), so only the file's own digest can vouch for it.
+        let back: Record = serde_json::from_str(&text).expect("record");
+        assert_ne!(back.digest().expect("digest"), sum);
+        // An edit is still caught.
+        let edited = text.replace("\"wall_seconds\":1.0", "\"wall_seconds\":2.0");
+        assert_ne!(edited, text);
+        assert_ne!(stored_digest(&edited).expect("digest"), sum);
     }
 
     #[test]
