@@ -737,7 +737,26 @@ fn an_optimum_on_the_edge_is_never_converged() {
             md.contains("**NOT CONVERGED") && md.contains("Not an optimum inside the box"),
             "{md}"
         );
+        // Each calibration is kept under its own label.
+        let label = c["label"].as_str().expect("label");
+        assert!(label.starts_with("ego-seeds1_2-"), "{label}");
+        let kept = out.join("calibrations").join(label);
+        assert_eq!(
+            calibration_json(&kept)["label"],
+            label,
+            "{}",
+            kept.display()
+        );
     }
+    // The two calibrations (other settings) sit side by side: neither overwrote the other.
+    let index = std::fs::read_to_string(out.join("calibrations/index.csv")).expect("index.csv");
+    let rows: Vec<&str> = index.lines().skip(1).collect();
+    assert_eq!(rows.len(), 2, "{index}");
+    assert!(
+        rows.iter()
+            .all(|r| r.starts_with("ego-seeds1_2-") && r.contains(",false,1,")),
+        "{index}"
+    );
 }
 
 #[test]

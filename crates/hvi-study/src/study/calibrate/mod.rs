@@ -40,7 +40,7 @@ use nelder_mead::refine_stage;
 use problem::{
     best_of, fixed_overrides, particles_of, refined_axes, Refinement, Stage, PAPER_BEST,
 };
-use report::{draw_figures, write_outputs};
+use report::{archive, draw_figures, write_outputs};
 
 /// What `calibrate` takes: the study's options and the search's, as the command line or a
 /// library caller gives them.
@@ -115,6 +115,7 @@ pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
         out: &out,
         progress,
     };
+    let first_box = bounds_of(&dims);
     let problem = stage.problem(fixed, dims);
     let method = args.method.unwrap_or(cfg.method);
     let search = search_stage(&stage, &problem, &cfg, args, method, &grid, &refine_keys)?;
@@ -138,8 +139,10 @@ pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
         .iter()
         .filter_map(|(k, v)| paper_params.get(k).map(|p| (k.clone(), v / p)))
         .collect();
+    let label = label_of(&cfg, args, method, &search, &first_box)?;
     let result = CalibrationResult {
         study: plan.study.clone(),
+        label,
         tier: plan.tier.clone(),
         particles: particles_of(&out, &best),
         targets_file: targets.path.clone(),
@@ -167,6 +170,13 @@ pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
     };
     write_outputs(&out, &result, &grid.evaluations)?;
     draw_figures(&out, &plan, &grid.records, &result, &cfg.log_axes, progress);
+    let kept = archive(&out, &result)?;
+    if progress {
+        eprintln!(
+            "kept beside the study's other calibrations: {}",
+            kept.display()
+        );
+    }
     if progress {
         eprint!("{}", report_text(&result));
     }
@@ -461,6 +471,55 @@ fn paper_point(
         .pop()
         .ok_or_else(|| anyhow::anyhow!("the paper's point has no evaluation"))?;
     Ok((paper_params, paper, ran))
+}
+
+/// The calibration's label: `<method>-seeds<s1_s2...>-<digest>`, the digest (8 hex digits of
+/// SHA-256) over every setting that can change its answer (the search's settings, the targets
+/// and weights, the first box) so that two calibrations differ in label whenever they may
+/// differ in result; the tier and the scene overrides are the study directory's own.
+fn label_of(
+    cfg: &CalibrateConfig,
+    args: &CalibrateOptions,
+    method: Method,
+    search: &SearchOutcome,
+    first_box: &BTreeMap<String, (f64, f64)>,
+) -> Result<String> {
+    use sha2::{Digest, Sha256};
+    let name = if search.method == "none" {
+        "grid"
+    } else {
+        method.name()
+    };
+    let settings = serde_json::json!({
+        "method": name,
+        "seeds": cfg.seeds,
+        "batch": cfg.batch,
+        "max_batches": args.max_batches.unwrap_or(cfg.max_batches),
+        "noise_floor": cfg.noise_floor,
+        "max_extensions": cfg.max_extensions,
+        "extend": args.extend,
+        "max_iters": args.max_iters.unwrap_or(cfg.max_iters),
+        "sd_tolerance": cfg.sd_tolerance,
+        "refine": cfg.refine,
+        "log_axes": cfg.log_axes,
+        "targets": cfg.targets,
+        "weights": cfg.weights,
+        "box": first_box,
+    });
+    let digest = Sha256::digest(hvi_run::plan::canonical_json(&settings).as_bytes());
+    let hex: String = digest.iter().take(4).map(|b| format!("{b:02x}")).collect();
+    // The seeds the answer is over (Nelder-Mead and the grid alone: the scene's own).
+    let seeds = if search.seeds.is_empty() {
+        "scene".to_string()
+    } else {
+        search
+            .seeds
+            .iter()
+            .map(u64::to_string)
+            .collect::<Vec<_>>()
+            .join("_")
+    };
+    Ok(format!("{name}-seeds{seeds}-{hex}"))
 }
 
 /// A box in words: `material.eps_j in [0.01, 10], material.kappa_n_m in [1.14e6, 9.12e6]`.

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use hvi_analysis::observable::Observable;
 use hvi_analysis::score::objective;
 use hvi_run::output::{write_atomic, write_atomic_bytes};
@@ -373,4 +373,114 @@ pub(super) fn calibration_snapshots(
         &tiles,
     )?;
     Ok(path)
+}
+
+/// The files of one calibration (as opposed to the grid's, which every calibration of the
+/// study shares).
+const CALIBRATION_FILES: [&str; 6] = [
+    "calibration.json",
+    "calibration.md",
+    "evaluations.csv",
+    "surrogate.csv",
+    "map_objective.png",
+    "map_objective.svg",
+];
+
+/// Keeps this calibration's files under `calibrations/<label>/` of the study directory (so
+/// that calibrations with other methods, seeds, settings or boxes sit side by side and never
+/// overwrite each other; the study directory's own copies are the last calibration's), and
+/// rewrites `calibrations/index.csv`, one row per kept calibration. Returns the directory.
+pub(super) fn archive(out: &Path, r: &CalibrationResult) -> Result<PathBuf> {
+    let root = out.join("calibrations");
+    let dir = root.join(&r.label);
+    let tmp = root.join(format!(".tmp-{}-{}", r.label, std::process::id()));
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp)?;
+    }
+    std::fs::create_dir_all(&tmp)?;
+    for name in CALIBRATION_FILES {
+        let from = out.join(name);
+        if from.exists() {
+            std::fs::copy(&from, tmp.join(name)).with_context(|| {
+                format!("cannot copy {} into {}", from.display(), tmp.display())
+            })?;
+        }
+    }
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir)
+            .with_context(|| format!("cannot replace {}", dir.display()))?;
+    }
+    std::fs::rename(&tmp, &dir)
+        .with_context(|| format!("cannot move {} to {}", tmp.display(), dir.display()))?;
+    write_index(&root)?;
+    Ok(dir)
+}
+
+/// `calibrations/index.csv`: every kept calibration (from its calibration.json), by label.
+fn write_index(root: &Path) -> Result<()> {
+    let mut rows: Vec<CalibrationResult> = Vec::new();
+    for entry in std::fs::read_dir(root)? {
+        let path = entry?.path().join("calibration.json");
+        if let Ok(text) = std::fs::read_to_string(&path) {
+            if let Ok(r) = serde_json::from_str::<CalibrationResult>(&text) {
+                rows.push(r);
+            }
+        }
+    }
+    rows.sort_by(|a, b| a.label.cmp(&b.label));
+    let keys: Vec<String> = {
+        let mut k: Vec<String> = rows
+            .iter()
+            .flat_map(|r| r.best.params.keys().cloned())
+            .collect();
+        k.sort();
+        k.dedup();
+        k
+    };
+    write_atomic(&root.join("index.csv"), |w| {
+        let mut csv = csv::Writer::from_writer(w);
+        let mut header: Vec<String> = ["label", "method", "seeds", "converged", "boxes"]
+            .map(String::from)
+            .to_vec();
+        header.extend(keys.iter().map(|k| format!("best {k}")));
+        header.extend(["objective", "paper_objective", "edges", "particles"].map(String::from));
+        csv.write_record(&header)?;
+        for r in &rows {
+            let mut row = vec![
+                r.label.clone(),
+                r.method.clone(),
+                if r.best.seeds.is_empty() {
+                    "scene".to_string()
+                } else {
+                    r.best
+                        .seeds
+                        .iter()
+                        .map(u64::to_string)
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                },
+                r.converged.to_string(),
+                r.boxes.len().to_string(),
+            ];
+            row.extend(keys.iter().map(|k| {
+                r.best
+                    .params
+                    .get(k)
+                    .map_or(String::new(), |v| v.to_string())
+            }));
+            row.push(r.best.objective.to_string());
+            row.push(r.paper.objective.to_string());
+            row.push(
+                r.edges
+                    .iter()
+                    .map(|e| format!("{} {}", e.key, e.side.name()))
+                    .collect::<Vec<_>>()
+                    .join("; "),
+            );
+            row.push(r.particles.map_or(String::new(), |n| n.to_string()));
+            csv.write_record(&row)?;
+        }
+        csv.flush()?;
+        Ok(())
+    })
 }

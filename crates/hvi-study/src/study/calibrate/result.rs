@@ -40,6 +40,10 @@ pub struct Evaluation {
 pub struct CalibrationResult {
     /// The study.
     pub study: String,
+    /// The calibration's label: its method, seeds and a digest of its settings and first box
+    /// (`calibrations/<label>/` keeps its files beside other calibrations of the study).
+    #[serde(default)]
+    pub label: String,
     /// The tier.
     pub tier: String,
     /// Particles of the runs (from the best run).
