@@ -477,6 +477,7 @@ impl NeighbourList {
         self.mirrors = !p.image_bonds.is_empty();
         let n = p.len();
         p.clear_broken_slots();
+        crate::symmetry::clear_broken_image_bonds(&mut p.image_bonds);
         self.sort_into_cells(p, 1.0 / radius);
         self.split_coordinates(p, block);
         let search = PairSearch {

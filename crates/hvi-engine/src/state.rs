@@ -129,10 +129,9 @@ impl Particles {
         })
     }
 
-    /// Clears the owned and mirror slots of bonds that broke since the last call (and the
-    /// image bonds that did).
+    /// Clears the owned and mirror slots of bonds that broke since the last call (the image
+    /// bonds that did are `symmetry::clear_broken_image_bonds`'s).
     pub(crate) fn clear_broken_slots(&mut self) {
-        crate::symmetry::clear_broken_image_bonds(&mut self.image_bonds);
         for i in 0..self.len() {
             for m in 0..OWNED_BONDS {
                 let s = self.bonds[i * BONDS_PER_PARTICLE + 2 * m];

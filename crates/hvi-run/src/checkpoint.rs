@@ -51,10 +51,9 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 
-use crate::output::write_atomic_bytes;
+use crate::files::write_atomic_bytes;
+pub use crate::files::CHECKPOINT_FILE;
 
-/// A single run's checkpoint file, in its output directory.
-pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
 /// The first eight bytes of a checkpoint.
 pub const MAGIC: [u8; 8] = *b"HVICKPT\0";
 /// The format version this code writes and reads.
@@ -156,9 +155,9 @@ pub fn interval() -> Every {
 
 /// The key of a run: the SHA-256 of the canonical JSON of what its checkpoint depends on.
 pub fn key(what: &serde_json::Value) -> [u8; 32] {
-    let text = crate::plan::canonical_json(&serde_json::json!({
+    let text = crate::files::canonical_json(&serde_json::json!({
         "checkpoint_format": FORMAT_VERSION,
-        "version": crate::plan::ENGINE_VERSION,
+        "version": crate::files::ENGINE_VERSION,
         "run": what,
     }));
     Sha256::digest(text.as_bytes()).into()

@@ -38,6 +38,7 @@
 pub mod bench;
 pub mod checkpoint;
 pub mod exec;
+pub mod files;
 pub mod interrupt;
 pub mod lock;
 pub mod output;

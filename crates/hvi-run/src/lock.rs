@@ -69,7 +69,7 @@ fn stamp(file: &mut File) {
         file,
         "pid {} on {}: {}",
         std::process::id(),
-        crate::store::host_name(),
+        crate::files::host_name(),
         args.join(" ")
     );
     let _ = file.flush();

@@ -5,68 +5,10 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use anyhow::{Context, Result};
+
+pub use crate::files::{remove_stale_partials, write_atomic, write_atomic_bytes};
 use hvi_engine::sim::Simulation;
 use hvi_engine::state::{Body, Particles};
-
-/// Writes a file atomically: into a temporary sibling, flushed and synced, then renamed over
-/// the target. A reader sees the old file or the new one, never a torn one.
-pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
-    let dir = path.parent().unwrap_or_else(|| Path::new("."));
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp.{}", std::process::id()));
-    let written = (|| -> Result<()> {
-        let file = fs::File::create(&tmp)?;
-        let mut w = BufWriter::new(file);
-        write(&mut w)?;
-        w.flush()?;
-        w.get_ref().sync_all()?;
-        Ok(())
-    })();
-    if let Err(e) = written {
-        // A full disk, say: no partial file stays, and the error names the file.
-        let _ = fs::remove_file(&tmp);
-        return Err(e.context(format!("cannot write {}", path.display())));
-    }
-    fs::rename(&tmp, path).with_context(|| format!("cannot move {} into place", path.display()))?;
-    Ok(())
-}
-
-/// Removes the temporary files [`write_atomic`] left in `dir` when a process was killed during
-/// a write (`.<name>.tmp.<pid>` of another process than this one), where the caller knows no
-/// other process writes (a resumed run's own directory, a checkpoint under its run lock).
-/// `only` restricts it to the temporaries of one file name. Returns how many.
-pub fn remove_stale_partials(dir: &Path, only: Option<&str>) -> Result<usize> {
-    let own = format!(".tmp.{}", std::process::id());
-    let mut n = 0;
-    let Ok(entries) = fs::read_dir(dir) else {
-        return Ok(0);
-    };
-    for e in entries.filter_map(|e| e.ok()) {
-        let name = e.file_name().to_string_lossy().into_owned();
-        let Some((target, pid)) = name.strip_prefix('.').and_then(|r| r.rsplit_once(".tmp."))
-        else {
-            continue;
-        };
-        let ours = only.is_none_or(|o| o == target);
-        if ours && pid.parse::<u32>().is_ok() && !name.ends_with(&own) && e.path().is_file() {
-            fs::remove_file(e.path())
-                .with_context(|| format!("cannot remove {}", e.path().display()))?;
-            n += 1;
-        }
-    }
-    Ok(n)
-}
-
-/// Writes bytes atomically.
-pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomic(path, |w| {
-        w.write_all(bytes)?;
-        Ok(())
-    })
-}
 
 /// Writes serialisable rows as a CSV file (header from the field names), atomically.
 pub fn write_csv_atomic<T: serde::Serialize>(
@@ -562,7 +504,7 @@ fn is_run_file(name: &str) -> bool {
         || (name.starts_with("dump_") && name.ends_with(".xyz")) // earlier versions' dumps
         || name == format!(".{TRAJECTORY_FILE}.partial")
         || name == PVD_FILE
-        || name == crate::checkpoint::CHECKPOINT_FILE
+        || name == crate::files::CHECKPOINT_FILE
         || (name.starts_with('.') && name.contains(".tmp."))
 }
 

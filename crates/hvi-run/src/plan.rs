@@ -14,21 +14,11 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::output::write_atomic_bytes;
+use crate::files::write_atomic_bytes;
 use crate::scene_file::parse_scene;
 use crate::spec::{json_to_override, override_key, Axis, Study, Tier};
 
-/// Version of the plan and run-record formats, and of what the fingerprint covers. Bump it
-/// when either changes meaning, so old results are not mistaken for new ones.
-pub const STUDY_FORMAT_VERSION: u32 = 1;
-
-/// The engine version a fingerprint records: the workspace version. Results that a code change
-/// alters need a version bump to invalidate cached runs (a decision: a hash of the source
-/// would invalidate every run on every commit).
-pub const ENGINE_VERSION: &str = env!("CARGO_PKG_VERSION");
-
-/// How many hex digits of the fingerprint name a run's directory.
-pub const DIR_DIGITS: usize = 16;
+pub use crate::files::{canonical_json, DIR_DIGITS, ENGINE_VERSION, STUDY_FORMAT_VERSION};
 
 /// One run of a plan.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -85,43 +75,6 @@ pub struct PlanRequest {
     pub particles: Option<f64>,
     /// `--set KEY=VALUE` overrides, after the tier.
     pub set: Vec<String>,
-}
-
-/// Serialises a JSON value with object keys sorted and no whitespace: the same value always
-/// gives the same bytes (serde_json writes floats in their shortest round-trip form).
-pub fn canonical_json(v: &serde_json::Value) -> String {
-    fn write(v: &serde_json::Value, out: &mut String) {
-        match v {
-            serde_json::Value::Object(m) => {
-                let mut keys: Vec<&String> = m.keys().collect();
-                keys.sort();
-                out.push('{');
-                for (i, k) in keys.iter().enumerate() {
-                    if i > 0 {
-                        out.push(',');
-                    }
-                    out.push_str(&serde_json::Value::String((*k).clone()).to_string());
-                    out.push(':');
-                    write(&m[*k], out);
-                }
-                out.push('}');
-            }
-            serde_json::Value::Array(a) => {
-                out.push('[');
-                for (i, x) in a.iter().enumerate() {
-                    if i > 0 {
-                        out.push(',');
-                    }
-                    write(x, out);
-                }
-                out.push(']');
-            }
-            other => out.push_str(&other.to_string()),
-        }
-    }
-    let mut s = String::new();
-    write(v, &mut s);
-    s
 }
 
 /// The fingerprint of a run: SHA-256 (hex) of the canonical JSON of the format version, the

@@ -694,7 +694,7 @@ impl Gathered {
         // What killed processes left half-written beside the checkpoint.
         if let Some(parent) = path.parent() {
             let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-            crate::output::remove_stale_partials(parent, name.as_deref())?;
+            crate::files::remove_stale_partials(parent, name.as_deref())?;
         }
         let (step, saved) = match checkpoint::read::<Saved>(&path, &c.key)? {
             Found::Nothing => return Ok(false),
@@ -717,8 +717,8 @@ impl Gathered {
             return start_over(e.to_string());
         }
         // The run's own files that a kill left half-written (dumps, pictures, tables).
-        crate::output::remove_stale_partials(&opts.out_dir, None)?;
-        crate::output::remove_stale_partials(&opts.out_dir.join(crate::output::VTK_DIR), None)?;
+        crate::files::remove_stale_partials(&opts.out_dir, None)?;
+        crate::files::remove_stale_partials(&opts.out_dir.join(crate::output::VTK_DIR), None)?;
         if let Every::Steps(k) = c.opts.every {
             c.next_step = next_multiple(step, k);
         }

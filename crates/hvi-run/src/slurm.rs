@@ -30,7 +30,7 @@ use std::time::{SystemTime, UNIX_EPOCH};
 use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
-use crate::output::write_atomic_bytes;
+use crate::files::write_atomic_bytes;
 use crate::plan::describe_values;
 use crate::plan::Plan;
 use crate::store::{RunStatus, Store};

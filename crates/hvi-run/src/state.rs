@@ -58,7 +58,7 @@ use hvi_engine::cloud::{CloudState, KeptStates};
 use hvi_engine::state::Body;
 use sha2::{Digest, Sha256};
 
-use crate::output::write_atomic_bytes;
+use crate::files::write_atomic_bytes;
 
 /// The state file's name in a run's directory.
 pub const STATE_FILE: &str = "state.bin";

@@ -29,7 +29,6 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::OnceLock;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -39,8 +38,10 @@ use serde::{Deserialize, Serialize};
 
 use sha2::{Digest, Sha256};
 
-use crate::output::write_atomic_bytes;
-use crate::plan::{canonical_json, DIR_DIGITS, ENGINE_VERSION, STUDY_FORMAT_VERSION};
+pub use crate::files::host_name;
+use crate::files::{
+    canonical_json, write_atomic_bytes, DIR_DIGITS, ENGINE_VERSION, STUDY_FORMAT_VERSION,
+};
 use crate::run::{run_scene, RunOptions, Summary};
 
 /// How a run ended.
@@ -155,35 +156,6 @@ fn process_alive(pid: u32) -> bool {
         return true;
     }
     Path::new(&format!("/proc/{pid}")).exists()
-}
-
-/// This machine's name as it appears in in-progress directory names (characters other than
-/// letters, digits, `.`, `-` and `_` become `_`).
-pub fn host_name() -> &'static str {
-    static HOST: OnceLock<String> = OnceLock::new();
-    HOST.get_or_init(|| {
-        let raw = ["/proc/sys/kernel/hostname", "/etc/hostname"]
-            .iter()
-            .find_map(|p| fs::read_to_string(p).ok())
-            .or_else(|| std::env::var("HOSTNAME").ok())
-            .unwrap_or_default();
-        let name: String = raw
-            .trim()
-            .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .collect();
-        if name.is_empty() {
-            "unknown".into()
-        } else {
-            name
-        }
-    })
 }
 
 /// A run in progress (or abandoned): a temporary directory of the store.

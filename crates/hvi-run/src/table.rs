@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::Result;
 use serde_json::Value;
 
-use crate::output::write_atomic;
+use crate::files::write_atomic;
 use crate::plan::Plan;
 use crate::spec::Axis;
 use crate::store::{Record, RunStatus};

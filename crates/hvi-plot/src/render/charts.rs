@@ -9,7 +9,7 @@ use plotters::coord::combinators::{LogCoord, WithKeyPoints};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
-use super::{thousands, PixelRect, SceneInfo};
+use super::common::{thousands, PixelRect, SceneInfo};
 use crate::save::write_png;
 use crate::theme::{
     fonts, line_key, series_legend, text_style, Area, ThemedAxes, AXIS_TEXT_LARGE, FAMILY, GRID,

@@ -9,7 +9,9 @@ use glam::DVec3;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::{scale_bar, shade, trimmed_range, Frame, PixelRect, SceneInfo, Splatter, MIN_DOT_PX};
+use super::common::{
+    scale_bar, shade, trimmed_range, Frame, PixelRect, SceneInfo, Splatter, MIN_DOT_PX,
+};
 use crate::save::write_png;
 use crate::theme::{fonts, text_style, Area, IMPACTOR, IMPACTOR_RGB, PLATE, PLATE_RGB};
 

@@ -11,7 +11,7 @@ use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::{equal_aspect, scale_bar, z_x_mesh, PixelRect, SceneInfo};
+use super::common::{equal_aspect, scale_bar, z_x_mesh, PixelRect, SceneInfo};
 use crate::save::write_png;
 use crate::theme::{fonts, text_style, Area, Chart2d, FAMILY, GUIDE, MEASURE};
 

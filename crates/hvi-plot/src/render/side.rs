@@ -11,7 +11,7 @@ use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::{
+use super::common::{
     equal_aspect, scale_bar, shade, thousands, trimmed_range, z_x_mesh, Frame, PixelRect,
     SceneInfo, Splatter, MIN_DOT_PX,
 };

@@ -11,7 +11,7 @@ use hvi_plot::contour::{contour_plot, ContourPlot, Marker};
 use plotters::style::RGBColor;
 use serde::Serialize;
 
-use super::{FidelityResult, Judged, SeedFields};
+use super::result::{FidelityResult, Judged, SeedFields};
 use crate::reproduce::report::{cell, check_report_dir, fmt_num, numbers_table, Figure};
 use crate::reproduce::stages::{FIG10_CHECKS, FIG10_MAIN_CHECKS, FIG9_CHECKS, FIG9_MAIN_CHECKS};
 use hvi_run::output::{write_atomic_bytes, write_csv_atomic};

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, Result};
 use plotters::style::RGBColor;
 
-use super::calibrate::{CalibrationResult, Evaluation};
+use super::calibrate::result::{CalibrationResult, Evaluation};
 use hvi_analysis::contour::{Field, Point};
 use hvi_analysis::score::{objective, Target};
 use hvi_engine::state::Body;

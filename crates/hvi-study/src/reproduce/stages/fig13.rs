@@ -12,7 +12,7 @@ use hvi_run::output::write_atomic;
 use hvi_run::plan::Plan;
 use hvi_run::store::Record;
 
-use super::{axis, execute, Ctx};
+use super::shared::{axis, execute, Ctx};
 use crate::reproduce::report::{fmt_num, short, Figure, StageTiming, Value, Verdict};
 
 /// Paper text of Fig. 13.

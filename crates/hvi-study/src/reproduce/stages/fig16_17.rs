@@ -15,8 +15,8 @@ use hvi_analysis::score::Target;
 use hvi_engine::paper;
 use hvi_run::plan::Plan;
 
-use super::{axis, completed_runs, plan_records, timing, Ctx};
-use super::{keeps_large_fragment, largest_fragment_bound};
+use super::shared::{axis, completed_runs, plan_records, timing, Ctx};
+use super::shared::{keeps_large_fragment, largest_fragment_bound};
 use crate::cli::ValidityArgs;
 use crate::reproduce::report::{fmt_num, judge, short, Check, Figure, StageTiming, Value, Verdict};
 use crate::study::figures::field_of;

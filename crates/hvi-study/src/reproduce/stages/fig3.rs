@@ -6,7 +6,7 @@ use hvi_engine::paper;
 use hvi_engine::potential::{ContactForm, Interaction};
 use hvi_plot::paper as plots;
 
-use super::Ctx;
+use super::shared::Ctx;
 use crate::reproduce::report::{short, Figure, Value, Verdict};
 
 /// Paper text of Fig. 3.

@@ -14,7 +14,7 @@ use hvi_run::output::write_atomic;
 use hvi_run::plan::Plan;
 use hvi_run::store::{Record, RunStatus};
 
-use super::{axis, execute, Ctx};
+use super::shared::{axis, execute, Ctx};
 use crate::reproduce::report::{fmt_num, Figure, StageTiming, Value, Verdict};
 use crate::reproduce::sizing;
 

@@ -15,7 +15,7 @@ use hvi_run::output::write_atomic;
 use hvi_run::plan::Plan;
 use hvi_run::store::{read_summary, Record, RunStatus};
 
-use super::{execute, Ctx};
+use super::shared::{execute, Ctx};
 use crate::reproduce::report::{fmt_num, short, Figure, StageTiming, Value, Verdict};
 
 /// Paper text of Fig. 5.

@@ -13,9 +13,9 @@ use hvi_engine::paper;
 use hvi_run::plan::Plan;
 use hvi_run::store::{read_summary, Record};
 
-use super::Ctx;
-use super::{axis, completed_runs, index_of, mean, plan_records, timing};
-use super::{keeps_large_fragment, largest_fragment_bound};
+use super::shared::Ctx;
+use super::shared::{axis, completed_runs, index_of, mean, plan_records, timing};
+use super::shared::{keeps_large_fragment, largest_fragment_bound};
 use crate::reproduce::report::{fmt_num, judge, short, Check, Figure, StageTiming, Value, Verdict};
 use crate::study::calibrate::{calibrate, CalibrateOptions};
 use crate::study::figures::field_of;

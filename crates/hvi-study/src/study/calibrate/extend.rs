@@ -11,72 +11,11 @@
 
 use std::collections::BTreeMap;
 
+use super::problem::{as_num, Dim, Refinement};
+pub use super::result::{fmt_value, Edge, SearchedBox, Side};
 use anyhow::Result;
 use hvi_run::plan::Plan;
-use serde::{Deserialize, Serialize};
-
-use super::problem::{as_num, Dim, Refinement};
-
-/// A side of an axis of the searched box.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Side {
-    /// The lowest value.
-    Low,
-    /// The highest value.
-    High,
-}
-
-impl Side {
-    /// `low` or `high`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Side::Low => "low",
-            Side::High => "high",
-        }
-    }
-}
-
-/// A side of the box that the answer touches.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Edge {
-    /// The parameter's key.
-    pub key: String,
-    /// Which side.
-    pub side: Side,
-    /// The box's value on that side, in the parameter's unit.
-    pub value: f64,
-    /// What touches it: `best point`, `confidence region` or both.
-    pub touched_by: String,
-    /// Why it was not extended further (None while it can be).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub limit: Option<String>,
-}
-
-impl Edge {
-    /// The edge in words, e.g. `the high side of material.eps_j (1 J), touched by the best
-    /// point`.
-    pub fn describe(&self) -> String {
-        format!(
-            "the {} side of {} ({}), touched by the {}",
-            self.side.name(),
-            self.key,
-            fmt_value(self.value),
-            self.touched_by
-        )
-    }
-}
-
-/// One box a calibration searched.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SearchedBox {
-    /// Per searched key, its (lowest, highest) value in the parameter's unit.
-    pub bounds: BTreeMap<String, (f64, f64)>,
-    /// Why the search in this box stopped.
-    pub termination: String,
-    /// The sides the answer in this box touched.
-    pub edges: Vec<Edge>,
-}
+use hvi_run::spec::round_sig;
 
 /// How far a calibration may move the box's sides.
 #[derive(Debug, Clone, Copy)]
@@ -87,24 +26,11 @@ pub struct ExtendRule {
     pub max_extensions: usize,
 }
 
-/// A number as the reports print it (four significant digits, no trailing zeros).
-pub(super) fn fmt_value(v: f64) -> String {
-    let s = format!("{v:.4e}");
-    // 1.0000e0 -> 1, 4.5600e6 -> 4.56e6
-    let (m, e) = s.split_once('e').unwrap_or((&s, "0"));
-    let m = m.trim_end_matches('0').trim_end_matches('.');
-    if e == "0" {
-        m.to_string()
-    } else {
-        format!("{m}e{e}")
-    }
-}
-
 /// The box in the parameters' units.
 pub(super) fn bounds_of(dims: &[Dim]) -> BTreeMap<String, (f64, f64)> {
     dims.iter()
         .map(|(k, log, lo, hi)| {
-            let v = |u: f64| if *log { 10f64.powf(u) } else { u };
+            let v = |u: f64| round_sig(if *log { 10f64.powf(u) } else { u }, 6);
             (k.clone(), (v(*lo), v(*hi)))
         })
         .collect()
@@ -145,7 +71,7 @@ pub(super) fn edges_of(
             edges.push(Edge {
                 key: key.clone(),
                 side,
-                value: if *log { 10f64.powf(bound) } else { bound },
+                value: round_sig(if *log { 10f64.powf(bound) } else { bound }, 6),
                 touched_by: touched_by.into(),
                 limit: None,
             });

@@ -32,8 +32,8 @@ pub use result::{CalibrationResult, Evaluation, ParamRegion, Spread, Surface};
 
 use super::options::StudyOptions;
 use extend::{
-    bounds_of, edges_of, extend, fmt_value, grid_coords, limit_line, new_lattice_points, Edge,
-    ExtendRule, SearchedBox,
+    bounds_of, edges_of, extend, grid_coords, limit_line, new_lattice_points, Edge, ExtendRule,
+    SearchedBox,
 };
 use grid::{grid_stage, Grid};
 use nelder_mead::refine_stage;
@@ -41,6 +41,7 @@ use problem::{
     best_of, fixed_overrides, particles_of, refined_axes, Refinement, Stage, PAPER_BEST,
 };
 use report::{archive, draw_figures, write_outputs};
+use result::fmt_bounds;
 
 /// What `calibrate` takes: the study's options and the search's, as the command line or a
 /// library caller gives them.
@@ -520,13 +521,4 @@ fn label_of(
             .join("_")
     };
     Ok(format!("{name}-seeds{seeds}-{hex}"))
-}
-
-/// A box in words: `material.eps_j in [0.01, 10], material.kappa_n_m in [1.14e6, 9.12e6]`.
-pub(crate) fn fmt_bounds(bounds: &BTreeMap<String, (f64, f64)>) -> String {
-    bounds
-        .iter()
-        .map(|(k, (lo, hi))| format!("{k} in [{}, {}]", fmt_value(*lo), fmt_value(*hi)))
-        .collect::<Vec<_>>()
-        .join(", ")
 }

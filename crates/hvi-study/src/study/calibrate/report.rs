@@ -85,7 +85,7 @@ pub fn report_text(r: &CalibrationResult) -> String {
     for (k, b) in r.boxes.iter().enumerate() {
         s.push_str(&format!(
             "  box {k}:       {}: {}\n",
-            super::fmt_bounds(&b.bounds),
+            super::result::fmt_bounds(&b.bounds),
             b.termination
         ));
     }
@@ -195,7 +195,7 @@ pub fn report_md(r: &CalibrationResult) -> String {
             };
             s.push_str(&format!(
                 "| {k} | {} | {} | {edges} |\n",
-                super::fmt_bounds(&b.bounds),
+                super::result::fmt_bounds(&b.bounds),
                 b.termination
             ));
         }

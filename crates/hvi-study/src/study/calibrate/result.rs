@@ -78,10 +78,10 @@ pub struct CalibrationResult {
     /// Every box searched, the grid's first; each later one extended past the sides the
     /// answer touched.
     #[serde(default)]
-    pub boxes: Vec<super::extend::SearchedBox>,
+    pub boxes: Vec<SearchedBox>,
     /// The sides of the last box that the answer touches (empty: the answer is interior).
     #[serde(default)]
-    pub edges: Vec<super::extend::Edge>,
+    pub edges: Vec<Edge>,
     /// Where the extension stopped, in words (e.g. the parameter lies beyond a side at its
     /// limit).
     #[serde(default)]
@@ -152,4 +152,87 @@ pub struct Surface {
     pub keys: (String, String),
     /// Predicted log10 J over the box, in the keys' own units.
     pub field: hvi_analysis::contour::Field,
+}
+
+/// A side of an axis of the searched box.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Side {
+    /// The lowest value.
+    Low,
+    /// The highest value.
+    High,
+}
+
+impl Side {
+    /// `low` or `high`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Side::Low => "low",
+            Side::High => "high",
+        }
+    }
+}
+
+/// A side of the box that the answer touches.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Edge {
+    /// The parameter's key.
+    pub key: String,
+    /// Which side.
+    pub side: Side,
+    /// The box's value on that side, in the parameter's unit.
+    pub value: f64,
+    /// What touches it: `best point`, `confidence region` or both.
+    pub touched_by: String,
+    /// Why it was not extended further (None while it can be).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub limit: Option<String>,
+}
+
+impl Edge {
+    /// The edge in words, e.g. `the high side of material.eps_j (1 J), touched by the best
+    /// point`.
+    pub fn describe(&self) -> String {
+        format!(
+            "the {} side of {} ({}), touched by the {}",
+            self.side.name(),
+            self.key,
+            fmt_value(self.value),
+            self.touched_by
+        )
+    }
+}
+
+/// One box a calibration searched.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SearchedBox {
+    /// Per searched key, its (lowest, highest) value in the parameter's unit.
+    pub bounds: BTreeMap<String, (f64, f64)>,
+    /// Why the search in this box stopped.
+    pub termination: String,
+    /// The sides the answer in this box touched.
+    pub edges: Vec<Edge>,
+}
+
+/// A number as the reports print it (four significant digits, no trailing zeros).
+pub fn fmt_value(v: f64) -> String {
+    let s = format!("{v:.4e}");
+    // 1.0000e0 -> 1, 4.5600e6 -> 4.56e6
+    let (m, e) = s.split_once('e').unwrap_or((&s, "0"));
+    let m = m.trim_end_matches('0').trim_end_matches('.');
+    if e == "0" {
+        m.to_string()
+    } else {
+        format!("{m}e{e}")
+    }
+}
+
+/// A box in words: `material.eps_j in [0.01, 10], material.kappa_n_m in [1.14e6, 9.12e6]`.
+pub fn fmt_bounds(bounds: &BTreeMap<String, (f64, f64)>) -> String {
+    bounds
+        .iter()
+        .map(|(k, (lo, hi))| format!("{k} in [{}, {}]", fmt_value(*lo), fmt_value(*hi)))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
