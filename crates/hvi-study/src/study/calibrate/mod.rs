@@ -346,6 +346,48 @@ fn ego_boxes(
     let seeds = ego::seed_list(&settings);
     loop {
         let problem = stage.problem(first.fixed.clone(), dims.clone());
+        // Where the points scored so far put the answer: on a side, the box moves out before
+        // any batch is spent inside it.
+        if rule.extend {
+            let probe = ego::EgoSettings {
+                max_batches: 0,
+                ..settings.clone()
+            };
+            let p = ego::search(&problem, &probe, scored.clone(), batches)?;
+            let at = ego::coords(&problem, &p.best.params);
+            let mut edges = edges_of(&dims, at.as_deref(), p.region.as_ref().map(|r| &r.sides));
+            let before = bounds_of(&dims);
+            if !edges.is_empty()
+                && extend(
+                    &problem,
+                    &mut dims,
+                    &mut values,
+                    &mut edges,
+                    &mut moved,
+                    rule,
+                )?
+            {
+                edges.retain(|e| e.limit.is_none());
+                if problem.progress {
+                    for e in &edges {
+                        eprintln!("edge: {} (before this box's batches)", e.describe());
+                    }
+                }
+                boxes.push(SearchedBox {
+                    bounds: before,
+                    termination: "extended before its batches: the answer from the points \
+                                  scored so far touches a side"
+                        .into(),
+                    edges,
+                });
+                let (evs, n) =
+                    extension_points(stage, first, &dims, &values, &scored, &seeds, extension)?;
+                scored.extend(evs);
+                runs += n;
+                extension += 1;
+                continue;
+            }
+        }
         let o = ego::search(&problem, &settings, scored, batches)?;
         runs += o.runs;
         batches += o.batches;
@@ -413,30 +455,44 @@ fn ego_boxes(
                 seeds: settings.seeds.clone(),
             });
         }
-        // The new grid points of the larger box, at every seed.
-        let seen: Vec<Vec<f64>> = scored
-            .iter()
-            .filter_map(|(e, _)| ego::coords(&problem, &e.params))
-            .collect();
-        let problem = stage.problem(first.fixed.clone(), dims.clone());
-        let points: Vec<BTreeMap<String, f64>> = new_lattice_points(&values, &seen)
-            .iter()
-            .map(|x| problem.values(x))
-            .collect();
-        let label = format!("extend-{extension}");
-        if problem.progress {
-            eprintln!(
-                "{label}: the box is now {}; {} new grid point(s) at {} seed(s)",
-                fmt_bounds(&bounds_of(&dims)),
-                points.len(),
-                seeds.len()
-            );
-        }
-        let (evs, n) = ego::run_points(&problem, &label, &points, &seeds)?;
+        let (evs, n) = extension_points(stage, first, &dims, &values, &scored, &seeds, extension)?;
         scored.extend(evs);
         runs += n;
         extension += 1;
     }
+}
+
+/// Runs the new grid points of an extended box (`dims`, its grid values `values`): those of
+/// the lattice of `values` not scored yet, at every seed of the search. Returns their
+/// evaluations and the runs simulated.
+fn extension_points(
+    stage: &Stage,
+    first: &Refinement,
+    dims: &[problem::Dim],
+    values: &[Vec<f64>],
+    scored: &[ego::Scored],
+    seeds: &[Option<u64>],
+    extension: usize,
+) -> Result<(Vec<ego::Scored>, usize)> {
+    let problem = stage.problem(first.fixed.clone(), dims.to_vec());
+    let seen: Vec<Vec<f64>> = scored
+        .iter()
+        .filter_map(|(e, _)| ego::coords(&problem, &e.params))
+        .collect();
+    let points: Vec<BTreeMap<String, f64>> = new_lattice_points(values, &seen)
+        .iter()
+        .map(|x| problem.values(x))
+        .collect();
+    let label = format!("extend-{extension}");
+    if problem.progress {
+        eprintln!(
+            "{label}: the box is now {}; {} new grid point(s) at {} seed(s)",
+            fmt_bounds(&bounds_of(dims)),
+            points.len(),
+            seeds.len()
+        );
+    }
+    ego::run_points(&problem, &label, &points, seeds)
 }
 
 /// The paper's best fit at this tier, through the same store (cache hits where the grid holds
