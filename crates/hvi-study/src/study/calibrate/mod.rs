@@ -353,7 +353,10 @@ fn ego_boxes(
                 max_batches: 0,
                 ..settings.clone()
             };
-            let p = ego::search(&problem, &probe, scored.clone(), batches)?;
+            // Quiet: the search in this box, if it runs, reports the same numbers.
+            let mut quiet = stage.problem(first.fixed.clone(), dims.clone());
+            quiet.progress = false;
+            let p = ego::search(&quiet, &probe, scored.clone(), batches)?;
             let at = ego::coords(&problem, &p.best.params);
             let mut edges = edges_of(&dims, at.as_deref(), p.region.as_ref().map(|r| &r.sides));
             let before = bounds_of(&dims);
