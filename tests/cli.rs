@@ -747,3 +747,29 @@ fn completions_man_pages_and_help_say_what_each_command_takes() {
     assert!(help("validity-map").contains("studies/validity-map.toml"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn output_into_a_pipe_closed_early_ends_quietly() {
+    // `hvi-study keys | head`: the reader goes away before the list is written. The process
+    // ends as `ls | head` does (SIGPIPE), without a panic or a backtrace.
+    use std::io::Read;
+    for _ in 0..5 {
+        let mut child = bin()
+            .arg("keys")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("starts");
+        drop(child.stdout.take()); // the reader closes at once
+        let status = child.wait().expect("ends");
+        let mut err = String::new();
+        child
+            .stderr
+            .take()
+            .expect("stderr")
+            .read_to_string(&mut err)
+            .expect("stderr");
+        assert!(!err.contains("panicked"), "{err}");
+        assert_ne!(status.code(), Some(101), "{err}");
+    }
+}

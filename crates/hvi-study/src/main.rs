@@ -8,6 +8,15 @@ use clap::Parser;
 use hvi_study::cli::Cli;
 
 fn main() -> ExitCode {
+    // Output piped into a reader that stops early (`hvi-study keys | head`) ends the process
+    // quietly, as it ends `ls | head`, instead of a panic on the failed write: Rust ignores
+    // SIGPIPE by default, so a closed pipe becomes a write error that `println!` panics on.
+    #[cfg(unix)]
+    // SAFETY: setting a signal's disposition to the default at the start of main, before any
+    // other thread exists, has no memory-safety conditions.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     if let Err(e) = hvi_run::interrupt::install() {
         eprintln!("warning: Ctrl-C and SIGTERM will end the process at once: {e}");
