@@ -410,6 +410,10 @@ fn settings_that_need_new_runs_and_bad_values_are_refused_by_name() {
         ("analysis.front_times_s=[1e-6, 2e-6]", "front times"),
         ("analysis.track_every=5", "analysis.quantile"),
         ("material.eps_j=0.1", "cannot change in a re-analysis"),
+        (
+            "analysis.quantle=0.95",
+            "unknown key `analysis.quantle` (did you mean `analysis.quantile`?)",
+        ),
         ("analysis.quantile=2", "analysis.quantile"),
         ("analysis.shadowgraph_pixel_m=abc", "not a number"),
     ] {

@@ -68,6 +68,15 @@ impl AnalysisChanges {
                     "--set `{set}`: the front times are those at which the runs kept their \
                      state; changing them needs new runs"
                 ),
+                _ if !hvi_engine::scene::keys::KEYS.iter().any(|k| k.name == key) => {
+                    let hint = hvi_run::scene_file::suggest(key)
+                        .filter(|k| CHANGEABLE_KEYS.contains(k))
+                        .map_or(String::new(), |k| format!(" (did you mean `{k}`?)"));
+                    bail!(
+                        "--set `{set}`: unknown key `{key}`{hint}; a re-analysis can change {}",
+                        CHANGEABLE_KEYS.join(", ")
+                    )
+                }
                 _ => bail!(
                     "--set `{set}`: `{key}` cannot change in a re-analysis, which runs no \
                      simulation (allowed: {})",
