@@ -167,9 +167,32 @@ fn running_again_does_no_new_simulation() {
         assert_eq!(r["status"], "completed", "{r}");
         assert!(r["particles"].as_f64().is_some(), "{r}");
     }
-    assert!(std::fs::read_to_string(out.join("results.csv"))
-        .expect("csv")
-        .starts_with("index,material.eps_j,material.kappa_n_m,status,fingerprint"));
+    let csv = std::fs::read_to_string(out.join("results.csv")).expect("csv");
+    assert!(csv.starts_with("index,material.eps_j,material.kappa_n_m,status,fingerprint"));
+    // Counts and yes/no columns are whole numbers, as pandas reads an integer column.
+    let header: Vec<&str> = csv.lines().next().expect("header").split(',').collect();
+    for line in csv.lines().skip(1) {
+        let cells: Vec<&str> = line.split(',').collect();
+        for name in [
+            "particles",
+            "n_part",
+            "n_frag",
+            "crater_count",
+            "large_central_crater",
+        ] {
+            let k = header.iter().position(|h| *h == name).expect("column");
+            let cell = cells[k];
+            assert!(
+                cell.is_empty() || cell.parse::<i64>().is_ok(),
+                "{name} = `{cell}` is not an integer"
+            );
+        }
+        let k = header
+            .iter()
+            .position(|h| *h == "fragmentation")
+            .expect("column");
+        assert!(cells[k].contains('.'), "fragmentation `{}`", cells[k]);
+    }
 
     let tables = |out: &Path| {
         ["results.csv", "results.json"].map(|f| std::fs::read(out.join(f)).expect("table"))

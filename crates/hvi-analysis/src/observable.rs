@@ -325,6 +325,19 @@ impl Observable {
         self.definition().unit
     }
 
+    /// Whether the observable is a count (particles, fragments, craters) or a yes/no as 0 or 1:
+    /// a whole number, which tables write without a decimal point.
+    pub fn is_whole(self) -> bool {
+        matches!(
+            self,
+            Observable::Particles
+                | Observable::NPart
+                | Observable::NFrag
+                | Observable::CraterCount
+                | Observable::LargeCentralCrater
+        )
+    }
+
     /// One line of meaning.
     pub fn description(self) -> &'static str {
         self.definition().description

@@ -81,6 +81,18 @@ pub fn num(x: Option<f64>) -> Value {
         .map_or(Value::Null, |v| serde_json::json!(v))
 }
 
+/// An observable's value as a JSON value: a count or a yes/no as a whole number (so that
+/// `1838`, not `1838.0`, reaches a CSV reader and pandas reads an integer column), any other
+/// as [`num`].
+pub fn observable_cell(o: Observable, x: Option<f64>) -> Value {
+    match x {
+        Some(v) if o.is_whole() && v.fract() == 0.0 && v.abs() < 9.0e15 => {
+            serde_json::json!(v as i64)
+        }
+        _ => num(x),
+    }
+}
+
 /// The columns of a results table over `axes`: `index`, one per axis, `status`,
 /// `fingerprint`, `dir`, one per observable, `wall_seconds`, `error`.
 pub fn result_columns(axes: &[Axis]) -> Vec<String> {
@@ -122,7 +134,10 @@ impl ResultRow<'_> {
         row.push(Value::String(self.fingerprint.into()));
         row.push(Value::String(self.dir.into()));
         for o in Observable::ALL {
-            row.push(num(self.observables.and_then(|obs| obs.get(o))));
+            row.push(observable_cell(
+                o,
+                self.observables.and_then(|obs| obs.get(o)),
+            ));
         }
         row.push(num(self.wall_seconds));
         row.push(self.error.map_or(Value::Null, |e| Value::String(e.into())));
