@@ -347,10 +347,32 @@ fn run_unit_executes_one_run_of_a_plan() {
         .output()
         .expect("runs");
     assert_ok(&o);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("material.eps_j (2 values) x material.kappa_n_m (2 values)"),
+        "{said}"
+    );
     let plan = out.join("plan.json");
     let doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&plan).expect("plan")).expect("json");
     assert_eq!(doc["runs"].as_array().map(Vec::len), Some(4));
+    // One value is one value, not "1 values".
+    let single = write_study(
+        &dir,
+        "single",
+        "[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01]\n",
+        TINY,
+    );
+    let o = bin()
+        .arg("plan")
+        .arg(&single)
+        .arg("--out")
+        .arg(dir.join("single"))
+        .output()
+        .expect("runs");
+    assert_ok(&o);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("material.eps_j (1 value)"), "{said}");
     assert!(!out.join("runs").read_dir().expect("runs").any(|_| true));
 
     let o = bin()

@@ -27,7 +27,10 @@ pub fn plan(args: &StudyOptions) -> Result<()> {
         done,
         plan.axes
             .iter()
-            .map(|a| format!("{} ({} values)", a.key, a.values.len()))
+            .map(|a| match a.values.len() {
+                1 => format!("{} (1 value)", a.key),
+                n => format!("{} ({n} values)", a.key),
+            })
             .collect::<Vec<_>>()
             .join(" x ")
     );
