@@ -370,10 +370,13 @@ fn ego_boxes(
                     rule,
                 )?
             {
-                edges.retain(|e| e.limit.is_none());
                 if problem.progress {
                     for e in &edges {
-                        eprintln!("edge: {} (before this box's batches)", e.describe());
+                        eprintln!(
+                            "edge: {} (before this box's batches){}",
+                            e.describe(),
+                            e.limit.as_ref().map_or(String::new(), |l| format!(": {l}"))
+                        );
                     }
                 }
                 boxes.push(SearchedBox {
