@@ -1165,3 +1165,165 @@ fn a_full_disk_gives_an_error_naming_the_file_and_leaves_a_consistent_store() {
         stderr(&o)
     );
 }
+
+/// `hvi-study calibrate STUDY --out OUT --threads 2` with `extra` flags.
+fn calibrate_with(study: &Path, out: &Path, extra: &[&str]) -> Output {
+    bin()
+        .arg("calibrate")
+        .arg(study)
+        .arg("--out")
+        .arg(out)
+        .args(["--threads", "2"])
+        .args(extra)
+        .output()
+        .expect("runs")
+}
+
+fn num(v: &serde_json::Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+#[test]
+fn a_resolution_ladder_steers_each_level_by_the_last_and_resumes_without_running_anything() {
+    let dir = scratch("calibrate-ladder");
+    let study = edge_study(&dir, "");
+    let out = dir.join("ladder");
+    let flags = ["--ladder", "1000,2000,3000", "--ladder-check", "4000"];
+    let o = calibrate_with(&study, &out, &flags);
+    assert_ok(&o);
+    let read = || -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join("ladder.json")).expect("ladder"))
+            .expect("json")
+    };
+    let l = read();
+    let levels = l["levels"].as_array().expect("levels");
+    assert_eq!(levels.len(), 3);
+    for (lv, n) in levels.iter().zip([1000, 2000, 3000]) {
+        assert_eq!(num(&lv["particles"]), f64::from(n));
+        let c = calibration_json(&out.join(format!("n{n}")));
+        assert_eq!(c["best"]["params"], lv["best"], "level {n}");
+        assert!(num(&lv["runs"]) > 0.0);
+    }
+    for f in ["ladder.md", "ladder.png"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let eps = |lv: &serde_json::Value, what: &str| -> (f64, f64) {
+        let v = &lv[what]["material.eps_j"];
+        (num(&v[0]).log10(), num(&v[1]).log10())
+    };
+    // Level 2's first box: level 1's interval (with its answer), padded, at least half a
+    // decade wide, three values.
+    assert_eq!(levels[0]["steered_by"], "the study's grid");
+    let (lo1, hi1) = eps(&levels[0], "intervals");
+    let (b_lo, b_hi) = eps(&levels[1], "first_box");
+    let best1 = num(&levels[0]["best"]["material.eps_j"]).log10();
+    let (lo1, hi1) = (lo1.min(best1), hi1.max(best1));
+    assert!(b_lo <= lo1 + 0.01 && b_hi >= hi1 - 0.01, "{l}");
+    assert!(b_hi - b_lo >= 0.49, "{l}");
+    let plan: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("n2000/plan.json")).expect("plan"))
+            .expect("plan json");
+    assert_eq!(
+        plan["axes"][0]["values"].as_array().expect("values").len(),
+        3
+    );
+    // Level 3's box is level 2's interval moved by the trend of levels 1 and 2.
+    let (best1, best2) = (
+        num(&levels[0]["best"]["material.eps_j"]).log10(),
+        num(&levels[1]["best"]["material.eps_j"]).log10(),
+    );
+    let shift = (best2 - best1) / 2f64.log10() * 1.5f64.log10();
+    let (lo2, hi2) = eps(&levels[1], "intervals");
+    let (lo2, hi2) = (lo2.min(best2), hi2.max(best2));
+    let (c_lo, c_hi) = eps(&levels[2], "first_box");
+    let mid = 0.5 * (c_lo + c_hi);
+    assert!(
+        (mid - (0.5 * (lo2 + hi2) + shift)).abs() < 0.01,
+        "box mid {mid}, interval mid {} + trend {shift}: {l}",
+        0.5 * (lo2 + hi2)
+    );
+    if shift.abs() > 1e-9 {
+        assert!(
+            levels[2]["steered_by"]
+                .as_str()
+                .expect("words")
+                .contains("trend"),
+            "{l}"
+        );
+    }
+    // The verdict is the rule applied to the last two levels.
+    let overlap = {
+        let (a, b) = (eps(&levels[1], "intervals"), eps(&levels[2], "intervals"));
+        a.0 <= b.1 && b.0 <= a.1
+    };
+    let interior = levels[1..]
+        .iter()
+        .all(|lv| lv["edges"].as_array().is_some_and(Vec::is_empty));
+    assert_eq!(l["converged_in_n"], overlap && interior, "{l}");
+    let verdict = l["verdict"].as_str().expect("verdict");
+    assert_eq!(verdict.starts_with("CONVERGED IN N"), overlap && interior);
+    let trend = (num(&levels[2]["best"]["material.eps_j"]).log10() - best2) / 1.5f64.log10();
+    assert!(
+        (num(&l["trend_per_decade"]["material.eps_j"]) - trend).abs() < 1e-9,
+        "{l}"
+    );
+    // The check ran the last answer at 4000 particles at both seeds.
+    let check = &l["check"];
+    assert_eq!(num(&check["particles"]), 4000.0);
+    assert_eq!(check["params"], levels[2]["best"]);
+    assert!(num(&check["objective"]).is_finite());
+    assert_eq!(num(&check["runs"]), 2.0);
+
+    // Again: every level from its store, nothing run, the same answers.
+    let o = calibrate_with(&study, &out, &flags);
+    assert_ok(&o);
+    let again = read();
+    for (a, b) in levels
+        .iter()
+        .zip(again["levels"].as_array().expect("levels"))
+    {
+        assert_eq!(num(&b["runs_made"]), 0.0, "{b}");
+        for k in [
+            "best",
+            "intervals",
+            "first_box",
+            "objective",
+            "runs",
+            "verdict",
+        ] {
+            assert_eq!(a[k], b[k], "{k}");
+        }
+    }
+    assert_eq!(l["verdict"], again["verdict"]);
+    assert_eq!(l["check"], again["check"]);
+}
+
+#[test]
+fn a_ladder_refuses_counts_it_cannot_climb_naming_the_flag() {
+    let dir = scratch("calibrate-ladder-refusals");
+    let study = edge_study(&dir, "");
+    let out = dir.join("out");
+    for (flags, says) in [
+        (vec!["--ladder", "2000"], "--ladder"),
+        (vec!["--ladder", "2000,1000"], "ascending"),
+        (
+            vec!["--ladder", "1000,2000", "--ladder-check", "1500"],
+            "--ladder-check",
+        ),
+        (vec!["--ladder-check", "4000"], "--ladder"),
+        (
+            vec!["--ladder", "1000,2000", "--particles", "500"],
+            "--particles",
+        ),
+        (
+            vec!["--ladder", "1000,2000", "--method", "nelder-mead"],
+            "ego",
+        ),
+    ] {
+        let o = calibrate_with(&study, &out, &flags);
+        assert!(!o.status.success(), "{flags:?} was accepted");
+        assert!(stderr(&o).contains(says), "{flags:?}: {}", stderr(&o));
+        assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
+    }
+    assert!(!out.join("n1000").exists(), "nothing was run");
+}

@@ -112,13 +112,13 @@ pub fn colormap(t: f64) -> RGBColor {
 }
 
 /// A linear axis (log10 values on a log axis) with the ticks of [`axis_keys`].
-struct KeyedAxis {
+pub(crate) struct KeyedAxis {
     range: RangedCoordf64,
     keys: Vec<f64>,
 }
 
 impl KeyedAxis {
-    fn new(a: f64, b: f64, log: bool) -> Self {
+    pub(crate) fn new(a: f64, b: f64, log: bool) -> Self {
         KeyedAxis {
             range: (a..b).into(),
             keys: axis_keys(a, b, log),
@@ -175,7 +175,8 @@ fn axis_keys(a: f64, b: f64, log: bool) -> Vec<f64> {
     }
 }
 
-fn tick(v: f64, log: bool) -> String {
+/// A tick's label at drawn coordinate `v` (log10 on a log axis).
+pub(crate) fn tick(v: f64, log: bool) -> String {
     let x = if log { 10f64.powf(v) } else { v };
     let a = x.abs();
     if a != 0.0 && !(1e-2..=1e5).contains(&a) {

@@ -25,6 +25,7 @@
 //! ```
 
 pub mod contour;
+pub mod ladder;
 pub mod paper;
 pub mod pareto;
 pub mod render;

@@ -12,6 +12,7 @@ use hvi_run::slurm::SlurmOptions;
 use hvi_run::spec::Study;
 
 use crate::study::calibrate::config::Method;
+use crate::study::calibrate::ladder::LadderOptions;
 use crate::study::calibrate::CalibrateOptions;
 use crate::study::options::StudyOptions;
 
@@ -191,9 +192,35 @@ pub struct CalibrateArgs {
     /// With --slurm: seconds between looks at the queue while a batch runs (0.2 to 3600).
     #[arg(long, value_name = "S", default_value_t = 10.0)]
     pub poll: f64,
+    /// Calibrate over a ladder of ascending particle counts, e.g. `2e4,8e4,2.7e5`: each level
+    /// a whole calibration in `<out>/n<N>/`, the first from the study's grid, each later one
+    /// from the previous level's confidence region (moved by the trend of the last two);
+    /// writes ladder.json, ladder.md and ladder.png with the verdict in N
+    /// (docs/calibration.md). `--out` is the ladder's directory (default
+    /// `runs/studies/<study>/<tier>-ladder`).
+    #[arg(long, value_delimiter = ',', value_name = "N1,N2,...")]
+    pub ladder: Option<Vec<f64>>,
+    /// With --ladder: run the last level's answer again at this many particles and score it
+    /// (overrides calibrate.ladder_check).
+    #[arg(long, value_name = "N")]
+    pub ladder_check: Option<f64>,
 }
 
 impl CalibrateArgs {
+    /// The ladder's options, when `--ladder` is given (`--ladder-check` alone is refused).
+    pub fn ladder(&self) -> Result<Option<LadderOptions>> {
+        match (&self.ladder, self.ladder_check) {
+            (Some(particles), check) => Ok(Some(LadderOptions {
+                particles: particles.clone(),
+                check,
+            })),
+            (None, Some(_)) => {
+                bail!("--ladder-check checks a ladder's last answer: add --ladder N1,N2,...")
+            }
+            (None, None) => Ok(None),
+        }
+    }
+
     /// The plain options these flags give, checked: the Slurm flags only with `--slurm`,
     /// `--threads` and `--jobs` only without.
     pub fn options(&self) -> Result<CalibrateOptions> {

@@ -57,6 +57,12 @@ pub fn dispatch(command: Command) -> Result<()> {
             tables_if_interrupted(&args, CollectAs::Sweep, r)
         }
         Command::Calibrate(args) => {
+            if let Some(ladder) = args.ladder()? {
+                return args
+                    .options()
+                    .and_then(|o| crate::study::calibrate::ladder::ladder(&o, &ladder))
+                    .map(|_| ());
+            }
             let r = args
                 .options()
                 .and_then(|o| crate::study::calibrate::calibrate(&o))

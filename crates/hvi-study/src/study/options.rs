@@ -67,8 +67,15 @@ impl StudyOptions {
             bail!("invalid value for `--jobs`: 0 (allowed: an integer >= 1)");
         }
         let study = Study::load(&self.study)?;
+        let (plan, out) = self.build_plan_of(&study)?;
+        Ok((study, plan, out))
+    }
+
+    /// Builds and validates the plan of `study` (loaded, and possibly changed, by the caller)
+    /// at these options; returns it with the output directory, writing nothing.
+    pub fn build_plan_of(&self, study: &Study) -> Result<(Plan, PathBuf)> {
         let plan = build_plan(
-            &study,
+            study,
             &PlanRequest {
                 tier: self.tier.clone(),
                 particles: self.particles,
@@ -79,7 +86,7 @@ impl StudyOptions {
             .out
             .clone()
             .unwrap_or_else(|| default_out_dir(&plan.study, &plan.tier, self.particles));
-        Ok((study, plan, out))
+        Ok((plan, out))
     }
 
     /// Execution options.

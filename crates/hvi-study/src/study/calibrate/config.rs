@@ -41,6 +41,10 @@ fn default_max_batches() -> usize {
 fn default_max_extensions() -> usize {
     2
 }
+fn default_ladder_values() -> usize {
+    3
+}
+
 fn default_noise_floor() -> f64 {
     0.02
 }
@@ -108,6 +112,15 @@ pub struct CalibrateConfig {
     /// decade on a log axis, the grid's spacing on a linear one).
     #[serde(default = "default_max_extensions")]
     pub max_extensions: usize,
+    /// Resolution ladder (`--ladder`): the values each searched axis takes in the first box of
+    /// a level after the first (its corners and the points between, spaced evenly in the
+    /// axis's coordinate).
+    #[serde(default = "default_ladder_values")]
+    pub ladder_values: usize,
+    /// Resolution ladder: the particle count at which the last level's answer is run again
+    /// as a check (none: no check; `--ladder-check` overrides).
+    #[serde(default)]
+    pub ladder_check: Option<f64>,
 }
 
 impl CalibrateConfig {
@@ -155,6 +168,17 @@ impl CalibrateConfig {
                 "study key `calibrate.max_extensions`: {} (allowed: 0 to 10 steps beyond the grid)",
                 cfg.max_extensions
             );
+        }
+        if !(2..=9).contains(&cfg.ladder_values) {
+            bail!(
+                "study key `calibrate.ladder_values`: {} (allowed: 2 to 9 values per axis)",
+                cfg.ladder_values
+            );
+        }
+        if let Some(n) = cfg.ladder_check {
+            if !(n.is_finite() && n >= 8.0) {
+                bail!("study key `calibrate.ladder_check`: {n} (allowed: a particle count >= 8)");
+            }
         }
         cfg.check_seeds("study key `calibrate.seeds`")?;
         Ok(cfg)

@@ -11,6 +11,7 @@ pub mod config;
 pub mod ego;
 pub mod extend;
 pub mod grid;
+pub mod ladder;
 pub mod nelder_mead;
 pub mod problem;
 pub mod report;
@@ -86,9 +87,23 @@ impl CalibrateOptions {
 /// paper's fit at this tier, then calibration.json, calibration.md, evaluations.csv, the maps
 /// and the snapshots.
 pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
-    let t0 = std::time::Instant::now();
     let (study, plan, out) = args.study.plan()?;
-    let mut cfg = CalibrateConfig::of(&study)?;
+    let result = calibrate_plan(args, &study, &plan, &out)?;
+    println!("{}", out.join("calibration.json").display());
+    Ok(result)
+}
+
+/// The calibration of a written plan of `study` in its directory `out` (what [`calibrate`]
+/// and each level of a [`ladder`] run).
+pub(crate) fn calibrate_plan(
+    args: &CalibrateOptions,
+    study: &hvi_run::spec::Study,
+    plan: &hvi_run::plan::Plan,
+    out: &Path,
+) -> Result<CalibrationResult> {
+    let t0 = std::time::Instant::now();
+    let (study, plan, out) = (study, plan, out.to_path_buf());
+    let mut cfg = CalibrateConfig::of(study)?;
     if let Some(seeds) = &args.seeds {
         cfg.seeds = seeds.clone();
         cfg.check_seeds("--seeds")?;
@@ -97,18 +112,18 @@ pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
     let targets =
         hvi_run::output::load_targets(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
     let progress = !args.study.quiet;
-    let (refine_keys, dims) = refined_axes(&plan, &cfg)?;
+    let (refine_keys, dims) = refined_axes(plan, &cfg)?;
     let runner = runner_of(args)?;
 
-    let grid = grid_stage(&plan, &out, &runner, &targets, progress)?;
+    let grid = grid_stage(plan, &out, &runner, &targets, progress)?;
     let best_grid = grid.evaluations[grid.best].clone();
     let best_run = plan.run(grid.best)?;
     let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
-    let fixed = fixed_overrides(&plan, &best_run.values, |k| refine_keys.contains(k))?;
+    let fixed = fixed_overrides(plan, &best_run.values, |k| refine_keys.contains(k))?;
     let store = Store::open(&out)?;
     let stage = Stage {
-        study: &study,
-        plan: &plan,
+        study,
+        plan,
         store: &store,
         targets: &targets,
         threads,
@@ -170,7 +185,7 @@ pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
         wall_seconds: t0.elapsed().as_secs_f64(),
     };
     write_outputs(&out, &result, &grid.evaluations)?;
-    draw_figures(&out, &plan, &grid.records, &result, &cfg.log_axes, progress);
+    draw_figures(&out, plan, &grid.records, &result, &cfg.log_axes, progress);
     let kept = archive(&out, &result)?;
     if progress {
         eprintln!(
@@ -181,7 +196,6 @@ pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
     if progress {
         eprint!("{}", report_text(&result));
     }
-    println!("{}", out.join("calibration.json").display());
     Ok(result)
 }
 
