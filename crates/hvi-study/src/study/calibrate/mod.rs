@@ -134,9 +134,26 @@ pub(crate) fn calibrate_plan(
     let first_box = bounds_of(&dims);
     let problem = stage.problem(fixed, dims);
     let method = args.method.unwrap_or(cfg.method);
-    let search = search_stage(&stage, &problem, &cfg, args, method, &grid, &refine_keys)?;
-    // The paper's point is scored over the seeds the answer was (like with like).
-    let (paper_params, paper, paper_runs) = paper_point(&stage, &best_run.values, &search.seeds)?;
+    // The paper's point is scored over the seeds the answer will be (like with like), before
+    // the search: a better point outside the box pulls the box out towards it.
+    let searched = !args.no_refine && !problem.dims.is_empty() && method == Method::Ego;
+    let search_seeds = if searched {
+        cfg.seeds.clone()
+    } else {
+        Vec::new()
+    };
+    let (paper_params, paper, paper_runs, paper_scored) =
+        paper_point(&stage, &best_run.values, &search_seeds)?;
+    let search = search_stage(
+        &stage,
+        &problem,
+        &cfg,
+        args,
+        method,
+        &grid,
+        &refine_keys,
+        paper_scored,
+    )?;
     // With seeds, the best grid point is the grid's best over those seeds too.
     let best_grid = search
         .evaluations
@@ -235,6 +252,7 @@ struct SearchOutcome {
 }
 
 /// Stage 2: the search after the grid (none with `--no-refine`, no axis or a zero budget).
+#[allow(clippy::too_many_arguments)]
 fn search_stage(
     stage: &Stage,
     problem: &Refinement,
@@ -243,6 +261,7 @@ fn search_stage(
     method: Method,
     grid: &Grid,
     refine_keys: &[String],
+    anchor: Option<ego::Scored>,
 ) -> Result<SearchOutcome> {
     let none = |why: &str| SearchOutcome {
         method: "none",
@@ -303,13 +322,15 @@ fn search_stage(
                 seeds: Vec::new(),
             })
         }
-        Method::Ego => ego_boxes(stage, problem, cfg, args, grid, refine_keys),
+        Method::Ego => ego_boxes(stage, problem, cfg, args, grid, refine_keys, anchor),
     }
 }
 
 /// The surrogate search, box after box: in the grid's box first, then, while the answer
 /// touches a side, in the box extended past it (its new grid points run first), until the
-/// answer is interior or every touched side is at its limit.
+/// answer is interior or every touched side is at its limit. A scored point outside the box
+/// (`anchor`, the paper's fit at the search's seeds) that beats the box's answer moves the
+/// sides between them out the same way, and joins the search once the box holds it.
 fn ego_boxes(
     stage: &Stage,
     first: &Refinement,
@@ -317,6 +338,7 @@ fn ego_boxes(
     args: &CalibrateOptions,
     grid: &Grid,
     refine_keys: &[String],
+    mut anchor: Option<ego::Scored>,
 ) -> Result<SearchOutcome> {
     let settings = ego::EgoSettings {
         batch: cfg.batch,
@@ -360,6 +382,21 @@ fn ego_boxes(
     let seeds = ego::seed_list(&settings);
     loop {
         let problem = stage.problem(first.fixed.clone(), dims.clone());
+        // The anchor joins the observations once the box holds it (unless a scored point
+        // sits there already: the paper's fit is often a grid point).
+        if anchor
+            .as_ref()
+            .is_some_and(|a| outside_sides(&dims, &problem, &a.0).is_empty())
+        {
+            let a = anchor.take();
+            let at = a.as_ref().and_then(|a| ego::coords(&problem, &a.0.params));
+            let seen = scored
+                .iter()
+                .any(|(e, _)| ego::coords(&problem, &e.params) == at);
+            if !seen {
+                scored.extend(a);
+            }
+        }
         // Where the points scored so far put the answer: on a side, the box moves out before
         // any batch is spent inside it.
         if rule.extend {
@@ -413,6 +450,23 @@ fn ego_boxes(
         batches += o.batches;
         let at = ego::coords(&problem, &o.best.params);
         let mut edges = edges_of(&dims, at.as_deref(), o.region.as_ref().map(|r| &r.sides));
+        // A better point outside the box pulls the sides between them out.
+        if let Some((a, _)) = anchor.as_ref().filter(|a| a.0.objective < o.best.objective) {
+            for (key, side, value) in outside_sides(&dims, &problem, a) {
+                if !edges.iter().any(|e| e.key == key && e.side == side) {
+                    edges.push(Edge {
+                        key,
+                        side,
+                        value,
+                        touched_by: format!(
+                            "a better point beyond it (the paper's fit, J = {:.4} against {:.4})",
+                            a.objective, o.best.objective
+                        ),
+                        limit: None,
+                    });
+                }
+            }
+        }
         let moved_now = !edges.is_empty()
             && extend(
                 &problem,
@@ -458,7 +512,7 @@ fn ego_boxes(
                 evaluations: scored
                     .into_iter()
                     .map(|(e, _)| e)
-                    .filter(|e| e.stage != "grid")
+                    .filter(|e| e.stage != "grid" && e.stage != "paper")
                     .collect(),
                 best: Some(o.best),
                 termination,
@@ -480,6 +534,31 @@ fn ego_boxes(
         runs += n;
         extension += 1;
     }
+}
+
+/// The sides of the box `dims` that a point lies beyond: (key, side, the side's value).
+fn outside_sides(
+    dims: &[problem::Dim],
+    problem: &Refinement,
+    e: &Evaluation,
+) -> Vec<(String, result::Side, f64)> {
+    let Some(x) = ego::coords(problem, &e.params) else {
+        return Vec::new();
+    };
+    let tol = 1e-9;
+    dims.iter()
+        .zip(x)
+        .filter_map(|((k, log, lo, hi), u)| {
+            let value = |c: f64| if *log { 10f64.powf(c) } else { c };
+            if u < lo - tol {
+                Some((k.clone(), result::Side::Low, value(*lo)))
+            } else if u > hi + tol {
+                Some((k.clone(), result::Side::High, value(*hi)))
+            } else {
+                None
+            }
+        })
+        .collect()
 }
 
 /// Runs the new grid points of an extended box (`dims`, its grid values `values`): those of
@@ -515,6 +594,15 @@ fn extension_points(
     ego::run_points(&problem, &label, &points, seeds)
 }
 
+/// The paper's fit: its parameters, its evaluation, the runs simulated for it and, at seeds,
+/// its evaluation with the runs' observables (as the surrogate search takes it).
+type PaperPoint = (
+    BTreeMap<String, f64>,
+    Evaluation,
+    usize,
+    Option<ego::Scored>,
+);
+
 /// The paper's best fit at this tier, through the same store (cache hits where the grid holds
 /// it), at `seeds` (the answer's, so that the two objectives compare like with like; empty:
 /// the scene's own seed): its parameters on the plan's axes, its evaluation and the runs
@@ -523,7 +611,7 @@ fn paper_point(
     stage: &Stage,
     best_values: &[serde_json::Value],
     seeds: &[u64],
-) -> Result<(BTreeMap<String, f64>, Evaluation, usize)> {
+) -> Result<PaperPoint> {
     let mut paper_params = BTreeMap::new();
     for (k, v) in PAPER_BEST {
         if stage.plan.axes.iter().any(|a| a.key == k) {
@@ -535,7 +623,7 @@ fn paper_point(
     if seeds.is_empty() {
         let paper = problem.evaluate("paper", &paper_params)?;
         let ran = usize::from(!paper.cached && paper.dir.is_some());
-        return Ok((paper_params, paper, ran));
+        return Ok((paper_params, paper, ran, None));
     }
     let seeds: Vec<Option<u64>> = seeds.iter().copied().map(Some).collect();
     let (mut evs, ran) = ego::run_points(
@@ -544,10 +632,10 @@ fn paper_point(
         std::slice::from_ref(&paper_params),
         &seeds,
     )?;
-    let (paper, _) = evs
+    let scored = evs
         .pop()
         .ok_or_else(|| anyhow::anyhow!("the paper's point has no evaluation"))?;
-    Ok((paper_params, paper, ran))
+    Ok((paper_params, scored.0.clone(), ran, Some(scored)))
 }
 
 /// The calibration's label: `<method>-seeds<s1_s2...>-<digest>`, the digest (8 hex digits of
