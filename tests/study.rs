@@ -438,14 +438,7 @@ fn results_of_different_studies_never_mix() {
 
 /// `hvi-study calibrate STUDY --out OUT` on 2 threads.
 fn calibrate(study: &Path, out: &Path) -> Output {
-    bin()
-        .arg("calibrate")
-        .arg(study)
-        .arg("--out")
-        .arg(out)
-        .args(["--threads", "2"])
-        .output()
-        .expect("runs")
+    calibrate_with(study, out, &[])
 }
 
 /// A calibration's calibration.json.

@@ -162,13 +162,9 @@ pub fn ladder_plot(path: &Path, plot: &LadderPlot) -> Result<()> {
             .chain(plot.check.map(|c| c.0))
             .collect();
         // The particle axis needs no room for the legend: a tenth of a decade each side.
-        let x = span(ns.iter().map(|n| n.log10()))
-            .map(|_| {
-                let lo = ns.iter().copied().fold(f64::INFINITY, f64::min).log10();
-                let hi = ns.iter().copied().fold(0.0, f64::max).log10();
-                (lo - 0.1, hi + 0.1)
-            })
-            .unwrap_or((0.0, 1.0));
+        let lo = ns.iter().copied().fold(f64::INFINITY, f64::min).log10();
+        let hi = ns.iter().copied().fold(0.0, f64::max).log10();
+        let x = (lo - 0.1, hi + 0.1);
         for (panel, area) in plot.panels.iter().zip(&areas) {
             let ys = panel
                 .levels

@@ -184,6 +184,15 @@ impl CalibrateConfig {
         Ok(cfg)
     }
 
+    /// The targets file (relative to the study file), with the study's weights applied.
+    pub fn load_targets(&self, study: &Study) -> Result<hvi_analysis::score::Targets> {
+        let base = study
+            .path
+            .parent()
+            .unwrap_or_else(|| std::path::Path::new("."));
+        hvi_run::output::load_targets(&base.join(&self.targets))?.with_weights(&self.weights)
+    }
+
     /// The seeds are distinct (`what` names where they came from in the error).
     pub(super) fn check_seeds(&self, what: &str) -> Result<()> {
         let mut seeds = self.seeds.clone();

@@ -309,7 +309,7 @@ fn from_coord(dim: &Dim, u: f64) -> f64 {
 }
 
 /// The narrowest first box a steered level gets on `dim`, in its coordinate: half a decade on
-/// a log axis, the study grid's smallest step on a linear one.
+/// a log axis, the study grid's smallest step on a linear one (none with a single value).
 fn min_width(study: &Study, dim: &Dim) -> f64 {
     if dim.1 {
         return 0.5;
@@ -321,11 +321,12 @@ fn min_width(study: &Study, dim: &Dim) -> f64 {
         .map(|a| a.values.iter().filter_map(|v| v.as_f64()).collect())
         .unwrap_or_default();
     vals.sort_by(f64::total_cmp);
+    // No step (a single value): no least width beyond the region's own.
     vals.windows(2)
         .map(|w| w[1] - w[0])
         .filter(|d| *d > 0.0)
-        .fold(f64::INFINITY, f64::min)
-        .clamp(1e-12, f64::MAX)
+        .reduce(f64::min)
+        .unwrap_or(0.0)
 }
 
 /// The study of a level after the first: each searched axis over the previous level's
@@ -460,9 +461,7 @@ fn check_run(
             super::problem::fmt_params(&params)
         );
     }
-    let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-    let targets =
-        hvi_run::output::load_targets(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
+    let targets = cfg.load_targets(study)?;
     let runner = runner_of(&check_args)?;
     let store = Store::open(&out)?;
     let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);

@@ -102,25 +102,22 @@ pub(crate) fn calibrate_plan(
     out: &Path,
 ) -> Result<CalibrationResult> {
     let t0 = std::time::Instant::now();
-    let (study, plan, out) = (study, plan, out.to_path_buf());
     let mut cfg = CalibrateConfig::of(study)?;
     if let Some(seeds) = &args.seeds {
         cfg.seeds = seeds.clone();
         cfg.check_seeds("--seeds")?;
     }
-    let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-    let targets =
-        hvi_run::output::load_targets(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
+    let targets = cfg.load_targets(study)?;
     let progress = !args.study.quiet;
     let (refine_keys, dims) = refined_axes(plan, &cfg)?;
     let runner = runner_of(args)?;
 
-    let grid = grid_stage(plan, &out, &runner, &targets, progress)?;
+    let grid = grid_stage(plan, out, &runner, &targets, progress)?;
     let best_grid = grid.evaluations[grid.best].clone();
     let best_run = plan.run(grid.best)?;
     let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
     let fixed = fixed_overrides(plan, &best_run.values, |k| refine_keys.contains(k))?;
-    let store = Store::open(&out)?;
+    let store = Store::open(out)?;
     let stage = Stage {
         study,
         plan,
@@ -128,7 +125,7 @@ pub(crate) fn calibrate_plan(
         targets: &targets,
         threads,
         runner: &runner,
-        out: &out,
+        out,
         progress,
     };
     let first_box = bounds_of(&dims);
@@ -177,7 +174,7 @@ pub(crate) fn calibrate_plan(
         study: plan.study.clone(),
         label,
         tier: plan.tier.clone(),
-        particles: particles_of(&out, &best),
+        particles: particles_of(out, &best),
         targets_file: targets.path.clone(),
         targets: targets.targets.clone(),
         gaps: targets.gaps.clone(),
@@ -201,9 +198,9 @@ pub(crate) fn calibrate_plan(
         runs_made: grid.ran + search.runs + paper_runs,
         wall_seconds: t0.elapsed().as_secs_f64(),
     };
-    write_outputs(&out, &result, &grid.evaluations)?;
-    draw_figures(&out, plan, &grid.records, &result, &cfg.log_axes, progress);
-    let kept = archive(&out, &result)?;
+    write_outputs(out, &result, &grid.evaluations)?;
+    draw_figures(out, plan, &grid.records, &result, &cfg.log_axes, progress);
+    let kept = archive(out, &result)?;
     if progress {
         eprintln!(
             "kept beside the study's other calibrations: {}",
