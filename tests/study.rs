@@ -1218,7 +1218,7 @@ fn a_resolution_ladder_steers_each_level_by_the_last_and_resumes_without_running
         (num(&v[0]).log10(), num(&v[1]).log10())
     };
     // Level 2's first box: level 1's interval (with its answer), padded, at least half a
-    // decade wide, three values.
+    // decade wide, two values (the default).
     assert_eq!(levels[0]["steered_by"], "the study's grid");
     let (lo1, hi1) = eps(&levels[0], "intervals");
     let (b_lo, b_hi) = eps(&levels[1], "first_box");
@@ -1231,31 +1231,90 @@ fn a_resolution_ladder_steers_each_level_by_the_last_and_resumes_without_running
             .expect("plan json");
     assert_eq!(
         plan["axes"][0]["values"].as_array().expect("values").len(),
-        3
+        2
     );
-    // Level 3's box is level 2's interval moved by the trend of levels 1 and 2.
+    // Each level after the first searched the difference from the level before: its
+    // calibration records the prior, fitted to that level's scored points.
+    assert!(calibration_json(&out.join("n1000"))["prior"].is_null());
+    for (k, n) in [(1, 2000), (2, 3000)] {
+        let c = calibration_json(&out.join(format!("n{n}")));
+        let prior = &c["prior"];
+        assert_eq!(
+            num(&prior["particles"]),
+            num(&levels[k - 1]["particles"]),
+            "{c}"
+        );
+        let below = calibration_json(&out.join(format!("n{}", [1000, 2000][k - 1])));
+        let scored = below["refinement"]
+            .as_array()
+            .expect("refinement")
+            .iter()
+            .filter(|e| e["objective"].as_f64().is_some_and(f64::is_finite))
+            .count();
+        assert!(num(&prior["points"]) >= scored as f64, "{prior}");
+        let rho = num(&prior["weight"]);
+        assert!((0.0..=2.0).contains(&rho), "{prior}");
+        let words = levels[k]["steered_by"].as_str().expect("words");
+        assert!(words.contains("difference from"), "{words}");
+        // The level below's answer ran here too, at the search's seeds.
+        let below_best = &levels[k - 1]["best"]["material.eps_j"];
+        assert!(
+            c["refinement"]
+                .as_array()
+                .expect("refinement")
+                .iter()
+                .any(|e| &e["params"]["material.eps_j"] == below_best
+                    && e["seeds"] == serde_json::json!([1, 2])),
+            "{c}"
+        );
+    }
+    assert!(levels[2]["steered_by"]
+        .as_str()
+        .expect("words")
+        .contains("itself on the levels below"));
+    // Level 3's box holds level 2's interval and that interval moved by the trend of levels
+    // 1 and 2, when both answers are inside their boxes on eps (an answer on a side gives no
+    // trend).
     let (best1, best2) = (
         num(&levels[0]["best"]["material.eps_j"]).log10(),
         num(&levels[1]["best"]["material.eps_j"]).log10(),
     );
-    let shift = (best2 - best1) / 2f64.log10() * 1.5f64.log10();
+    let on_eps_side = |lv: &serde_json::Value| {
+        lv["edges"]
+            .as_array()
+            .expect("edges")
+            .iter()
+            .any(|e| e["key"] == "material.eps_j")
+    };
+    let trended = !on_eps_side(&levels[0]) && !on_eps_side(&levels[1]);
+    let shift = if trended {
+        (best2 - best1) / 2f64.log10() * 1.5f64.log10()
+    } else {
+        0.0
+    };
     let (lo2, hi2) = eps(&levels[1], "intervals");
     let (lo2, hi2) = (lo2.min(best2), hi2.max(best2));
     let (c_lo, c_hi) = eps(&levels[2], "first_box");
-    let mid = 0.5 * (c_lo + c_hi);
+    let (want_lo, want_hi) = (lo2.min(lo2 + shift), hi2.max(hi2 + shift));
     assert!(
-        (mid - (0.5 * (lo2 + hi2) + shift)).abs() < 0.01,
-        "box mid {mid}, interval mid {} + trend {shift}: {l}",
-        0.5 * (lo2 + hi2)
+        c_lo <= want_lo + 0.01 && c_hi >= want_hi - 0.01,
+        "box [{c_lo}, {c_hi}] against the interval [{lo2}, {hi2}] and the trend {shift}: {l}"
     );
+    // Padded by a quarter of the width on each side (or to half a decade).
+    let w = want_hi - want_lo;
+    let pad = (0.25 * w).max(0.5 * (0.5 - w));
+    assert!(
+        (c_lo - (want_lo - pad)).abs() < 0.01 && (c_hi - (want_hi + pad)).abs() < 0.01,
+        "box [{c_lo}, {c_hi}], want [{}, {}]: {l}",
+        want_lo - pad,
+        want_hi + pad
+    );
+    let words = levels[2]["steered_by"].as_str().expect("words");
     if shift.abs() > 1e-9 {
-        assert!(
-            levels[2]["steered_by"]
-                .as_str()
-                .expect("words")
-                .contains("trend"),
-            "{l}"
-        );
+        assert!(words.contains("widened along the trend"), "{l}");
+    }
+    if !trended {
+        assert!(words.contains("no trend on material.eps_j"), "{l}");
     }
     // The verdict is the rule applied to the last two levels.
     let overlap = {

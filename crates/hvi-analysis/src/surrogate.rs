@@ -18,8 +18,16 @@
 //!   [`REGION_NOISE_MULTIPLE`] noise standard errors of the best prediction, reported as one
 //!   interval per parameter.
 //!
+//! - A prior from a lower fidelity (a coarser resolution of the same model, [`Prior`]): the
+//!   model is then `rho * prior + a kriging model of the difference` (the autoregressive
+//!   multi-fidelity model of Kennedy and O'Hagan, Biometrika 87, 1, 2000), with `rho` fitted to
+//!   the observations by least squares, so that a few fine points correct a coarse landscape
+//!   instead of learning it again from a grid.
+//!
 //! Coordinates are those of the search (e.g. log10 eps); the caller maps them to parameters.
 //! Nothing here runs a simulation: an objective is whatever the caller measured.
+
+use std::sync::Arc;
 
 use anyhow::{anyhow, bail, Result};
 use egobox_gp::correlation_models::Matern52Corr;
@@ -112,10 +120,77 @@ impl SearchBox {
     }
 }
 
+/// The lowest and highest share of a prior in the fine model (`rho`).
+pub const PRIOR_WEIGHT: (f64, f64) = (0.0, 2.0);
+
+/// A model of the same objective at a lower fidelity (a coarser resolution), fitted to its own
+/// observations over their bounding box; a fine [`Surrogate`] learns only the difference.
+#[derive(Clone)]
+pub struct Prior {
+    model: Arc<Surrogate>,
+}
+
+impl std::fmt::Debug for Prior {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Prior")
+            .field("bounds", &self.model.space.bounds)
+            .finish()
+    }
+}
+
+impl Prior {
+    /// The coarse model of `observations` (noise `noise_sd`), over the box they span (an axis
+    /// they do not spread along gets a unit width around their value).
+    pub fn fit(observations: &[Observation], noise_sd: f64) -> Result<Prior> {
+        Prior::fit_on(observations, noise_sd, None)
+    }
+
+    /// [`Prior::fit`] on a still coarser prior (a ladder's levels, each on the one before).
+    pub fn fit_on(
+        observations: &[Observation],
+        noise_sd: f64,
+        prior: Option<&Prior>,
+    ) -> Result<Prior> {
+        let d = observations
+            .first()
+            .map(|o| o.x.len())
+            .ok_or_else(|| anyhow!("a prior needs observations"))?;
+        let mut bounds = vec![(f64::INFINITY, f64::NEG_INFINITY); d];
+        for o in observations {
+            if o.x.len() != d {
+                bail!(
+                    "a prior's observations have {} and {d} coordinates",
+                    o.x.len()
+                );
+            }
+            for (b, &v) in bounds.iter_mut().zip(&o.x) {
+                b.0 = b.0.min(v);
+                b.1 = b.1.max(v);
+            }
+        }
+        for b in &mut bounds {
+            if b.1 - b.0 < 1e-9 {
+                *b = (b.0 - 0.5, b.1 + 0.5);
+            }
+        }
+        let space = SearchBox::new(bounds)?;
+        Ok(Prior {
+            model: Arc::new(Surrogate::fit_on(&space, observations, noise_sd, prior)?),
+        })
+    }
+
+    /// The coarse model's mean and standard deviation at each point.
+    pub fn predict(&self, points: &[Vec<f64>]) -> Result<Vec<(f64, f64)>> {
+        self.model.predict(points)
+    }
+}
+
 /// A kriging model of the objective over a box.
 pub struct Surrogate {
     gp: GaussianProcess<f64, ConstantMean, Matern52Corr>,
     space: SearchBox,
+    /// The lower fidelity's model and its weight `rho`, when the model is of the difference.
+    prior: Option<(Prior, f64)>,
 }
 
 impl Surrogate {
@@ -124,6 +199,48 @@ impl Surrogate {
     /// variance relative to the observations' (egobox-gp adds it to the correlation matrix's
     /// diagonal), at least 1e-8 for a well-conditioned fit.
     pub fn fit(
+        space: &SearchBox,
+        observations: &[Observation],
+        noise_sd: f64,
+    ) -> Result<Surrogate> {
+        Surrogate::fit_on(space, observations, noise_sd, None)
+    }
+
+    /// [`Surrogate::fit`] on a lower fidelity's model: the kriging model is of `y - rho *
+    /// prior(x)`, with `rho` the least-squares slope of the observations on the prior's
+    /// predictions there (within [`PRIOR_WEIGHT`]; 1 with fewer than three observations or
+    /// predictions that do not vary).
+    pub fn fit_on(
+        space: &SearchBox,
+        observations: &[Observation],
+        noise_sd: f64,
+        prior: Option<&Prior>,
+    ) -> Result<Surrogate> {
+        let Some(prior) = prior else {
+            return Surrogate::fit_plain(space, observations, noise_sd);
+        };
+        let xs: Vec<Vec<f64>> = observations.iter().map(|o| o.x.clone()).collect();
+        let c: Vec<f64> = prior.predict(&xs)?.into_iter().map(|p| p.0).collect();
+        let rho = prior_weight(&c, &observations.iter().map(|o| o.y).collect::<Vec<_>>());
+        let difference: Vec<Observation> = observations
+            .iter()
+            .zip(&c)
+            .map(|(o, c)| Observation {
+                x: o.x.clone(),
+                y: o.y - rho * c,
+            })
+            .collect();
+        let mut model = Surrogate::fit_plain(space, &difference, noise_sd)?;
+        model.prior = Some((prior.clone(), rho));
+        Ok(model)
+    }
+
+    /// The prior's weight in the model (None without a prior).
+    pub fn prior_weight(&self) -> Option<f64> {
+        self.prior.as_ref().map(|p| p.1)
+    }
+
+    fn fit_plain(
         space: &SearchBox,
         observations: &[Observation],
         noise_sd: f64,
@@ -161,11 +278,26 @@ impl Surrogate {
         Ok(Surrogate {
             gp,
             space: space.clone(),
+            prior: None,
         })
     }
 
-    /// Predicted mean and standard deviation of the objective at each point.
+    /// Predicted mean and standard deviation of the objective at each point (with a prior:
+    /// `rho` times its mean plus the difference's, the variances added likewise).
     pub fn predict(&self, points: &[Vec<f64>]) -> Result<Vec<(f64, f64)>> {
+        let own = self.predict_own(points)?;
+        let Some((prior, rho)) = &self.prior else {
+            return Ok(own);
+        };
+        Ok(prior
+            .predict(points)?
+            .into_iter()
+            .zip(own)
+            .map(|((pm, ps), (m, s))| (rho * pm + m, (s * s + rho * rho * ps * ps).sqrt()))
+            .collect())
+    }
+
+    fn predict_own(&self, points: &[Vec<f64>]) -> Result<Vec<(f64, f64)>> {
         let d = self.space.dims();
         let mut x = Array2::zeros((points.len(), d));
         for (i, p) in points.iter().enumerate() {
@@ -182,6 +314,28 @@ impl Surrogate {
             .map(|(&m, &v)| (m, v.max(0.0).sqrt()))
             .collect())
     }
+}
+
+/// The least-squares slope of `y` on `c` (with an intercept), within [`PRIOR_WEIGHT`]; 1 with
+/// fewer than three points or a `c` that does not vary.
+fn prior_weight(c: &[f64], y: &[f64]) -> f64 {
+    let n = c.len().min(y.len());
+    if n < 3 {
+        return 1.0;
+    }
+    let (mc, my) = (
+        c.iter().take(n).sum::<f64>() / n as f64,
+        y.iter().take(n).sum::<f64>() / n as f64,
+    );
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for (a, b) in c.iter().zip(y).take(n) {
+        sxy += (a - mc) * (b - my);
+        sxx += (a - mc) * (a - mc);
+    }
+    if sxx <= 1e-12 * n as f64 {
+        return 1.0;
+    }
+    (sxy / sxx).clamp(PRIOR_WEIGHT.0, PRIOR_WEIGHT.1)
 }
 
 /// The expected improvement below `best` of a normal prediction (mean, sd), for minimisation.
@@ -217,6 +371,7 @@ pub fn propose(
     observations: &[Observation],
     noise_sd: f64,
     q: usize,
+    prior: Option<&Prior>,
 ) -> Result<Proposal> {
     let candidates = space.lattice();
     let near = 0.5 * space.spacing();
@@ -224,7 +379,7 @@ pub fn propose(
     let mut points: Vec<Vec<f64>> = Vec::new();
     let mut first = None;
     for _ in 0..q {
-        let model = Surrogate::fit(space, &believed, noise_sd)?;
+        let model = Surrogate::fit_on(space, &believed, noise_sd, prior)?;
         let best = best_predicted(&model, &believed)?;
         let taken: Vec<Vec<f64>> = believed.iter().map(|o| space.unit(&o.x)).collect();
         let free: Vec<&Vec<f64>> = candidates
@@ -271,7 +426,7 @@ pub fn propose(
     let (max_expected_improvement, best_predicted) = match first {
         Some(f) => f,
         None => {
-            let model = Surrogate::fit(space, observations, noise_sd)?;
+            let model = Surrogate::fit_on(space, observations, noise_sd, prior)?;
             (0.0, best_predicted(&model, observations)?)
         }
     };
@@ -321,8 +476,13 @@ pub struct Region {
 
 /// The confidence region of the minimum: the lattice points whose predicted objective is within
 /// [`REGION_NOISE_MULTIPLE`] x `noise_sd` of the lowest prediction.
-pub fn region(space: &SearchBox, observations: &[Observation], noise_sd: f64) -> Result<Region> {
-    let model = Surrogate::fit(space, observations, noise_sd)?;
+pub fn region(
+    space: &SearchBox,
+    observations: &[Observation],
+    noise_sd: f64,
+    prior: Option<&Prior>,
+) -> Result<Region> {
+    let model = Surrogate::fit_on(space, observations, noise_sd, prior)?;
     let lattice = space.lattice();
     let pred = model.predict(&lattice)?;
     let k_best = (0..pred.len())
@@ -401,21 +561,34 @@ mod tests {
         q: usize,
         max_batches: usize,
     ) -> (Vec<Observation>, bool) {
+        search_from(space, f, noise_sd, q, max_batches, 3, None)
+    }
+
+    /// [`search`] from an `n` x `n` grid, on a prior when given.
+    fn search_from(
+        space: &SearchBox,
+        f: impl Fn(&[f64]) -> f64,
+        noise_sd: f64,
+        q: usize,
+        max_batches: usize,
+        n: usize,
+        prior: Option<&Prior>,
+    ) -> (Vec<Observation>, bool) {
         let mut noise = Noise(7);
         let mut obs = Vec::new();
-        for i in 0..3 {
-            for j in 0..3 {
+        for i in 0..n {
+            for j in 0..n {
                 let x: Vec<f64> = [i, j]
                     .iter()
                     .zip(&space.bounds)
-                    .map(|(&k, (lo, hi))| lo + (hi - lo) * k as f64 / 2.0)
+                    .map(|(&k, (lo, hi))| lo + (hi - lo) * k as f64 / (n - 1) as f64)
                     .collect();
                 let y = f(&x) + noise_sd * noise.normal();
                 obs.push(Observation { x, y });
             }
         }
         for _ in 0..max_batches {
-            let p = propose(space, &obs, noise_sd, q).expect("proposal");
+            let p = propose(space, &obs, noise_sd, q, prior).expect("proposal");
             if converged(p.max_expected_improvement, noise_sd) || p.points.is_empty() {
                 return (obs, true);
             }
@@ -425,6 +598,54 @@ mod tests {
             }
         }
         (obs, false)
+    }
+
+    #[test]
+    fn a_coarse_prior_finds_the_fine_minimum_in_fewer_evaluations() {
+        // The coarse landscape is the fine one moved and raised, as J at a coarser resolution
+        // is: its minimum at (0.1, -0.4) against the fine one's (0.3, -0.2).
+        let space = SearchBox::new(vec![(-1.0, 1.0), (-1.0, 1.0)]).expect("box");
+        let fine = |x: &[f64]| (x[0] - 0.3).powi(2) + 2.0 * (x[1] + 0.2).powi(2);
+        let coarse = |x: &[f64]| 0.3 + 1.2 * ((x[0] - 0.1).powi(2) + 2.0 * (x[1] + 0.4).powi(2));
+        let noise = 0.01;
+        let mut coarse_obs = Vec::new();
+        for i in 0..6 {
+            for j in 0..6 {
+                let x = vec![-1.0 + 0.4 * i as f64, -1.0 + 0.4 * j as f64];
+                coarse_obs.push(Observation { y: coarse(&x), x });
+            }
+        }
+        let prior = Prior::fit(&coarse_obs, noise).expect("prior");
+        let (plain, plain_converged) = search(&space, fine, noise, 2, 20);
+        let (on_prior, prior_converged) = search_from(&space, fine, noise, 2, 20, 2, Some(&prior));
+        assert!(plain_converged && prior_converged);
+        assert!(
+            on_prior.len() < plain.len(),
+            "on the prior {} evaluations, without {}",
+            on_prior.len(),
+            plain.len()
+        );
+        let r = region(&space, &on_prior, noise, Some(&prior)).expect("region");
+        for (k, truth) in [0.3, -0.2].iter().enumerate() {
+            let (lo, hi) = r.intervals[k];
+            assert!(
+                lo <= *truth && *truth <= hi,
+                "axis {k}: {truth} outside [{lo}, {hi}]"
+            );
+        }
+        // The prior's weight is fitted, not assumed: the fine landscape is the coarse one
+        // over 1.2 near the minimum.
+        let model = Surrogate::fit_on(&space, &on_prior, noise, Some(&prior)).expect("model");
+        let rho = model.prior_weight().expect("a prior");
+        assert!((0.5..1.2).contains(&rho), "rho {rho}");
+    }
+
+    #[test]
+    fn a_prior_weight_is_the_slope_and_falls_back_to_one() {
+        assert_eq!(prior_weight(&[1.0, 2.0], &[5.0, 9.0]), 1.0);
+        assert_eq!(prior_weight(&[1.0, 1.0, 1.0], &[5.0, 9.0, 3.0]), 1.0);
+        assert!((prior_weight(&[0.0, 1.0, 2.0], &[1.0, 1.5, 2.0]) - 0.5).abs() < 1e-12);
+        assert_eq!(prior_weight(&[0.0, 1.0, 2.0], &[9.0, 0.0, -9.0]), 0.0);
     }
 
     #[test]
@@ -446,7 +667,7 @@ mod tests {
         let noise = 0.01;
         let (obs, conv) = search(&space, f, noise, 2, 15);
         assert!(conv, "did not converge in {} evaluations", obs.len());
-        let r = region(&space, &obs, noise).expect("region");
+        let r = region(&space, &obs, noise, None).expect("region");
         eprintln!(
             "quadratic: {} evaluations, best {:?}, region {:?}",
             obs.len(),
@@ -475,7 +696,7 @@ mod tests {
         };
         let noise = 0.05;
         let (obs, _) = search(&space, f, noise, 3, 12);
-        let r = region(&space, &obs, noise).expect("region");
+        let r = region(&space, &obs, noise, None).expect("region");
         let truth = f(&r.best);
         eprintln!(
             "branin: {} evaluations, best {:?}, f = {truth}",
@@ -500,7 +721,7 @@ mod tests {
             9,
             "no run beyond the grid when nothing can improve"
         );
-        let r = region(&space, &obs, 0.02).expect("region");
+        let r = region(&space, &obs, 0.02, None).expect("region");
         assert!(r.share_of_box > 0.9, "{}", r.share_of_box);
         assert!(r.at_boundary.iter().all(|&b| b));
     }
@@ -511,7 +732,7 @@ mod tests {
         let space = SearchBox::new(vec![(0.0, 1.0), (0.0, 1.0)]).expect("box");
         let f = |x: &[f64]| (x[0] - 1.5).powi(2) + 4.0 * (x[1] - 0.5).powi(2);
         let (obs, _) = search(&space, f, 0.01, 2, 6);
-        let r = region(&space, &obs, 0.01).expect("region");
+        let r = region(&space, &obs, 0.01, None).expect("region");
         assert_eq!(r.sides[0], (false, true), "x: {:?}", r.intervals[0]);
         assert_eq!(r.sides[1], (false, false), "y: {:?}", r.intervals[1]);
         assert_eq!(r.at_boundary, vec![true, false]);
@@ -527,7 +748,7 @@ mod tests {
                 y: (x - 0.4f64).powi(2),
             })
             .collect();
-        let p = propose(&space, &obs, 0.0, 4).expect("proposal");
+        let p = propose(&space, &obs, 0.0, 4, None).expect("proposal");
         assert_eq!(p.points.len(), 4);
         let mut all: Vec<f64> = obs.iter().map(|o| o.x[0]).collect();
         all.extend(p.points.iter().map(|x| x[0]));
@@ -537,7 +758,7 @@ mod tests {
             }
         }
         // Deterministic: the same data proposes the same batch.
-        let again = propose(&space, &obs, 0.0, 4).expect("proposal");
+        let again = propose(&space, &obs, 0.0, 4, None).expect("proposal");
         assert_eq!(p.points, again.points);
     }
 

@@ -252,6 +252,7 @@ impl CalibrateArgs {
             seeds: self.seeds.clone(),
             extend: !self.no_extend,
             slurm,
+            coarse: None,
         })
     }
 }
@@ -422,6 +423,10 @@ pub struct ReproduceArgs {
     /// check in CI that a committed report is current.
     #[arg(long, requires = "previous")]
     pub fail_on_change: bool,
+    /// The history file each run appends its record to (default `<out>/history.jsonl`);
+    /// several report directories may share one.
+    #[arg(long, value_name = "FILE")]
+    pub history: Option<PathBuf>,
     /// The reproduction's config.
     #[arg(long, default_value = "studies/reproduce.toml")]
     pub config: PathBuf,

@@ -42,7 +42,11 @@ fn default_max_extensions() -> usize {
     2
 }
 fn default_ladder_values() -> usize {
-    3
+    2
+}
+
+fn default_true() -> bool {
+    true
 }
 
 fn default_noise_floor() -> f64 {
@@ -114,9 +118,14 @@ pub struct CalibrateConfig {
     pub max_extensions: usize,
     /// Resolution ladder (`--ladder`): the values each searched axis takes in the first box of
     /// a level after the first (its corners and the points between, spaced evenly in the
-    /// axis's coordinate).
+    /// axis's coordinate). Two by default: with the prior the corners only fix the
+    /// difference from the coarse landscape.
     #[serde(default = "default_ladder_values")]
     pub ladder_values: usize,
+    /// Resolution ladder: whether a level's search models the difference from the level
+    /// before (a multi-fidelity prior; false: each level learns its landscape afresh).
+    #[serde(default = "default_true")]
+    pub ladder_prior: bool,
     /// Resolution ladder: the particle count at which the last level's answer is run again
     /// as a check (none: no check; `--ladder-check` overrides).
     #[serde(default)]

@@ -26,7 +26,7 @@ use anyhow::{anyhow, Result};
 use hvi_analysis::observable::{Observable, Observables};
 use hvi_analysis::score::objective;
 use hvi_analysis::surrogate::{
-    self, converged, propose, seed_mean_noise, Observation, SearchBox, Surrogate,
+    self, converged, propose, seed_mean_noise, Observation, Prior, SearchBox, Surrogate,
 };
 use hvi_run::store::{Job, Record, RunStatus};
 
@@ -44,6 +44,8 @@ pub(super) struct EgoSettings {
     pub max_batches: usize,
     /// The least noise assumed for the objective (a seed mean's standard error).
     pub noise_floor: f64,
+    /// A coarser resolution's model of log10 J: the search models the difference from it.
+    pub prior: Option<Prior>,
 }
 
 /// What the search found.
@@ -72,6 +74,8 @@ pub(super) struct EgoOutcome {
     pub surface: Option<Surface>,
     /// Runs simulated.
     pub runs: usize,
+    /// The prior's weight in the final model (None without a prior).
+    pub prior_weight: Option<f64>,
 }
 
 /// An evaluated point with its runs' observables, one per seed.
@@ -141,7 +145,7 @@ pub(super) fn search(
                 obs.len()
             ));
         }
-        let proposal = propose(&space, &obs, noise, settings.batch)?;
+        let proposal = propose(&space, &obs, noise, settings.batch, settings.prior.as_ref())?;
         let ei = proposal.max_expected_improvement;
         if problem.progress {
             eprintln!(
@@ -172,10 +176,10 @@ pub(super) fn search(
         batch += 1;
     };
     let obs = observations(problem, &evaluations);
-    let model = Surrogate::fit(&space, &obs, noise)?;
+    let model = Surrogate::fit_on(&space, &obs, noise, settings.prior.as_ref())?;
     let best_index = best_predicted(&model, problem, &evaluations)?;
     let (best, observables) = evaluations[best_index].clone();
-    let region = surrogate::region(&space, &obs, noise)
+    let region = surrogate::region(&space, &obs, noise, settings.prior.as_ref())
         .ok()
         .map(|r| param_region(problem, &r));
     let spread = spread_of(problem, &observables);
@@ -192,7 +196,37 @@ pub(super) fn search(
         spread,
         surface,
         runs,
+        prior_weight: model.prior_weight(),
     })
+}
+
+/// The model of a coarser calibration's scored points in this problem's coordinates, the
+/// search's prior; built on the calibration's own prior when it had one (the model of each
+/// level is then the difference from the one below, down to the first).
+pub(super) fn prior_of(problem: &Refinement, coarse: &super::Coarse) -> Result<Prior> {
+    let inner = match &coarse.prior {
+        Some(c) => Some(prior_of(problem, c)?),
+        None => None,
+    };
+    let obs: Vec<Observation> = coarse
+        .points
+        .iter()
+        .filter(|(_, j)| j.is_finite())
+        .filter_map(|(p, j)| {
+            coords(problem, p).map(|x| Observation {
+                x,
+                y: log_objective(*j),
+            })
+        })
+        .collect();
+    if obs.len() < 3 {
+        return Err(anyhow!(
+            "the {}-particle calibration has {} scored points with every searched key (a prior needs 3)",
+            coarse.particles,
+            obs.len()
+        ));
+    }
+    Prior::fit_on(&obs, coarse.noise, inner.as_ref())
 }
 
 /// Points per axis of [`Surface`].

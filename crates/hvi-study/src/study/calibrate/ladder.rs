@@ -6,8 +6,10 @@
 //! - Each later level starts from a small grid (`calibrate.ladder_values` values per searched
 //!   axis) over the previous level's confidence region, padded by a quarter of its width on
 //!   each side and at least half a decade wide on a log axis (one grid step of the study on a
-//!   linear one), and moved by the trend of the last two levels' answers per decade of N
-//!   when there are two. The edge-aware search extends that box where the answer leaves it.
+//!   linear one), and widened to hold that region moved by the trend of the last two
+//!   levels' answers per decade of N when there are two (and both are inside their boxes).
+//!   Its search models the difference from the level before (a multi-fidelity prior). The
+//!   edge-aware search extends that box where the answer leaves it.
 //! - Optionally (`--ladder-check N`, `calibrate.ladder_check`) the last answer is run at a
 //!   finer resolution at the search's seeds and scored.
 //! - The verdict: converged in N when the last two levels' intervals overlap on every
@@ -31,7 +33,7 @@ use serde::{Deserialize, Serialize};
 use super::config::{CalibrateConfig, Method};
 use super::problem::{fixed_overrides, refined_axes, Dim, Stage, PAPER_BEST};
 use super::result::{fmt_bounds, fmt_value, CalibrationResult, Edge};
-use super::{calibrate_plan, ego, runner_of, CalibrateOptions};
+use super::{calibrate_plan, ego, runner_of, CalibrateOptions, Coarse};
 
 /// What a ladder takes beside the calibration's options.
 #[derive(Debug, Clone)]
@@ -195,17 +197,33 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
     let mut levels: Vec<LadderLevel> = Vec::new();
     let mut results: Vec<CalibrationResult> = Vec::new();
     let mut keys: Vec<Dim> = Vec::new();
+    let mut coarse: Option<Coarse> = None;
     for (k, &n) in opts.particles.iter().enumerate() {
         let t_level = std::time::Instant::now();
         let dir = level_dir(n);
         let mut level_args = args.clone();
         level_args.study.particles = Some(n);
         level_args.study.out = Some(root.join(&dir));
-        let (level_study, steered_by) = if k == 0 {
+        let (level_study, mut steered_by) = if k == 0 {
             (study.clone(), "the study's grid".to_string())
         } else {
             steer(&study, &cfg, &keys, &levels, n)?
         };
+        if cfg.ladder_prior {
+            if let Some(c) = coarse.clone() {
+                steered_by.push_str(&format!(
+                    "; searched as the difference from the {} level's model ({} scored points{})",
+                    c.particles,
+                    c.points.len(),
+                    if c.prior.is_some() {
+                        ", itself on the levels below"
+                    } else {
+                        ""
+                    }
+                ));
+                level_args.coarse = Some(c);
+            }
+        }
         if progress {
             eprintln!(
                 "ladder level {}/{}: {} particles, first box from {steered_by}",
@@ -246,6 +264,9 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
             runs_made: r.runs_made,
             wall_seconds: t_level.elapsed().as_secs_f64(),
         });
+        // The next level's prior: this level's points, on this level's own prior.
+        let below = level_args.coarse.take();
+        coarse = Some(Coarse::of(&r, n, cfg.noise_floor, below));
         results.push(r);
     }
 
@@ -330,7 +351,7 @@ fn min_width(study: &Study, dim: &Dim) -> f64 {
 }
 
 /// The study of a level after the first: each searched axis over the previous level's
-/// confidence region, padded, moved by the trend of the last two answers, at
+/// confidence region, padded, widened along the trend of the last two answers, at
 /// `calibrate.ladder_values` values. Returns it and where its box came from, in words.
 fn steer(
     study: &Study,
@@ -345,6 +366,7 @@ fn steer(
     let before = levels.len().checked_sub(2).map(|i| &levels[i]);
     let mut out = study.clone();
     let mut shifts = Vec::new();
+    let mut unmoved = Vec::new();
     for dim in dims {
         let best = prev
             .best
@@ -358,14 +380,25 @@ fn steer(
             .map_or((c, c), |&(a, b)| (to_coord(dim, a), to_coord(dim, b)));
         lo = lo.min(c);
         hi = hi.max(c);
-        // The trend of the last two answers, per decade of N, carried to this level's N.
-        if let Some(b) = before {
+        // The trend of the last two answers, per decade of N, carried to this level's N; only
+        // between answers inside their boxes on this axis (an answer on a side says where the
+        // box ended, not where the optimum is).
+        let interior = |l: &LadderLevel| !l.edges.iter().any(|e| e.key == dim.0);
+        if let Some(b) = before.filter(|b| !(interior(b) && interior(prev))) {
+            unmoved.push(format!(
+                "{} (the {} or {} answer is on a side of its box)",
+                dim.0, b.particles, prev.particles
+            ));
+        }
+        if let Some(b) = before.filter(|b| interior(b) && interior(prev)) {
             if let Some(&v) = b.best.get(&dim.0) {
                 let slope = (c - to_coord(dim, v)) / (prev.particles.log10() - b.particles.log10());
                 let shift = slope * (n.log10() - prev.particles.log10());
                 if shift.is_finite() && shift != 0.0 {
-                    lo += shift;
-                    hi += shift;
+                    // Both the region and the region moved by the trend: two levels make a
+                    // trend, not a law (the optimum may as well have stopped moving).
+                    lo = lo.min(lo + shift);
+                    hi = hi.max(hi + shift);
                     shifts.push(format!(
                         "{} {:+.3}{}",
                         dim.0,
@@ -401,9 +434,12 @@ fn steer(
     );
     if !shifts.is_empty() {
         why.push_str(&format!(
-            ", moved by the trend of the last two answers ({})",
+            ", widened along the trend of the last two answers ({})",
             shifts.join(", ")
         ));
+    }
+    if !unmoved.is_empty() {
+        why.push_str(&format!(", no trend on {}", unmoved.join(", ")));
     }
     Ok((out, why))
 }

@@ -42,7 +42,7 @@ use problem::{
     best_of, fixed_overrides, particles_of, refined_axes, Refinement, Stage, PAPER_BEST,
 };
 use report::{archive, draw_figures, write_outputs};
-use result::fmt_bounds;
+use result::{fmt_bounds, PriorUse};
 
 /// What `calibrate` takes: the study's options and the search's, as the command line or a
 /// library caller gives them.
@@ -65,6 +65,54 @@ pub struct CalibrateOptions {
     /// Run each batch as a Slurm job array with these options, asking the queue every so many
     /// seconds (None: run here).
     pub slurm: Option<(SlurmOptions, f64)>,
+    /// A coarser resolution's calibration whose scored points are the surrogate search's prior
+    /// (a ladder's level passes its own to the next; None: no prior).
+    pub coarse: Option<Coarse>,
+}
+
+/// A coarser resolution's scored points, the prior of a surrogate search: the search then
+/// models the difference between this resolution's log10 J and the coarse one's
+/// (docs/calibration.md, "The resolution ladder").
+#[derive(Debug, Clone)]
+pub struct Coarse {
+    /// Its particle count.
+    pub particles: f64,
+    /// Its answer (run first at this resolution: the coarse optimum is the one point
+    /// most likely near the fine one).
+    pub best: BTreeMap<String, f64>,
+    /// Each scored point: its searched parameters and J over the seeds.
+    pub points: Vec<(BTreeMap<String, f64>, f64)>,
+    /// The noise of its log10 J.
+    pub noise: f64,
+    /// The calibration it was itself searched on, if any (the model is then built on it).
+    pub prior: Option<Box<Coarse>>,
+}
+
+impl Coarse {
+    /// The scored points of a surrogate calibration at `particles` (its search's points and
+    /// the paper's fit when scored at the same seeds).
+    pub fn of(
+        r: &CalibrationResult,
+        particles: f64,
+        noise_floor: f64,
+        prior: Option<Coarse>,
+    ) -> Coarse {
+        let seeds = &r.best.seeds;
+        let points = r
+            .refinement
+            .iter()
+            .chain(std::iter::once(&r.paper).filter(|p| &p.seeds == seeds))
+            .filter(|e| e.score.is_some() && e.objective.is_finite())
+            .map(|e| (e.params.clone(), e.objective))
+            .collect();
+        Coarse {
+            particles,
+            best: r.best.params.clone(),
+            points,
+            noise: r.noise.unwrap_or(noise_floor),
+            prior: prior.map(Box::new),
+        }
+    }
 }
 
 impl CalibrateOptions {
@@ -79,6 +127,7 @@ impl CalibrateOptions {
             seeds: None,
             extend: true,
             slurm: None,
+            coarse: None,
         }
     }
 }
@@ -197,6 +246,15 @@ pub(crate) fn calibrate_plan(
         best_spread: search.spread,
         runs_made: grid.ran + search.runs + paper_runs,
         wall_seconds: t0.elapsed().as_secs_f64(),
+        prior: args
+            .coarse
+            .as_ref()
+            .filter(|_| search.method == Method::Ego.name())
+            .map(|c| PriorUse {
+                particles: c.particles,
+                points: c.points.len(),
+                weight: search.prior_weight,
+            }),
     };
     write_outputs(out, &result, &grid.evaluations)?;
     draw_figures(out, plan, &grid.records, &result, &cfg.log_axes, progress);
@@ -246,6 +304,8 @@ struct SearchOutcome {
     limit: Option<String>,
     /// The seeds the answer's objective is over (empty: the scene's own).
     seeds: Vec<u64>,
+    /// The prior's weight in the final model (None without a prior).
+    prior_weight: Option<f64>,
 }
 
 /// Stage 2: the search after the grid (none with `--no-refine`, no axis or a zero budget).
@@ -276,6 +336,7 @@ fn search_stage(
         edges: Vec::new(),
         limit: None,
         seeds: Vec::new(),
+        prior_weight: None,
     };
     if args.no_refine {
         return Ok(none("skipped (--no-refine)"));
@@ -317,6 +378,7 @@ fn search_stage(
                 spread: Vec::new(),
                 runs: *problem.ran.borrow(),
                 seeds: Vec::new(),
+                prior_weight: None,
             })
         }
         Method::Ego => ego_boxes(stage, problem, cfg, args, grid, refine_keys, anchor),
@@ -342,6 +404,10 @@ fn ego_boxes(
         seeds: cfg.seeds.clone(),
         max_batches: args.max_batches.unwrap_or(cfg.max_batches),
         noise_floor: cfg.noise_floor,
+        prior: match &args.coarse {
+            Some(c) => Some(ego::prior_of(first, c)?),
+            None => None,
+        },
     };
     let rule = ExtendRule {
         extend: args.extend,
@@ -370,13 +436,30 @@ fn ego_boxes(
         .zip(grid.records.iter().cloned())
         .collect();
     let (mut scored, mut runs) = ego::seeded_grid(first, &settings, &pairs)?;
+    let seeds = ego::seed_list(&settings);
+    // A coarser level's answer runs beside the grid (unless the grid holds it).
+    if let Some(c) = &args.coarse {
+        let at: BTreeMap<String, f64> = first
+            .dims
+            .iter()
+            .filter_map(|d| c.best.get(&d.0).map(|v| (d.0.clone(), *v)))
+            .collect();
+        let coords = ego::coords(first, &at);
+        let seen = scored
+            .iter()
+            .any(|(e, _)| ego::coords(first, &e.params) == coords);
+        if coords.is_some() && !seen {
+            let (evs, n) = ego::run_points(first, "coarse-answer", &[at], &seeds)?;
+            scored.extend(evs);
+            runs += n;
+        }
+    }
     let mut dims = first.dims.clone();
     let mut values = grid_coords(first.plan, &dims)?;
     let mut moved = BTreeMap::new();
     let mut boxes = Vec::new();
     let mut batches = 0;
     let mut extension = 0;
-    let seeds = ego::seed_list(&settings);
     loop {
         let problem = stage.problem(first.fixed.clone(), dims.clone());
         // The anchor joins the observations once the box holds it (unless a scored point
@@ -524,6 +607,7 @@ fn ego_boxes(
                 edges,
                 limit,
                 seeds: settings.seeds.clone(),
+                prior_weight: o.prior_weight,
             });
         }
         let (evs, n) = extension_points(stage, first, &dims, &values, &scored, &seeds, extension)?;

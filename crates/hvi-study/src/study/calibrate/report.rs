@@ -98,6 +98,9 @@ pub fn report_text(r: &CalibrationResult) -> String {
                 .map_or(String::new(), |l| format!(" ({l})"))
         ));
     }
+    if let Some(p) = &r.prior {
+        s.push_str(&format!("  modelled as: {}\n", p.describe()));
+    }
     s.push_str(&format!("  best:        {}\n", describe_eval(&r.best)));
     for line in interval_lines(r) {
         s.push_str(&format!("  interval:    {line}\n"));
@@ -221,6 +224,12 @@ pub fn report_md(r: &CalibrationResult) -> String {
         "\nObjective J = {:.4} at the best point, {:.4} at the best grid point, {:.4} at the paper's fit.\n",
         r.best.objective, r.best_grid.objective, r.paper.objective
     ));
+    if let Some(p) = &r.prior {
+        s.push_str(&format!(
+            "The search modelled log10 J as {} (docs/calibration.md, \"The resolution ladder\").\n",
+            p.describe()
+        ));
+    }
     if let Some(noise) = r.noise {
         s.push_str(&format!(
             "The noise the search worked with: {noise:.4} in log10 J ({}).\n",

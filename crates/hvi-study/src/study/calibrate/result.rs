@@ -107,6 +107,33 @@ pub struct CalibrationResult {
     /// Wall time of this invocation, s.
     #[serde(default)]
     pub wall_seconds: f64,
+    /// The coarser resolution the surrogate search modelled the difference from (None: none).
+    #[serde(default)]
+    pub prior: Option<PriorUse>,
+}
+
+/// The coarser calibration a surrogate search started from.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PriorUse {
+    /// Its particle count.
+    pub particles: f64,
+    /// Its scored points the prior was fitted to.
+    pub points: usize,
+    /// The prior's weight `rho` in the final model (log10 J = rho x prior + difference).
+    pub weight: Option<f64>,
+}
+
+impl PriorUse {
+    /// In words, for the reports.
+    pub fn describe(&self) -> String {
+        format!(
+            "the difference from a model of the {}-particle calibration's {} scored points{}",
+            self.particles,
+            self.points,
+            self.weight
+                .map_or(String::new(), |w| format!(", weighted {w:.2}"))
+        )
+    }
 }
 
 /// The calibrated parameters' confidence region, in the parameters' own units.
