@@ -12,7 +12,9 @@
 #   HVI_TIER         the tier (default paper; quick for a smoke test)
 #   HVI_THREADS      worker threads (default every core)
 #
-# Layout: $HVI_NIGHTLY_DIR/latest (tonight's report: report.md, reproduce.json, figures; it is
+# Layout: $HVI_NIGHTLY_DIR/history.jsonl (one record per night: commit, date, wall times,
+# every verdict and deciding number; kept across nights), $HVI_NIGHTLY_DIR/latest (tonight's
+# report: index.html with every number's history, report.md, reproduce.json, figures; it is
 # rewritten after every stage, so it shows how far the night got), $HVI_NIGHTLY_DIR/previous
 # (the night before), $HVI_NIGHTLY_DIR/nightly.lock. The runs are kept in the study store
 # (runs/reproduce/<tier>, by fingerprint): a night simulates only what is missing. The paper
@@ -36,7 +38,7 @@ if [ -f "$dir/latest/reproduce.json" ]; then
     rm -rf "$dir/previous"
     mv "$dir/latest" "$dir/previous"
 fi
-args=(reproduce --tier "$tier" --out "$dir/latest")
+args=(reproduce --tier "$tier" --out "$dir/latest" --history "$dir/history.jsonl")
 if [ -f "$dir/previous/reproduce.json" ]; then
     args+=(--previous "$dir/previous")
 fi
@@ -45,4 +47,4 @@ if [ -n "${HVI_THREADS:-}" ]; then
 fi
 echo "$(date -Is) nightly: hvi-study ${args[*]}"
 target/release/hvi-study "${args[@]}"
-echo "$(date -Is) nightly: done: $dir/latest/report.md"
+echo "$(date -Is) nightly: done: $dir/latest/index.html"

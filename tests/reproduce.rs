@@ -151,6 +151,10 @@ fn reproduce_draws_every_figure_gives_every_verdict_and_reruns_from_the_store() 
     );
     // Fig. 3 needs no run and its laws meet at r_eq: reproduced at any tier.
     assert_eq!(json["figures"][0]["verdict"], "reproduced");
+    // The history has this run; the page says it is the first.
+    assert_eq!(history(&out).len(), 1);
+    let html = std::fs::read_to_string(out.join("index.html")).expect("index.html");
+    assert!(html.contains("This is the first run of this tier in the history."));
 
     // Again, comparing with the first report: nothing runs, nothing changes.
     let o = reproduce(
@@ -176,6 +180,42 @@ fn reproduce_draws_every_figure_gives_every_verdict_and_reruns_from_the_store() 
         md.contains("## What changed since the previous report\n\nNothing"),
         "{md}"
     );
+    // Two runs: two records, and every tracked deciding number's chart has two points.
+    let records = history(&out);
+    assert_eq!(records.len(), 2);
+    assert_eq!(records[0]["figures"], records[1]["figures"]);
+    let tracked: usize = json["figures"]
+        .as_array()
+        .expect("figures")
+        .iter()
+        .map(|f| {
+            f["numbers"]
+                .as_array()
+                .expect("numbers")
+                .iter()
+                .filter(|n| n["timing"] != true)
+                .count()
+        })
+        .sum();
+    let html = std::fs::read_to_string(out.join("index.html")).expect("index.html");
+    assert_eq!(html.matches("<svg class=\"history\"").count(), tracked);
+    assert_eq!(html.matches("data-points=\"2\"").count(), tracked, "{html}");
+    assert!(html.contains("Nothing: every verdict and deciding number is the same."));
+
+    // The run before had another Fig. 3 verdict and another Fig. 4 number (as after a
+    // change): the next page shows both.
+    let mut second = records[1].clone();
+    second["figures"][0]["verdict"] = serde_json::json!("partly");
+    let (name, _) = {
+        let n = &second["figures"][1]["numbers"][0];
+        (n[0].as_str().expect("name").to_string(), n[1].clone())
+    };
+    second["figures"][1]["numbers"][0][1] = serde_json::json!(99.0);
+    std::fs::write(
+        out.join("history.jsonl"),
+        format!("{}\n{}\n", records[0], second),
+    )
+    .expect("history");
 
     // A changed number is listed, and --fail-on-change fails on it.
     let prev = dir.join("previous");
@@ -193,6 +233,104 @@ fn reproduce_draws_every_figure_gives_every_verdict_and_reruns_from_the_store() 
     assert!(stderr(&o).contains("changed since"), "{}", stderr(&o));
     let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
     assert!(md.contains("- Fig. 4: decades spanned: 99 -> "), "{md}");
+    // A failed comparison still records the run.
+    assert_eq!(history(&out).len(), 3);
+    let html = std::fs::read_to_string(out.join("index.html")).expect("index.html");
+    assert!(
+        html.contains("<tr class=\"changed\"><td><a href=\"#fig-3\">3</a>"),
+        "{html}"
+    );
+    assert!(
+        html.contains("<section class=\"figure changed\" id=\"fig-3\">"),
+        "{html}"
+    );
+    assert!(
+        html.contains(&format!("Fig. 4</a>: {name}: 99 &rarr; ")),
+        "{html}"
+    );
+    assert!(html.contains("class=\"pt moved last\""), "{html}");
+    assert_eq!(
+        html.matches("data-points=\"3\"").count(),
+        html.matches("<svg class=\"history\"").count()
+    );
+    in_a_browser(&out, 3);
+}
+
+/// The records of a report's history.
+fn history(out: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(out.join("history.jsonl"))
+        .expect("history.jsonl")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("a record"))
+        .collect()
+}
+
+/// Opens `out/index.html` in headless Chromium and checks that it loads without an error,
+/// that every picture loads, and that each history chart has `runs` points. Skips with a
+/// message where Chromium is missing, and fails then under CI=true (`.ci/run` installs it).
+fn in_a_browser(out: &Path, runs: usize) {
+    let Some(chromium) = ["chromium", "chromium-browser", "google-chrome"]
+        .into_iter()
+        .find(|c| {
+            std::process::Command::new(c)
+                .arg("--version")
+                .output()
+                .is_ok_and(|o| o.status.success())
+        })
+    else {
+        assert!(
+            std::env::var("CI").as_deref() != Ok("true"),
+            "CI=true but no Chromium to open index.html (.ci/run installs Debian's chromium)"
+        );
+        eprintln!("SKIP: no Chromium here: index.html not opened in a browser");
+        return;
+    };
+    let profile = out.join("chromium-profile");
+    let page = out.join("index.html").canonicalize().expect("page");
+    let o = std::process::Command::new(chromium)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--allow-file-access-from-files",
+            "--virtual-time-budget=10000",
+        ])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg("--dump-dom")
+        .arg(format!("file://{}", page.display()))
+        .output()
+        .expect("chromium runs");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let dom = String::from_utf8_lossy(&o.stdout);
+    let body = &dom[dom.find("<body").expect("a body")..];
+    let body = &body[..body.find('>').expect("the body tag")];
+    let attr = |name: &str| -> String {
+        let key = format!("{name}=\"");
+        let at = body
+            .find(&key)
+            .unwrap_or_else(|| panic!("no {name} on <body>: {body}"))
+            + key.len();
+        body[at..][..body[at..].find('"').expect("quote")].to_string()
+    };
+    assert_eq!(attr("data-ready"), "1", "{body}");
+    assert_eq!(attr("data-errors"), "0", "{}", attr("data-error-text"));
+    let html = std::fs::read_to_string(&page).expect("page");
+    let images = html.matches("<img ").count();
+    assert!(images >= FILES.len(), "{images} pictures on the page");
+    assert_eq!(attr("data-images"), images.to_string());
+    assert_eq!(attr("data-images-loaded"), images.to_string(), "{body}");
+    // Every chart in the rendered page has one point per recorded run.
+    let charts: Vec<&str> = dom.split("<svg class=\"history\"").skip(1).collect();
+    assert!(!charts.is_empty());
+    for c in charts {
+        let c = &c[..c.find("</svg>").expect("svg end")];
+        assert_eq!(c.matches("<circle").count(), runs, "{c}");
+    }
 }
 
 #[test]

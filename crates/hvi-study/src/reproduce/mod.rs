@@ -14,9 +14,13 @@
 //! stopped at any point resumes. The report is rewritten after every stage (figures not yet
 //! computed say `pending`), so a long tier shows where it stands. With `--previous DIR` the
 //! report lists what changed since DIR's `reproduce.json` (verdicts and deciding numbers).
+//! Each finished run appends a record to the history (`history.jsonl`, or `--history FILE`)
+//! and writes `index.html`, the report as a web page with every deciding number's history.
 //! Every paper number comes from `hvi_engine::paper`.
 
 pub mod config;
+pub mod history;
+pub mod page;
 mod plans;
 pub mod report;
 pub mod sizing;
@@ -440,6 +444,29 @@ fn finish(
     rep.wall_seconds = t0.elapsed().as_secs_f64();
     rep.changes = previous.map(|p| report::diff(p, &rep));
     rep.write(out)?;
+    let history_path = args
+        .history
+        .clone()
+        .unwrap_or_else(|| out.join(history::HISTORY_FILE));
+    let record = history::Record::of(&rep, history::current_commit(), history::now_utc());
+    let history = history::History::append(&history_path, &record)?;
+    for (line, why) in &history.damaged {
+        eprintln!(
+            "warning: {} line {line} is not a history record and is skipped (kept in the file): {why}",
+            history_path.display()
+        );
+    }
+    page::write_page(out, &rep, &history)?;
+    say(
+        args,
+        format!(
+            "history: {} run(s) of tier `{}` in {}; page: {}",
+            history.of_tier(&rep.tier).count(),
+            rep.tier,
+            history_path.display(),
+            out.join(page::PAGE_FILE).display()
+        ),
+    );
     say(
         args,
         format!(

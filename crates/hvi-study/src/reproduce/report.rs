@@ -230,7 +230,7 @@ pub struct StageTiming {
 }
 
 /// The machine the reproduction ran on.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Machine {
     /// CPU model (`/proc/cpuinfo`).
     pub cpu: String,
