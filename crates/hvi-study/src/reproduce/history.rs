@@ -171,7 +171,7 @@ impl History {
 
     /// Appends `record` to the history at `path` (created when missing) and returns the
     /// history as it now is. The file is rewritten atomically under an exclusive lock on
-    /// `<path>.lock`; damaged lines stay as they were.
+    /// `.<name>.lock` beside it; damaged lines stay as they were.
     pub fn append(path: &Path, record: &Record) -> Result<History> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir)
@@ -207,8 +207,10 @@ impl History {
     }
 }
 
+/// The lock beside a history: `.<name>.lock` (hidden, and ignored by the repository).
 fn lock_path(path: &Path) -> PathBuf {
-    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    let mut name = std::ffi::OsString::from(".");
+    name.push(path.file_name().unwrap_or_default());
     name.push(".lock");
     path.with_file_name(name)
 }

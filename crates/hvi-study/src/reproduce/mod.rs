@@ -45,6 +45,8 @@ use stages::Ctx;
 /// `hvi-study reproduce`.
 pub fn reproduce(args: &ReproduceArgs) -> Result<Reproduction> {
     let t0 = Instant::now();
+    // Before anything is written: a report written into the repository is not a change.
+    let commit = history::current_commit();
     check_counts(args)?;
     let config = Config::load(&args.config)?;
     let tier = config.tier(&args.tier)?.clone();
@@ -82,7 +84,7 @@ pub fn reproduce(args: &ReproduceArgs) -> Result<Reproduction> {
         targets,
     };
     let errors = run_stages(args, &inputs, &mut rep, &out, t0)?;
-    finish(args, rep, previous.as_ref(), &out, t0, errors)
+    finish(args, rep, previous.as_ref(), &out, t0, errors, commit)
 }
 
 /// A progress line on stderr (none with `--quiet`).
@@ -439,6 +441,7 @@ fn finish(
     out: &Path,
     t0: Instant,
     mut errors: Vec<String>,
+    commit: String,
 ) -> Result<Reproduction> {
     rep.complete = errors.is_empty();
     rep.wall_seconds = t0.elapsed().as_secs_f64();
@@ -448,7 +451,7 @@ fn finish(
         .history
         .clone()
         .unwrap_or_else(|| out.join(history::HISTORY_FILE));
-    let record = history::Record::of(&rep, history::current_commit(), history::now_utc());
+    let record = history::Record::of(&rep, commit, history::now_utc());
     let history = history::History::append(&history_path, &record)?;
     for (line, why) in &history.damaged {
         eprintln!(
