@@ -254,6 +254,25 @@ fn reproduce_draws_every_figure_gives_every_verdict_and_reruns_from_the_store() 
         html.matches("<svg class=\"history\"").count()
     );
     in_a_browser(&out, 3);
+
+    // Another report directory on the same history (--history): a fourth record, charted on
+    // its own page, and no history of its own.
+    let other = dir.join("other");
+    let shared = out.join("history.jsonl");
+    let o = reproduce(
+        &config,
+        &other,
+        &runs,
+        &["--history", shared.to_str().expect("utf-8")],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(history(&out).len(), 4);
+    assert!(!other.join("history.jsonl").exists());
+    let html = std::fs::read_to_string(other.join("index.html")).expect("index.html");
+    assert_eq!(
+        html.matches("data-points=\"4\"").count(),
+        html.matches("<svg class=\"history\"").count()
+    );
 }
 
 /// The records of a report's history.
