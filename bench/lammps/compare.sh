@@ -15,7 +15,6 @@
 #       --set K=V      extra hvi scene override (repeatable; also used for the data file)
 #       --threads LIST hvi thread counts to time, default "1 2"
 #       --thermo K     energy/thermo interval in steps (default STEPS/20, at least 1)
-#       --tablen N     bond table points (default 4001)
 #       --binsize B    LAMMPS neighbour bin size in m (default: LAMMPS's, half the cutoff)
 #       --lmp-sf SFX   LAMMPS style suffix, e.g. opt (default none)
 #       --lmp-threads K  LAMMPS on K OpenMP threads (`-sf omp -pk omp K`; needs a LAMMPS
@@ -48,7 +47,6 @@ WORKDIR=""
 SCENE="$ROOT/studies/scenes/default.toml"
 THREADS="1 2"
 THERMO=""
-TABLEN=4001
 BINSIZE=0
 LMP_SF=""
 LMP_THREADS=1
@@ -67,7 +65,6 @@ while [[ $# -gt 0 ]]; do
     --set) EXTRA_SETS+=(--set "${2:?--set needs KEY=VALUE}"); shift 2 ;;
     --threads) THREADS="${2:?--threads needs a list}"; shift 2 ;;
     --thermo) THERMO="${2:?--thermo needs a value}"; shift 2 ;;
-    --tablen) TABLEN="${2:?--tablen needs a value}"; shift 2 ;;
     --binsize) BINSIZE="${2:?--binsize needs a value}"; shift 2 ;;
     --lmp-sf) LMP_SF="${2:?--lmp-sf needs a value}"; shift 2 ;;
     --lmp-threads) LMP_THREADS="${2:?--lmp-threads needs a value}"; shift 2 ;;
@@ -86,7 +83,6 @@ if [[ -n "$STEPS" && -n "$END_TIME" ]]; then die "give STEPS or --end-time, not 
 [[ -z "$STEPS" && -z "$END_TIME" ]] && STEPS=2000
 [[ "$N" =~ ^[0-9]+([.][0-9]*)?([eE][+]?[0-9]+)?$ ]] || die "N must be a number, got '$N'"
 [[ -z "$STEPS" || "$STEPS" =~ ^[1-9][0-9]*$ ]] || die "STEPS must be a positive integer, got '$STEPS'"
-[[ "$TABLEN" =~ ^[0-9]+$ ]] || die "--tablen must be an integer"
 
 # ---- tools -------------------------------------------------------------------------------
 # Where cargo put it: CARGO_TARGET_DIR when set (relative to the repository root, where the
@@ -108,8 +104,11 @@ if [[ -z "$WORKDIR" ]]; then
 fi
 mkdir -p "$WORKDIR" "$(dirname "$CSV")"
 WORKDIR="$(cd "$WORKDIR" && pwd)"
-DATA="$WORKDIR/init.data"
-TABLE="$WORKDIR/bond.table"
+# hvi's export of the scene (hvi-study run --lammps): data.lmp, bond.table, model.lmp (this
+# directory's in.hvi.lmp) and in.lmp with the scene's values; LAMMPS runs in.lmp with the
+# step count and output settings of this comparison given as -var.
+EXPORT="$WORKDIR/lammps"
+DATA="$EXPORT/data.lmp"
 
 json() { # json FILE EXPR  -> prints python expression on the parsed file (d = the object)
   python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))' "$1" "$2"
@@ -120,11 +119,11 @@ json() { # json FILE EXPR  -> prints python expression on the parsed file (d = t
 SETS=(--set "resolution.particles=$N" --set "run.max_stride=1" "${EXTRA_SETS[@]}")
 
 # ---- (a0) probe: initial state and the time step --------------------------------------------
-# One step with --lammps-data: writes the data file and tells us dt (it depends on the
+# One step with --lammps: writes the LAMMPS input and tells us dt (it depends on the
 # resolution), so that STEPS can be turned into an end time that gives exactly STEPS steps.
 log "hvi probe run (writes $DATA)"
 "$HVI" run "$SCENE" --out "$WORKDIR/hvi_probe" "${SETS[@]}" --set run.end_time_s=1e-15 \
-  --lammps-data "$DATA" --threads 1 --quiet >"$WORKDIR/hvi_probe.log" 2>&1 \
+  --lammps "$EXPORT" --threads 1 --quiet >"$WORKDIR/hvi_probe.log" 2>&1 \
   || die "hvi probe run failed, see $WORKDIR/hvi_probe.log"
 PROBE="$WORKDIR/hvi_probe/summary.json"
 [[ -s "$DATA" ]] || die "hvi did not write $DATA"
@@ -161,8 +160,6 @@ fi
 # ---- (b) LAMMPS run -----------------------------------------------------------------------
 LMP_LOG="$WORKDIR/lammps.log"
 if [[ $SKIP_LAMMPS -eq 0 ]]; then
-  python3 "$HERE/make_table.py" --r-eq "$R_EQ" --kappa "$KAPPA" --rcut "$RCUT" --sigma "$SIGMA" \
-    --n "$TABLEN" --out "$TABLE"
   SF=()
   [[ -n "$LMP_SF" ]] && SF=(-sf "$LMP_SF")
   [[ "$LMP_THREADS" =~ ^[1-9][0-9]*$ ]] || die "--lmp-threads: $LMP_THREADS (allowed: an integer >= 1)"
@@ -174,10 +171,7 @@ if [[ $SKIP_LAMMPS -eq 0 ]]; then
   # `compute reduce` of a local compute needs `inputs local` in LAMMPS releases from 2023 on
   # and is refused with it by older ones (Debian's 29 Sep 2021): try the new form, fall back.
   run_lammps() {
-    OMP_NUM_THREADS="$LMP_THREADS" "$LMP" "${SF[@]}" -in "$HERE/in.hvi.lmp" -log "$LMP_LOG" -screen none -nocite \
-      -var data "$DATA" -var table "$TABLE" -var tablen "$TABLEN" \
-      -var sigma "$SIGMA" -var r_eq "$R_EQ" -var eps "$EPS" -var contact "$CONTACT" \
-      -var kappa "$KAPPA" -var rcut "$RCUT" -var dt "$DT" -var skin "$SKIN" \
+    OMP_NUM_THREADS="$LMP_THREADS" "$LMP" "${SF[@]}" -in "$EXPORT/in.lmp" -log "$LMP_LOG" -screen none -nocite \
       -var steps "$STEPS" -var thermo "$THERMO" -var binsize "$BINSIZE" \
       -var reduce_local "$1" \
       >"$WORKDIR/lammps.stdout" 2>&1

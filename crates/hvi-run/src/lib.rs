@@ -40,6 +40,7 @@ pub mod checkpoint;
 pub mod exec;
 pub mod files;
 pub mod interrupt;
+pub mod lammps;
 pub mod lock;
 pub mod output;
 pub mod plan;

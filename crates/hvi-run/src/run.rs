@@ -40,6 +40,9 @@ pub struct RunOptions {
     pub dump_format: DumpFormat,
     /// Write the initial state as a LAMMPS data file here.
     pub lammps_data: Option<PathBuf>,
+    /// Write the scene as a runnable LAMMPS input into this directory
+    /// ([`crate::lammps::write_lammps_input`]).
+    pub lammps_dir: Option<PathBuf>,
     /// Show a progress bar and thermo lines on stderr.
     pub progress: bool,
     /// Write pictures: the cloud's side view at the end, the 3-D series at
@@ -662,6 +665,9 @@ impl Gathered {
         let t = Instant::now();
         if let Some(path) = &opts.lammps_data {
             write_lammps_data(path, sim)?;
+        }
+        if let Some(dir) = &opts.lammps_dir {
+            crate::lammps::write_lammps_input(dir, sim, spec)?;
         }
         run.rows.push(row(sim, &sim.energy_initial));
         if let Some(every) = opts.dump_every {

@@ -591,6 +591,10 @@ pub struct RunArgs {
     /// Write the initial state as a LAMMPS data file (units si, atom_style bond).
     #[arg(long, value_name = "FILE")]
     pub lammps_data: Option<PathBuf>,
+    /// Write the scene as LAMMPS runs it into DIR: data.lmp, bond.table, model.lmp and in.lmp
+    /// with every coefficient, runnable as `lmp -in DIR/in.lmp` (docs/running.md).
+    #[arg(long, value_name = "DIR")]
+    pub lammps: Option<PathBuf>,
     /// No progress output.
     #[arg(long)]
     pub quiet: bool,

@@ -187,6 +187,7 @@ fn run(args: RunArgs) -> Result<()> {
     let keep: Vec<&std::ffi::OsStr> = args
         .lammps_data
         .iter()
+        .chain(args.lammps.iter())
         .filter(|p| p.parent() == Some(args.out.as_path()))
         .filter_map(|p| p.file_name())
         .collect();
@@ -195,6 +196,7 @@ fn run(args: RunArgs) -> Result<()> {
         dump_every: args.dump_every,
         dump_format: args.dump_format.into(),
         lammps_data: args.lammps_data.clone(),
+        lammps_dir: args.lammps.clone(),
         progress: !args.quiet,
         render: args.render,
         checkpoint: (args.checkpoint_every != Every::Off).then(|| CheckpointOptions {
