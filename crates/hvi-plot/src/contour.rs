@@ -248,7 +248,11 @@ fn drawn_field(p: &ContourPlot) -> Field {
 
 /// Draws the whole plot on `root` (a bitmap or an SVG): the map, its legend and subtitle, and
 /// the colour bar.
-fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, p: &ContourPlot) -> Result<()>
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    p: &ContourPlot,
+    max_tiles: usize,
+) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
@@ -257,7 +261,7 @@ where
     let frame = MapFrame::of(&field);
     let (main, bar) = root.split_horizontally(root.dim_in_pixel().0 - 150);
     let mut chart = map_axes(&main, p, &frame)?;
-    fill_field(&mut chart, &field, &frame)?;
+    fill_field(&mut chart, &field, &frame, max_tiles)?;
     iso_lines(&mut chart, &field, p, &frame)?;
     run_points(&mut chart, &field, p)?;
     region_box(&mut chart, p)?;
@@ -300,28 +304,45 @@ where
     Ok(chart)
 }
 
+/// Tiles per grid cell side at most (a coarse grid's cells are shaded smoothly).
+const TILES_PER_CELL: usize = 14;
+
+/// Tiles in a bitmap map at most, and in an SVG one (each tile is an SVG element: a model's
+/// 33 x 33 field at 14 x 14 tiles a cell made a 17 MB file).
+const MAX_TILES_PNG: usize = usize::MAX;
+const MAX_TILES_SVG: usize = 6000;
+
+/// Tiles per cell side for `cells` cells within `max_tiles` in all (at least one).
+fn tiles_per_cell(cells: usize, max_tiles: usize) -> usize {
+    let by_budget = ((max_tiles as f64 / cells.max(1) as f64).sqrt().floor() as usize).max(1);
+    by_budget.min(TILES_PER_CELL)
+}
+
 /// The filled field: each grid cell as tiles coloured by the interpolation at their centre
-/// (grey where it is missing).
+/// (grey where it is missing), at most `max_tiles` tiles in all.
 fn fill_field<DB: DrawingBackend>(
     chart: &mut MapChart<'_, DB>,
     field: &Field,
     frame: &MapFrame,
+    max_tiles: usize,
 ) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
-    const TILES: usize = 14;
+    let cells = field.x.len().saturating_sub(1) * field.y.len().saturating_sub(1);
+    let tiles_per = tiles_per_cell(cells, max_tiles);
     let mut tiles = Vec::new();
     for j in 0..field.y.len().saturating_sub(1) {
         for i in 0..field.x.len().saturating_sub(1) {
             let (cx0, cx1) = (field.x[i], field.x[i + 1]);
             let (cy0, cy1) = (field.y[j], field.y[j + 1]);
-            for a in 0..TILES {
-                for b in 0..TILES {
-                    let u0 = cx0 + (cx1 - cx0) * a as f64 / TILES as f64;
-                    let u1 = cx0 + (cx1 - cx0) * (a + 1) as f64 / TILES as f64;
-                    let v0 = cy0 + (cy1 - cy0) * b as f64 / TILES as f64;
-                    let v1 = cy0 + (cy1 - cy0) * (b + 1) as f64 / TILES as f64;
+            for a in 0..tiles_per {
+                for b in 0..tiles_per {
+                    let n = tiles_per as f64;
+                    let u0 = cx0 + (cx1 - cx0) * a as f64 / n;
+                    let u1 = cx0 + (cx1 - cx0) * (a + 1) as f64 / n;
+                    let v0 = cy0 + (cy1 - cy0) * b as f64 / n;
+                    let v1 = cy0 + (cy1 - cy0) * (b + 1) as f64 / n;
                     let color = field
                         .at(0.5 * (u0 + u1), 0.5 * (v0 + v1))
                         .map_or(RGBColor(200, 200, 200), |z| colormap(frame.norm(z)));
@@ -541,7 +562,7 @@ pub fn contour_plot(stem: &Path, p: &ContourPlot) -> Result<()> {
     let mut rgb = vec![255u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        draw(&root, p)?;
+        draw(&root, p, MAX_TILES_PNG)?;
     }
     // The extension is appended, not substituted: a stem may hold dots (`quantile-0.9_R`).
     let with = |ext: &str| {
@@ -554,7 +575,7 @@ pub fn contour_plot(stem: &Path, p: &ContourPlot) -> Result<()> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
-        draw(&root, p)?;
+        draw(&root, p, MAX_TILES_SVG)?;
     }
     write_atomic_bytes(&with("svg"), svg.as_bytes())?;
     Ok(())
@@ -628,5 +649,43 @@ mod tests {
         assert_eq!(&png[1..4], b"PNG");
         let svg = std::fs::read_to_string(dir.join("r.svg")).expect("svg");
         assert!(svg.starts_with("<svg"), "{}", &svg[..40.min(svg.len())]);
+    }
+
+    #[test]
+    fn a_fine_field_stays_a_small_svg() {
+        // A kriging model's 33 x 33 prediction: 17 MB of tiles before the budget.
+        let n = 33;
+        let axis = |lo: f64, hi: f64| -> Vec<f64> {
+            (0..n)
+                .map(|k| lo * (hi / lo).powf(k as f64 / (n - 1) as f64))
+                .collect()
+        };
+        let z = (0..n)
+            .map(|j| (0..n).map(|i| ((i * j) as f64).sqrt()).collect())
+            .collect();
+        let field = Field::new(axis(1e-4, 1.0), axis(1e5, 1e8), z).expect("field");
+        let p = ContourPlot {
+            title: "J".into(),
+            subtitle: "model".into(),
+            x_label: "eps".into(),
+            y_label: "kappa".into(),
+            x_log: true,
+            y_log: true,
+            field,
+            value_label: "J".into(),
+            levels: 6,
+            highlight: None,
+            extra_points: vec![],
+            samples: None,
+            markers: vec![],
+            region: None,
+        };
+        let dir = std::env::temp_dir().join(format!("hvi-plot-fine-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        contour_plot(&dir.join("j"), &p).expect("draws");
+        let svg = std::fs::metadata(dir.join("j.svg")).expect("svg").len();
+        assert!(svg < 2_000_000, "{svg} bytes");
+        assert_eq!(tiles_per_cell(6, MAX_TILES_SVG), TILES_PER_CELL);
+        assert_eq!(tiles_per_cell(32 * 32, MAX_TILES_SVG), 2);
     }
 }
