@@ -666,6 +666,44 @@ fn keys_lists_the_registry_the_docs_print_and_suspicious_values_warn() {
         "{text}"
     );
     assert!(!text.contains("scene.v0_m_s"), "{text}");
+    // In a terminal, links read as words and a path, not Markdown.
+    assert!(!text.contains("]("), "{text}");
+    assert!(text.contains("(docs/model-decisions.md#"), "{text}");
+    // An error words a range as keys does: "a number > 0", not "(0e0, inf)"; and a value
+    // that is not allowed draws its error, not a warning about what it would do.
+    let out = scratch("range-words");
+    let o = run(&out, &["--set", "run.end_time_s=-1", "--quiet"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("invalid value for `run.end_time_s`: -1 (allowed: a number > 0)"),
+        "{err}"
+    );
+    assert!(!err.contains("warning"), "{err}");
+    let o = bin()
+        .args(["keys", "run.end_time_s"])
+        .output()
+        .expect("runs");
+    assert!(String::from_utf8_lossy(&o.stdout).contains("a number > 0"));
+    // `plan` runs nothing: the flags of running are not its flags.
+    for flag in [
+        ["--threads", "2"],
+        ["--jobs", "2"],
+        ["--checkpoint-every", "off"],
+    ] {
+        let o = bin()
+            .arg("plan")
+            .arg(repo().join("studies/calibration.toml"))
+            .args(flag)
+            .output()
+            .expect("runs");
+        assert_eq!(o.status.code(), Some(2), "{flag:?}");
+        assert!(
+            String::from_utf8_lossy(&o.stderr)
+                .contains(&format!("unexpected argument '{}'", flag[0])),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
 
     // km/s typed as m/s: allowed, but it warns; so does a run too short for a cloud.
     let out = scratch("warn");

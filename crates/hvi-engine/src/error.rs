@@ -70,24 +70,42 @@ pub(crate) fn check_range(
     if value.is_finite() && above && below {
         return Ok(value);
     }
-    let lb = if open_lo { "(" } else { "[" };
-    let rb = if open_hi { ")" } else { "]" };
-    let fmt = |x: f64| {
-        if x.is_infinite() {
-            if x > 0.0 {
-                "inf".to_string()
-            } else {
-                "-inf".to_string()
-            }
-        } else {
-            format!("{x:e}")
-        }
-    };
     Err(EngineError::invalid(
         key,
         value,
-        format!("a finite number in {lb}{}, {}{rb}", fmt(lo), fmt(hi)),
+        describe_interval(lo, open_lo, hi, open_hi),
     ))
+}
+
+/// An interval in words, as errors and `hvi-study keys` print it: `a number > 0`,
+/// `a number >= 1`, `(0, 1e5]`.
+pub fn describe_interval(lo: f64, open_lo: bool, hi: f64, open_hi: bool) -> String {
+    if hi.is_infinite() && lo.is_finite() {
+        format!(
+            "a number {} {}",
+            if open_lo { ">" } else { ">=" },
+            bound(lo)
+        )
+    } else {
+        format!(
+            "{}{}, {}{}",
+            if open_lo { "(" } else { "[" },
+            bound(lo),
+            bound(hi),
+            if open_hi { ")" } else { "]" }
+        )
+    }
+}
+
+/// A bound as written: 0, 0.05, 1000, 1e5, 5e8, inf.
+fn bound(x: f64) -> String {
+    if x.is_infinite() {
+        if x > 0.0 { "inf" } else { "-inf" }.to_string()
+    } else if x != 0.0 && !(1e-3..1e4).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
 }
 
 /// A strictly positive finite number.

@@ -39,7 +39,7 @@ pub enum Command {
     /// Write the man pages (hvi-study.1 and one per subcommand) into a directory.
     Man(ManArgs),
     /// Validate a study and write its plan.json (every run's scene checked), running nothing.
-    Plan(StudyArgs),
+    Plan(PlanArgs),
     /// Run every run of a study (in parallel, finished runs reused) and write results.csv/json.
     Sweep(StudyArgs),
     /// Calibrate: the study's grid scored against experiments_data, then a surrogate search
@@ -152,6 +152,45 @@ impl StudyArgs {
     /// Execution options from the flags.
     pub fn exec_options(&self) -> ExecOptions {
         self.options().exec_options()
+    }
+}
+
+/// `hvi-study plan` arguments: the study's, without the flags of running (it runs nothing).
+#[derive(Args, Debug, Clone)]
+pub struct PlanArgs {
+    /// Study file (TOML), e.g. studies/calibration.toml.
+    pub study: PathBuf,
+    /// Resolution tier, as named in the study's `[tiers]` (default: its default_tier, `quick`).
+    #[arg(long)]
+    pub tier: Option<String>,
+    /// Override the tier's particle count (resolution.particles).
+    #[arg(long, value_name = "N")]
+    pub particles: Option<f64>,
+    /// Override a scene key in every run: section.key=value (not an axis key).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// Output directory (default: `runs/studies/<study>/<tier>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// No progress output.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+impl PlanArgs {
+    /// The plain options these flags give (no threads: nothing runs).
+    pub fn options(&self) -> StudyOptions {
+        StudyOptions {
+            study: self.study.clone(),
+            tier: self.tier.clone(),
+            particles: self.particles,
+            sets: self.sets.clone(),
+            out: self.out.clone(),
+            threads: None,
+            jobs: None,
+            checkpoint_every: Every::Off,
+            quiet: self.quiet,
+        }
     }
 }
 

@@ -18,7 +18,7 @@ use crate::cli::{
 pub fn dispatch(command: Command) -> Result<()> {
     // The checkpoint interval of every run a study store computes in this process.
     let every = match &command {
-        Command::Plan(a) | Command::Sweep(a) => Some(a.checkpoint_every),
+        Command::Sweep(a) => Some(a.checkpoint_every),
         Command::Calibrate(a) => Some(a.study.checkpoint_every),
         Command::ValidityMap(a) => Some(a.study.checkpoint_every),
         Command::Submit(a) => Some(a.study.checkpoint_every),
@@ -155,6 +155,7 @@ fn keys(args: &KeysArgs) {
         print!("{}", markdown_of(keys));
         return;
     }
+    let plain = |t: &str| plain_links(&t.replace("  ", " "));
     let width = keys.iter().map(|k| k.name.len()).max().unwrap_or(0);
     for k in keys {
         println!(
@@ -163,14 +164,50 @@ fn keys(args: &KeysArgs) {
             k.unit(),
             k.allowed.describe(),
             if k.default.is_empty() {
-                "none"
+                "none".to_string()
             } else {
-                k.default
+                plain(k.default)
             },
             "",
-            k.meaning.replace("  ", " "),
+            plain(k.meaning),
         );
     }
+}
+
+/// Markdown links as a terminal shows them: `[words](fidelity.md#x)` becomes
+/// `words (docs/fidelity.md#x)` (the meanings link within docs/).
+fn plain_links(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(open) = rest.find('[') {
+        let after = &rest[open + 1..];
+        let link = after.find("](").and_then(|close| {
+            let target = &after[close + 2..];
+            target
+                .find(')')
+                .map(|end| (&after[..close], &target[..end], close + 2 + end + 1))
+        });
+        match link {
+            Some((words, target, used)) => {
+                out.push_str(&rest[..open]);
+                let target = match target.strip_prefix("../") {
+                    Some(t) => t.to_string(),
+                    None if target.starts_with("http") || target.starts_with('#') => {
+                        target.to_string()
+                    }
+                    None => format!("docs/{target}"),
+                };
+                out.push_str(&format!("{words} ({target})"));
+                rest = &after[used..];
+            }
+            None => {
+                out.push_str(&rest[..=open]);
+                rest = after;
+            }
+        }
+    }
+    out.push_str(rest);
+    out
 }
 
 /// `hvi-study run`.
@@ -299,5 +336,22 @@ fn run_unit(args: &RunUnitArgs) -> Result<()> {
             "run {} failed (recorded in its directory)",
             args.index
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::plain_links;
+
+    #[test]
+    fn markdown_links_read_plainly_in_a_terminal() {
+        assert_eq!(
+            plain_links("why 0.9: [model decisions](model-decisions.md#readings); [x] stays"),
+            "why 0.9: model decisions (docs/model-decisions.md#readings); [x] stays"
+        );
+        assert_eq!(
+            plain_links("see [the data](../experiments_data/README.md)"),
+            "see the data (experiments_data/README.md)"
+        );
     }
 }

@@ -35,30 +35,9 @@ impl Allowed {
                 lo_open,
                 hi,
                 hi_open,
-            } => {
-                if hi.is_infinite() {
-                    format!("a number {} {}", if lo_open { ">" } else { ">=" }, num(lo))
-                } else {
-                    format!(
-                        "{}{}, {}{}",
-                        if lo_open { "(" } else { "[" },
-                        num(lo),
-                        num(hi),
-                        if hi_open { ")" } else { "]" }
-                    )
-                }
-            }
+            } => crate::error::describe_interval(lo, lo_open, hi, hi_open),
             Allowed::Text(t) => t.to_string(),
         }
-    }
-}
-
-/// A bound as written: 0.05, 1000, 1e5, 5e8.
-fn num(x: f64) -> String {
-    if x != 0.0 && !(1e-3..1e4).contains(&x.abs()) {
-        format!("{x:e}")
-    } else {
-        format!("{x}")
     }
 }
 

@@ -174,7 +174,12 @@ impl SceneSpec {
         } = self.scene
         {
             let through = (diameter_m * t_over_d) / v0;
-            if self.analysis.cloud && v0 > 0.0 && self.run.end_time_s < through {
+            // A time that is not allowed at all is an error of its own, not this warning.
+            if self.analysis.cloud
+                && v0 > 0.0
+                && self.run.end_time_s > 0.0
+                && self.run.end_time_s < through
+            {
                 w.push(format!(
                     "run.end_time_s = {:.3e} s is shorter than the {:.3e} s the sphere needs to \
                      cross the plate at v0 (t / v0): no debris cloud forms, so the cloud's \
