@@ -12,8 +12,8 @@ use plotters::prelude::*;
 use super::common::{thousands, PixelRect, SceneInfo};
 use crate::save::write_png;
 use crate::theme::{
-    fonts, line_key, series_legend, text_style, Area, ThemedAxes, AXIS_TEXT_LARGE, FAMILY, GRID,
-    GUIDE, IMPACTOR, MEASURE, PLATE, RUN_LEGEND,
+    dashed_key, fonts, line_key, series_legend, text_style, Area, ThemedAxes, AXIS_TEXT_LARGE,
+    FAMILY, GRID, GUIDE, IMPACTOR, MEASURE, PLATE, RUN_LEGEND,
 };
 
 /// One bin of the histogram: diameters [lo, hi), mm.
@@ -217,7 +217,7 @@ fn histogram_series(
             ShapeStyle::from(&GUIDE).stroke_width(2),
         ))?
         .label(format!("one particle, d = {one:.3} mm (resolution limit)"))
-        .legend(|(x, y)| line_key(x, y, 20, GUIDE.stroke_width(2)));
+        .legend(|(x, y)| dashed_key(x, y, GUIDE));
     Ok(())
 }
 
@@ -392,7 +392,7 @@ fn track_front(
                 ShapeStyle::from(&BLACK).stroke_width(1),
             ))?
             .label(format!("va / v0 = {r:.3} (front at the two dashed times)"))
-            .legend(|(x, y)| line_key(x, y, 20, BLACK.stroke_width(1)));
+            .legend(|(x, y)| dashed_key(x, y, BLACK));
     }
     Ok(())
 }
