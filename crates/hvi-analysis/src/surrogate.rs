@@ -282,8 +282,11 @@ impl Surrogate {
         })
     }
 
-    /// Predicted mean and standard deviation of the objective at each point (with a prior:
-    /// `rho` times its mean plus the difference's, the variances added likewise).
+    /// Predicted mean and standard deviation of the objective at each point. With a prior:
+    /// `rho` times its mean plus the difference's mean, and the difference's deviation alone
+    /// (the coarse model is the fine one's known trend, as a mean function is; adding its own
+    /// deviation kept every prediction's deviation above the coarse level's noise, so the
+    /// expected improvement never fell below the fine noise and a search never converged).
     pub fn predict(&self, points: &[Vec<f64>]) -> Result<Vec<(f64, f64)>> {
         let own = self.predict_own(points)?;
         let Some((prior, rho)) = &self.prior else {
@@ -293,7 +296,7 @@ impl Surrogate {
             .predict(points)?
             .into_iter()
             .zip(own)
-            .map(|((pm, ps), (m, s))| (rho * pm + m, (s * s + rho * rho * ps * ps).sqrt()))
+            .map(|((pm, _), (m, s))| (rho * pm + m, s))
             .collect())
     }
 
