@@ -187,9 +187,7 @@ pub fn ladder_plot(path: &Path, plot: &LadderPlot) -> Result<()> {
                         GREY.stroke_width(2),
                     )))?
                     .label(name.clone())
-                    .legend(|(px, py)| {
-                        PathElement::new(vec![(px, py), (px + 24, py)], GREY.stroke_width(2))
-                    });
+                    .legend(|(px, py)| crate::theme::dashed_key(px, py, GREY));
             }
             for &(n, v, interval, interior) in &panel.levels {
                 let xn = n.log10();
