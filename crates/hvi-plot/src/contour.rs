@@ -369,11 +369,33 @@ where
     let line_color = RGBColor(40, 40, 40);
     for k in 1..=p.levels {
         let level = frame.zmin + frame.zspan * k as f64 / (p.levels + 1) as f64;
-        for line in field.contour(level) {
+        let lines = field.contour(level);
+        // The level's value at the middle of its longest line, as the colour bar writes it.
+        let label_at = lines
+            .iter()
+            .max_by_key(|l| l.len())
+            .and_then(|l| l.get(l.len() / 2).copied());
+        for line in lines {
             chart.draw_series(std::iter::once(PathElement::new(
                 line,
                 line_color.mix(0.55).stroke_width(1),
             )))?;
+        }
+        if let Some(at) = label_at {
+            // On a pale box, so that it reads on the dark and the light end of the colours.
+            let text = tick(level, false);
+            let half = 4 * text.chars().count() as i32 + 3;
+            chart.draw_series(std::iter::once(
+                EmptyElement::at(at)
+                    + Rectangle::new([(-half, -9), (half, 9)], WHITE.mix(0.75).filled())
+                    + Text::new(
+                        text,
+                        (0, 0),
+                        text_style(14.0)
+                            .color(&line_color)
+                            .pos(Pos::new(HPos::Center, VPos::Center)),
+                    ),
+            ))?;
         }
     }
     if let Some((level, label)) = &p.highlight {
@@ -649,6 +671,13 @@ mod tests {
         assert_eq!(&png[1..4], b"PNG");
         let svg = std::fs::read_to_string(dir.join("r.svg")).expect("svg");
         assert!(svg.starts_with("<svg"), "{}", &svg[..40.min(svg.len())]);
+        // The iso-lines carry their values (levels at 1/6, 2/6, ... of the range 1-1.8).
+        for label in ["1.133", "1.267", "1.4"] {
+            assert!(
+                svg.contains(&format!("\n{label}\n</text>")),
+                "no label {label}"
+            );
+        }
     }
 
     #[test]
