@@ -13,7 +13,7 @@
 //!   pick goes elsewhere and a whole batch can run at once.
 //! - The stopping rule: converged when the largest expected improvement left is below the
 //!   noise of the objective (its standard error); more runs could not tell a better point from
-//!   scatter.
+//!   scatter. On a prior, the model of the observations alone must agree ([`step`]).
 //! - The confidence region: every lattice point whose predicted objective is within
 //!   [`REGION_NOISE_MULTIPLE`] noise standard errors of the best prediction, reported as one
 //!   interval per parameter.
@@ -456,6 +456,72 @@ pub fn converged(max_expected_improvement: f64, noise_sd: f64) -> bool {
     max_expected_improvement < noise_sd
 }
 
+/// The next step of a search: the batch to run, or the stop.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Step {
+    /// The batch to run (empty when the search stops or no candidate is left).
+    pub proposal: Proposal,
+    /// Whether the stopping rule holds.
+    pub converged: bool,
+    /// The largest expected improvement of the search's model (on its prior when it has one).
+    pub expected_improvement: f64,
+    /// On a prior, once its model sees nothing left to gain: the largest expected improvement
+    /// of the model of the observations alone, which must see nothing either for the search
+    /// to stop (the batch is then that model's).
+    pub own_expected_improvement: Option<f64>,
+}
+
+/// The search's next step from the observations so far: a batch of `q` points by expected
+/// improvement ([`propose`]) or the stop ([`converged`]).
+///
+/// On a prior the stop needs two opinions. A prior's model is confident wherever the coarse
+/// landscape was sampled, and where the fine landscape has a basin the coarse one lacks it
+/// predicts no gain: its expected improvement can fall below the noise after a few points in
+/// the wrong place. So once it does, the model of the observations alone (no prior) is asked
+/// too: the search stops when it also sees nothing left; otherwise its batch runs. The prior
+/// steers where the search looks; it cannot end the search by itself.
+pub fn step(
+    space: &SearchBox,
+    observations: &[Observation],
+    noise_sd: f64,
+    q: usize,
+    prior: Option<&Prior>,
+) -> Result<Step> {
+    let proposal = propose(space, observations, noise_sd, q, prior)?;
+    let expected_improvement = proposal.max_expected_improvement;
+    if !converged(expected_improvement, noise_sd) {
+        return Ok(Step {
+            proposal,
+            converged: false,
+            expected_improvement,
+            own_expected_improvement: None,
+        });
+    }
+    let stop = |proposal: Proposal, own| Step {
+        proposal: Proposal {
+            points: Vec::new(),
+            ..proposal
+        },
+        converged: true,
+        expected_improvement,
+        own_expected_improvement: own,
+    };
+    if prior.is_none() {
+        return Ok(stop(proposal, None));
+    }
+    let own = propose(space, observations, noise_sd, q, None)?;
+    let own_ei = own.max_expected_improvement;
+    if converged(own_ei, noise_sd) {
+        return Ok(stop(proposal, Some(own_ei)));
+    }
+    Ok(Step {
+        proposal: own,
+        converged: false,
+        expected_improvement,
+        own_expected_improvement: Some(own_ei),
+    })
+}
+
 /// The calibrated point and its confidence region, from the surrogate.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Region {
@@ -591,11 +657,11 @@ mod tests {
             }
         }
         for _ in 0..max_batches {
-            let p = propose(space, &obs, noise_sd, q, prior).expect("proposal");
-            if converged(p.max_expected_improvement, noise_sd) || p.points.is_empty() {
+            let s = step(space, &obs, noise_sd, q, prior).expect("step");
+            if s.converged || s.proposal.points.is_empty() {
                 return (obs, true);
             }
-            for x in p.points {
+            for x in s.proposal.points {
                 let y = f(&x) + noise_sd * noise.normal();
                 obs.push(Observation { x, y });
             }
@@ -641,6 +707,83 @@ mod tests {
         let model = Surrogate::fit_on(&space, &on_prior, noise, Some(&prior)).expect("model");
         let rho = model.prior_weight().expect("a prior");
         assert!((0.5..1.2).contains(&rho), "rho {rho}");
+    }
+
+    #[test]
+    fn a_confident_prior_cannot_stop_a_search_short_of_a_basin_it_lacks() {
+        // The fine landscape is the coarse one with a second, deeper basin at (0, 0) that
+        // the coarse resolution does not have (as a fragment-size score that only a finer
+        // lattice resolves). The search starts as a ladder level does: the box's corners and
+        // the coarse answer.
+        let space = SearchBox::new(vec![(-1.0, 1.0), (-1.0, 1.0)]).expect("box");
+        let coarse = |x: &[f64]| (x[0] + 0.5).powi(2) + (x[1] + 0.5).powi(2);
+        let fine = |x: &[f64]| coarse(x) - (-(x[0].powi(2) + x[1].powi(2)) / 0.3).exp();
+        let noise = 0.02;
+        let mut coarse_obs = Vec::new();
+        for i in 0..7 {
+            for j in 0..7 {
+                let x = vec![-1.0 + i as f64 / 3.0, -1.0 + j as f64 / 3.0];
+                coarse_obs.push(Observation { y: coarse(&x), x });
+            }
+        }
+        let prior = Prior::fit(&coarse_obs, noise).expect("prior");
+        let best = |obs: &[Observation]| obs.iter().map(|o| fine(&o.x)).fold(f64::MAX, f64::min);
+        // The prior's model alone as the judge: it stops in the coarse basin.
+        let mut obs: Vec<Observation> = [
+            (-1.0, -1.0),
+            (-1.0, 1.0),
+            (1.0, -1.0),
+            (1.0, 1.0),
+            (-0.5, -0.5),
+        ]
+        .iter()
+        .map(|&(a, b)| Observation {
+            x: vec![a, b],
+            y: fine(&[a, b]),
+        })
+        .collect();
+        let start = obs.clone();
+        let mut stopped = false;
+        for _ in 0..20 {
+            let p = propose(&space, &obs, noise, 2, Some(&prior)).expect("proposal");
+            if converged(p.max_expected_improvement, noise) || p.points.is_empty() {
+                stopped = true;
+                break;
+            }
+            for x in p.points {
+                obs.push(Observation { y: fine(&x), x });
+            }
+        }
+        assert!(stopped, "the prior-only rule never stopped");
+        assert!(
+            best(&obs) > -0.3,
+            "the prior-only rule found the hidden basin ({}): the case does not test the rule",
+            best(&obs)
+        );
+        // Both models as judges: the search goes on until it finds the deeper basin (its
+        // minimum is -0.62).
+        let mut obs = start;
+        let mut own_batches = 0;
+        let mut stopped = false;
+        for _ in 0..20 {
+            let s = step(&space, &obs, noise, 2, Some(&prior)).expect("step");
+            if s.converged || s.proposal.points.is_empty() {
+                stopped = s.converged;
+                break;
+            }
+            own_batches += usize::from(s.own_expected_improvement.is_some());
+            for x in s.proposal.points {
+                obs.push(Observation { y: fine(&x), x });
+            }
+        }
+        assert!(stopped, "the two-opinion rule did not converge");
+        assert!(own_batches > 0, "the model without the prior never steered");
+        assert!(
+            best(&obs) < -0.55,
+            "the two-opinion rule stopped at {} ({} evaluations)",
+            best(&obs),
+            obs.len()
+        );
     }
 
     #[test]

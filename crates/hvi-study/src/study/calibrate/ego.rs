@@ -10,8 +10,9 @@
 //!    `calibrate.batch` points by expected improvement; they run together (each at every
 //!    seed) through the store and are scored on their seed-mean observables.
 //! 3. The search stops converged when the largest expected improvement left is below the
-//!    noise, or not converged after `calibrate.max_batches` batches (or when no candidate is
-//!    left).
+//!    noise (on a coarser level's prior: under the model on the prior and under the model of
+//!    the level's own points alone, [`hvi_analysis::surrogate::step`]), or not converged after
+//!    `calibrate.max_batches` batches (or when no candidate is left).
 //! 4. The answer: the evaluated point with the lowest *predicted* objective (a single lucky
 //!    seed does not win), the confidence region of the minimum as one interval per axis, and
 //!    each target's observable at that point over the seeds.
@@ -26,7 +27,7 @@ use anyhow::{anyhow, Result};
 use hvi_analysis::observable::{Observable, Observables};
 use hvi_analysis::score::objective;
 use hvi_analysis::surrogate::{
-    self, converged, propose, seed_mean_noise, Observation, Prior, SearchBox, Surrogate,
+    self, seed_mean_noise, step, Observation, Prior, SearchBox, Surrogate,
 };
 use hvi_run::store::{Job, Record, RunStatus};
 
@@ -145,17 +146,39 @@ pub(super) fn search(
                 obs.len()
             ));
         }
-        let proposal = propose(&space, &obs, noise, settings.batch, settings.prior.as_ref())?;
-        let ei = proposal.max_expected_improvement;
+        let next = step(&space, &obs, noise, settings.batch, settings.prior.as_ref())?;
+        let ei = next.expected_improvement;
+        let own = match next.own_expected_improvement {
+            Some(own) => format!(
+                ", without the prior {own:.4}{}",
+                if next.converged {
+                    ""
+                } else {
+                    " (the batch is that model's)"
+                }
+            ),
+            None => String::new(),
+        };
         if problem.progress {
             eprintln!(
-                "ego: {} points scored, noise {noise:.4}, largest expected improvement {ei:.4}",
+                "ego: {} points scored, noise {noise:.4}, largest expected improvement {ei:.4}{own}",
                 obs.len()
             );
         }
-        if converged(ei, noise) {
-            break (true, format!("converged after {batch} batch(es): the largest expected improvement left ({ei:.3e}) is below the noise of log10 J ({noise:.3e})"), noise, noise_source);
+        if next.converged {
+            let why = match next.own_expected_improvement {
+                Some(own) => format!("the largest expected improvement left is below the noise of log10 J ({noise:.3e}) on the prior ({ei:.3e}) and without it ({own:.3e})"),
+                None => format!("the largest expected improvement left ({ei:.3e}) is below the noise of log10 J ({noise:.3e})"),
+            };
+            break (
+                true,
+                format!("converged after {batch} batch(es): {why}"),
+                noise,
+                noise_source,
+            );
         }
+        let proposal = next.proposal;
+        let ei = proposal.max_expected_improvement;
         if proposal.points.is_empty() {
             break (false, format!("not converged: no candidate left after {batch} batch(es) (largest expected improvement {ei:.3e}, noise {noise:.3e})"), noise, noise_source);
         }
