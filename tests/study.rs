@@ -1209,6 +1209,50 @@ fn a_resolution_ladder_steers_each_level_by_the_last_and_resumes_without_running
         let c = calibration_json(&out.join(format!("n{n}")));
         assert_eq!(c["best"]["params"], lv["best"], "level {n}");
         assert!(num(&lv["runs"]) > 0.0);
+        // The level's points that meet every target, counted again here: each term within
+        // its tolerance, over the distinct points scored at the answer's seeds.
+        let met = &lv["targets_met"];
+        assert_eq!(met, &c["targets_met"], "level {n}");
+        let seeds = &c["best"]["seeds"];
+        let mut scored: Vec<&serde_json::Value> = Vec::new();
+        for e in c["refinement"]
+            .as_array()
+            .expect("refinement")
+            .iter()
+            .chain([&c["paper"]])
+        {
+            if &e["seeds"] == seeds
+                && !e["score"].is_null()
+                && !scored.iter().any(|p| p["params"] == e["params"])
+            {
+                scored.push(e);
+            }
+        }
+        let meeting: Vec<&&serde_json::Value> = scored
+            .iter()
+            .filter(|e| {
+                e["score"]["terms"]
+                    .as_array()
+                    .expect("terms")
+                    .iter()
+                    .all(|t| num(&t["term"]) <= 1.0)
+            })
+            .collect();
+        assert_eq!(
+            num(&met["scored"]) as usize,
+            scored.len(),
+            "level {n}: {met}"
+        );
+        assert_eq!(
+            num(&met["points"]) as usize,
+            meeting.len(),
+            "level {n}: {met}"
+        );
+        if let Some(e) = meeting.first() {
+            let v = num(&e["params"]["material.eps_j"]);
+            let span = &met["spans"]["material.eps_j"];
+            assert!(num(&span[0]) <= v && v <= num(&span[1]), "level {n}: {met}");
+        }
     }
     for f in ["ladder.md", "ladder.png"] {
         assert!(out.join(f).is_file(), "{f}");

@@ -1,6 +1,7 @@
 //! The resolution ladder's figure (`ladder.png`): each calibrated parameter against the
 //! particle count, its confidence interval as a bar, and the objective at each level's answer
-//! (with the check run at a finer resolution, if any). One panel per parameter and one for the
+//! (with the check run at a finer resolution, if any), and beside each interval a pale band
+//! where the level's runs meet every target. One panel per parameter and one for the
 //! objective, side by side; log particle axis. Shows numbers, derives none.
 
 use std::path::Path;
@@ -25,6 +26,9 @@ pub struct LadderPanel {
     pub log: bool,
     /// Per level, its mark.
     pub levels: Vec<LevelMark>,
+    /// Per level, (particles, (lowest, highest)): where the level's runs meet every target
+    /// (a pale band beside the interval; no entry: no run there meets them).
+    pub met: Vec<(f64, (f64, f64))>,
     /// A reference value drawn across (the paper's fit), with its name.
     pub reference: Option<(f64, String)>,
 }
@@ -49,6 +53,7 @@ pub struct LadderPlot {
 const BLUE: RGBColor = RGBColor(31, 96, 196);
 const RED: RGBColor = RGBColor(200, 30, 30);
 const GREY: RGBColor = RGBColor(120, 120, 120);
+const GREEN: RGBColor = RGBColor(40, 160, 80);
 
 type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<KeyedAxis, KeyedAxis>>;
 
@@ -173,6 +178,7 @@ pub fn ladder_plot(path: &Path, plot: &LadderPlot) -> Result<()> {
                     let (a, b) = i.unwrap_or((*v, *v));
                     [*v, a, b]
                 })
+                .chain(panel.met.iter().flat_map(|(_, (a, b))| [*a, *b]))
                 .chain(panel.reference.as_ref().map(|r| r.0))
                 .map(|v| coord(v, panel.log));
             let y = span(ys).unwrap_or((0.0, 1.0));
@@ -188,6 +194,26 @@ pub fn ladder_plot(path: &Path, plot: &LadderPlot) -> Result<()> {
                     )))?
                     .label(name.clone())
                     .legend(|(px, py)| crate::theme::dashed_key(px, py, GREY));
+            }
+            let half = 0.018 * (x.1 - x.0);
+            for (k, &(n, (a, b))) in panel.met.iter().enumerate() {
+                // A band right of the level's mark, at least a few pixels tall.
+                let xn = n.log10() + 2.2 * half;
+                let (a, b) = (coord(a, panel.log), coord(b, panel.log));
+                let pad = 0.004 * (y.1 - y.0);
+                let band = chart.draw_series(std::iter::once(Rectangle::new(
+                    [(xn - half, a - pad), (xn + half, b + pad)],
+                    GREEN.mix(0.45).filled(),
+                )))?;
+                if k == 0 {
+                    band.label("where the runs meet every target")
+                        .legend(|(px, py)| {
+                            Rectangle::new(
+                                [(px + 6, py - 7), (px + 18, py + 7)],
+                                GREEN.mix(0.45).filled(),
+                            )
+                        });
+                }
             }
             for &(n, v, interval, interior) in &panel.levels {
                 let xn = n.log10();
@@ -313,6 +339,7 @@ mod tests {
                     (2e4, 0.03, Some((0.01, 0.1)), true),
                     (8e4, 0.02, None, false),
                 ],
+                met: vec![(2e4, (0.02, 0.08)), (8e4, (0.02, 0.02))],
                 reference: Some((0.01, "the paper".into())),
             }],
             objective: vec![(2e4, 0.5), (8e4, 0.3)],

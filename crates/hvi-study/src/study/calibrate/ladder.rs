@@ -32,7 +32,7 @@ use serde::{Deserialize, Serialize};
 
 use super::config::{CalibrateConfig, Method};
 use super::problem::{fixed_overrides, refined_axes, Dim, Stage, PAPER_BEST};
-use super::result::{fmt_bounds, fmt_value, CalibrationResult, Edge};
+use super::result::{fmt_bounds, fmt_value, CalibrationResult, Edge, TargetsMet};
 use super::{calibrate_plan, ego, runner_of, CalibrateOptions, Coarse};
 
 /// What a ladder takes beside the calibration's options.
@@ -77,6 +77,9 @@ pub struct LadderLevel {
     pub runs_made: usize,
     /// Wall time of this invocation's level, s.
     pub wall_seconds: f64,
+    /// The points of the level that meet every target, and their spans.
+    #[serde(default)]
+    pub targets_met: Option<TargetsMet>,
 }
 
 /// The last answer run at a finer resolution.
@@ -263,6 +266,7 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
             run_core_seconds: core,
             runs_made: r.runs_made,
             wall_seconds: t_level.elapsed().as_secs_f64(),
+            targets_met: r.targets_met.clone(),
         });
         // The next level's prior: this level's points, on this level's own prior.
         let below = level_args.coarse.take();
@@ -607,6 +611,37 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> (bool, BTreeMap<String, f64>
             )
         })
         .collect();
+    // How far along the valley each level's runs meet the targets (no model): read beside
+    // the intervals, which are each search's around its own minimum.
+    let met_words = dims
+        .iter()
+        .filter_map(|dim| {
+            let span = |l: &LadderLevel| {
+                l.targets_met
+                    .as_ref()
+                    .and_then(|m| m.spans.get(&dim.0).copied())
+            };
+            let (sa, sb) = (span(a)?, span(b)?);
+            let meet = !(sa.1 < sb.0 || sb.1 < sa.0);
+            Some(format!(
+                "{} {} to {} and {} to {} ({})",
+                dim.0,
+                fmt_value(sa.0),
+                fmt_value(sa.1),
+                fmt_value(sb.0),
+                fmt_value(sb.1),
+                if meet { "overlapping" } else { "apart" }
+            ))
+        })
+        .collect::<Vec<_>>();
+    let met_words = if met_words.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; the points that meet every target span {}",
+            met_words.join(", ")
+        )
+    };
     let trend_words = trend
         .iter()
         .map(|(k, v)| {
@@ -633,7 +668,7 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> (bool, BTreeMap<String, f64>
     let converged = apart.is_empty() && edges.is_empty();
     let verdict = if converged {
         format!(
-            "CONVERGED IN N: the intervals at {} and {} particles overlap on every parameter ({trend_words}){warning}",
+            "CONVERGED IN N: the intervals at {} and {} particles overlap on every parameter ({trend_words}){met_words}{warning}",
             fmt_value(a.particles),
             fmt_value(b.particles)
         )
@@ -641,7 +676,7 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> (bool, BTreeMap<String, f64>
         let mut why = apart;
         why.extend(edges);
         format!(
-            "NOT CONVERGED IN N: {}; {trend_words}{warning}",
+            "NOT CONVERGED IN N: {}; {trend_words}{met_words}{warning}",
             why.join("; ")
         )
     };
@@ -708,10 +743,10 @@ fn ladder_md(r: &LadderResult, dims: &[Dim]) -> String {
         r.study, r.tier, r.seeds, r.verdict
     );
     s.push_str("![each parameter and J against N](ladder.png)\n\n");
-    s.push_str("| particles | first box | from | answer [interval] | J | paper's fit J | converged | runs | core-s |\n|---|---|---|---|---|---|---|---|---|\n");
+    s.push_str("| particles | first box | from | answer [interval] | J | paper's fit J | converged | where the runs meet every target | runs | core-s |\n|---|---|---|---|---|---|---|---|---|---|\n");
     for l in &r.levels {
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {:.4} | {:.4} | {} | {} | {:.0} |\n",
+            "| {} | {} | {} | {} | {:.4} | {:.4} | {} | {} | {} | {:.0} |\n",
             l.particles_run
                 .map_or(fmt_value(l.particles), |p| format!("{p:.0}")),
             fmt_bounds(&l.first_box),
@@ -733,6 +768,9 @@ fn ladder_md(r: &LadderResult, dims: &[Dim]) -> String {
                         .join("; ")
                 )
             },
+            l.targets_met
+                .as_ref()
+                .map_or("n/a".to_string(), TargetsMet::describe),
             l.runs,
             l.run_core_seconds
         ));
@@ -790,6 +828,14 @@ fn draw(path: &Path, r: &LadderResult, dims: &[Dim]) -> Result<()> {
                     })
                 })
                 .collect(),
+            met: r
+                .levels
+                .iter()
+                .filter_map(|l| {
+                    let span = l.targets_met.as_ref()?.spans.get(&d.0)?;
+                    Some((l.particles_run.unwrap_or(l.particles), *span))
+                })
+                .collect(),
             reference: PAPER_BEST
                 .iter()
                 .find(|(k, _)| *k == d.0)
@@ -840,6 +886,7 @@ mod tests {
             run_core_seconds: 0.0,
             runs_made: 0,
             wall_seconds: 0.0,
+            targets_met: None,
         }
     }
 

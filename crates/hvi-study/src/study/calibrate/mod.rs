@@ -29,7 +29,7 @@ use hvi_run::store::{Record, Store};
 pub use config::{CalibrateConfig, Method};
 pub use grid::score_table;
 pub use report::{report_md, report_text};
-pub use result::{CalibrationResult, Evaluation, ParamRegion, Spread, Surface};
+pub use result::{CalibrationResult, Evaluation, ParamRegion, Spread, Surface, TargetsMet};
 
 use super::options::StudyOptions;
 use extend::{
@@ -219,6 +219,10 @@ pub(crate) fn calibrate_plan(
         .filter_map(|(k, v)| paper_params.get(k).map(|p| (k.clone(), v / p)))
         .collect();
     let label = label_of(&cfg, args, method, &search, &first_box)?;
+    let targets_met = TargetsMet::of(
+        search.evaluations.iter().chain(std::iter::once(&paper)),
+        &best.seeds,
+    );
     let result = CalibrationResult {
         study: plan.study.clone(),
         label,
@@ -255,6 +259,7 @@ pub(crate) fn calibrate_plan(
                 points: c.points.len(),
                 weight: search.prior_weight,
             }),
+        targets_met,
     };
     write_outputs(out, &result, &grid.evaluations)?;
     draw_figures(out, plan, &grid.records, &result, &cfg.log_axes, progress);

@@ -105,6 +105,9 @@ pub fn report_text(r: &CalibrationResult) -> String {
     for line in interval_lines(r) {
         s.push_str(&format!("  interval:    {line}\n"));
     }
+    if let Some(m) = &r.targets_met {
+        s.push_str(&format!("  targets met: {}\n", m.describe()));
+    }
     if let Some(noise) = r.noise {
         s.push_str(&format!(
             "  noise:       {noise:.4} in log10 J ({})\n",
@@ -174,6 +177,12 @@ pub fn report_md(r: &CalibrationResult) -> String {
             } else {
                 ""
             }
+        ));
+    }
+    if let Some(m) = &r.targets_met {
+        s.push_str(&format!(
+            "\nWhere the runs meet every target (each term within its tolerance at the seed mean, no model): {}. The interval above is the model's, around one minimum; this span is how far along the valley the points looked at meet the targets.\n",
+            m.describe()
         ));
     }
     if !r.boxes.is_empty() {

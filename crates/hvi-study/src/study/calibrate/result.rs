@@ -110,6 +110,101 @@ pub struct CalibrationResult {
     /// The coarser resolution the surrogate search modelled the difference from (None: none).
     #[serde(default)]
     pub prior: Option<PriorUse>,
+    /// The evaluated points that meet every target, at the answer's seeds (None: none scored).
+    #[serde(default)]
+    pub targets_met: Option<TargetsMet>,
+}
+
+/// The evaluated points that meet every target: each target's term within its tolerance
+/// (term <= 1) at the seed-mean observables, among the points scored at the answer's seeds.
+/// It reads the runs alone, no model: how far along a valley the targets are met where the
+/// calibration has looked, which a confidence region (the model's, around one minimum)
+/// does not say.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TargetsMet {
+    /// Points that meet every target.
+    pub points: usize,
+    /// Distinct points scored at the answer's seeds.
+    pub scored: usize,
+    /// Per parameter that varies among the scored points, the lowest and highest value among
+    /// those that meet every target.
+    pub spans: BTreeMap<String, (f64, f64)>,
+}
+
+impl TargetsMet {
+    /// From the evaluations (each point counted once) scored at `seeds`; None when none is.
+    pub fn of<'a>(
+        evaluations: impl IntoIterator<Item = &'a Evaluation>,
+        seeds: &[u64],
+    ) -> Option<TargetsMet> {
+        let mut scored: Vec<&Evaluation> = Vec::new();
+        for e in evaluations {
+            if e.seeds == seeds && e.score.is_some() && !scored.iter().any(|s| s.params == e.params)
+            {
+                scored.push(e);
+            }
+        }
+        if scored.is_empty() {
+            return None;
+        }
+        let meets = |e: &Evaluation| {
+            e.score
+                .as_ref()
+                .is_some_and(|s| s.terms.iter().all(|t| t.term <= 1.0))
+        };
+        // The parameters that vary among the scored points (a key fixed by the study is no
+        // span), and that every point names.
+        let keys: Vec<&String> = scored[0]
+            .params
+            .keys()
+            .filter(|k| scored.iter().all(|e| e.params.contains_key(*k)))
+            .filter(|k| {
+                let v = scored[0].params[*k];
+                scored.iter().any(|e| e.params[*k] != v)
+            })
+            .collect();
+        let met: Vec<&&Evaluation> = scored.iter().filter(|e| meets(e)).collect();
+        let spans = keys
+            .into_iter()
+            .filter_map(|k| {
+                let vals = met.iter().map(|e| e.params[k]);
+                let lo = vals.clone().fold(f64::INFINITY, f64::min);
+                let hi = vals.fold(f64::NEG_INFINITY, f64::max);
+                lo.is_finite().then(|| (k.clone(), (lo, hi)))
+            })
+            .collect();
+        Some(TargetsMet {
+            points: met.len(),
+            scored: scored.len(),
+            spans,
+        })
+    }
+
+    /// In words: `5 of 23 points scored meet every target: eps_j 1.4e-3 to 2.1e-3, ...`.
+    pub fn describe(&self) -> String {
+        if self.points == 0 {
+            return format!(
+                "none of the {} points scored meets every target",
+                self.scored
+            );
+        }
+        let spans = self
+            .spans
+            .iter()
+            .map(|(k, (lo, hi))| {
+                if lo == hi {
+                    format!("{k} {}", fmt_value(*lo))
+                } else {
+                    format!("{k} {} to {}", fmt_value(*lo), fmt_value(*hi))
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(", ");
+        format!(
+            "{} of the {} points scored meet every target: {spans}",
+            self.points, self.scored
+        )
+    }
 }
 
 /// The coarser calibration a surrogate search started from.
@@ -262,4 +357,81 @@ pub fn fmt_bounds(bounds: &BTreeMap<String, (f64, f64)>) -> String {
         .map(|(k, (lo, hi))| format!("{k} in [{}, {}]", fmt_value(*lo), fmt_value(*hi)))
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hvi_analysis::score::Term;
+
+    fn eval(eps: f64, kappa: f64, seeds: &[u64], terms: &[f64]) -> Evaluation {
+        let terms: Vec<Term> = terms
+            .iter()
+            .enumerate()
+            .map(|(k, &t)| Term {
+                name: format!("t{k}"),
+                observed: Some(1.0),
+                term: t,
+                weight: 1.0,
+            })
+            .collect();
+        Evaluation {
+            stage: "ego-0".into(),
+            step: 0,
+            params: BTreeMap::from([
+                ("eps".to_string(), eps),
+                ("kappa".to_string(), kappa),
+                ("rcut".to_string(), 1.5),
+            ]),
+            objective: terms.iter().map(|t| t.term).sum::<f64>() / terms.len() as f64,
+            score: Some(Score {
+                objective: 0.0,
+                terms,
+            }),
+            status: "completed".into(),
+            cached: false,
+            dir: None,
+            seeds: seeds.to_vec(),
+            seed_objectives: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_targets_met_span_reads_every_term_at_the_answers_seeds_once() {
+        let seeds = [1, 2];
+        let evals = [
+            eval(1e-3, 1e7, &seeds, &[0.5, 0.9]),
+            // Met, but the same point again: counted once.
+            eval(1e-3, 1e7, &seeds, &[0.5, 0.9]),
+            eval(4e-3, 8e6, &seeds, &[1.0, 0.0]),
+            // One term past its tolerance: not met, though J = 0.55 is lower than others'.
+            eval(1e-2, 9e6, &seeds, &[1.1, 0.0]),
+            // Met, at another seed: not compared with these.
+            eval(1e-1, 1e6, &[3], &[0.0, 0.0]),
+            // Not scored.
+            Evaluation {
+                score: None,
+                ..eval(2e-3, 2e7, &seeds, &[0.0])
+            },
+        ];
+        let m = TargetsMet::of(&evals, &seeds).expect("scored points");
+        assert_eq!((m.points, m.scored), (2, 3));
+        // rcut is the same at every point: no span.
+        assert_eq!(
+            m.spans,
+            BTreeMap::from([
+                ("eps".to_string(), (1e-3, 4e-3)),
+                ("kappa".to_string(), (8e6, 1e7)),
+            ])
+        );
+        assert!(
+            m.describe().starts_with("2 of the 3 points"),
+            "{}",
+            m.describe()
+        );
+        let none = TargetsMet::of(&evals[3..4], &seeds).expect("one scored");
+        assert_eq!((none.points, none.spans.len()), (0, 0));
+        assert!(none.describe().contains("none of the 1"));
+        assert!(TargetsMet::of(&evals[4..], &seeds).is_none());
+    }
 }
