@@ -159,6 +159,31 @@ fn running_again_does_no_new_simulation() {
     let first = sweep(&study, &out, &[]);
     assert_ok(&first);
     assert_eq!(counts(&first), (4, 0, 4, 0), "{}", stderr(&first));
+    // Each finished run's line says how much is left, but the last.
+    let lines: Vec<String> = stderr(&first)
+        .lines()
+        .filter(|l| l.contains("completed in"))
+        .map(String::from)
+        .collect();
+    assert_eq!(lines.len(), 4, "{}", stderr(&first));
+    for (k, l) in lines.iter().enumerate() {
+        assert_eq!(
+            l.contains(&format!("; {} left, about ", 3 - k)),
+            k < 3,
+            "{l}"
+        );
+    }
+    // study.log: every run's start and end, stamped; a run directory keeps no progress file.
+    let log = || std::fs::read_to_string(out.join("study.log")).expect("study.log");
+    let text = log();
+    assert_eq!(text.matches(" start ").count(), 4, "{text}");
+    assert_eq!(text.matches(": completed in ").count(), 4, "{text}");
+    assert!(text.lines().all(|l| l.starts_with("20")), "{text}");
+    assert!(text.contains("material.eps_j"), "{text}");
+    for r in results(&out) {
+        let run = out.join(r["dir"].as_str().expect("dir"));
+        assert!(!run.join("progress.json").exists(), "{}", run.display());
+    }
     let before = records(&out);
     assert_eq!(before.len(), 4);
     let rows = results(&out);
@@ -202,6 +227,7 @@ fn running_again_does_no_new_simulation() {
     let second = sweep(&study, &out, &[]);
     assert_ok(&second);
     assert_eq!(counts(&second), (4, 4, 0, 0), "{}", stderr(&second));
+    assert_eq!(log(), text, "a cached run is not logged as run");
     assert_eq!(records(&out), before, "a cached run was rewritten");
     assert_eq!(results(&out), rows);
     // Byte for byte: numbers read back from the records are the numbers written.
@@ -329,9 +355,64 @@ fn a_failed_run_is_recorded_and_the_study_goes_on() {
     )
     .expect("the failed run keeps its summary");
     assert!(summary.contains("\"unstable\""));
+    let log = std::fs::read_to_string(out.join("study.log")).expect("study.log");
+    assert!(log.contains(": FAILED after "), "{log}");
+    assert!(log.contains(": completed in "), "{log}");
     // Failed runs are tried again; completed ones are not.
     let o = sweep(&study, &out, &[]);
     assert_eq!(counts(&o), (2, 1, 1, 1), "{}", stderr(&o));
+}
+
+#[test]
+fn status_shows_a_running_runs_progress() {
+    let dir = scratch("status-progress");
+    let study = write_study(&dir, "progress", GRID_2X2, TINY);
+    let out = dir.join("out");
+    let o = bin()
+        .arg("plan")
+        .arg(&study)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert_ok(&o);
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).expect("plan"))
+            .expect("json");
+    let run_dir = doc["runs"][1]["dir"].as_str().expect("dir").to_string();
+    let digits = run_dir.trim_start_matches("runs/");
+    // A run in progress in this (live) process, as the store names its working directory,
+    // with the progress file a store run keeps.
+    let work = out
+        .join("runs")
+        .join(format!(".tmp-{digits}-{}-0", std::process::id()));
+    std::fs::create_dir_all(&work).expect("work dir");
+    std::fs::write(
+        work.join("progress.json"),
+        r#"{"step":500,"steps":1000,"time_s":1e-6,"end_time_s":2e-6,"wall_s":120.0}"#,
+    )
+    .expect("progress");
+    let o = bin()
+        .arg("status")
+        .arg(&study)
+        .arg("--out")
+        .arg(&out)
+        .arg("--verbose")
+        .output()
+        .expect("runs");
+    assert_ok(&o);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("1 running"), "{text}");
+    let line = text
+        .lines()
+        .find(|l| l.contains(&run_dir))
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!(
+        line.contains("running")
+            && line.contains(": 50 % (1.0 of 2.0 us simulated, 2.0 min so far)"),
+        "{line}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

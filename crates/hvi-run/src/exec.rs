@@ -168,7 +168,9 @@ pub fn execute(
     let elsewhere_before = store.done_elsewhere();
     let (records, pending) = look_up(store, jobs)?;
     let cached = records.iter().filter(|r| r.is_some()).count();
-    let phases = order_runs(jobs, &pending, opts);
+    let (phases, costs) = order_runs(jobs, &pending, opts);
+    let total_cost: f64 = costs.values().sum();
+    let done_cost = std::sync::Mutex::new(0.0f64);
     let bar = progress_bar(opts, pending.len(), cached);
     let say = |line: String| {
         if opts.progress {
@@ -203,7 +205,17 @@ pub fn execute(
         if !matches!(&r, Ok(rec) if rec.status == RunStatus::Completed) {
             failed_now.fetch_add(1, Ordering::Relaxed);
         }
-        say(finished_line(n, pending.len(), i, &r, describe));
+        let finished_cost = {
+            let mut c = done_cost.lock().unwrap_or_else(|p| p.into_inner());
+            *c += costs.get(&i).copied().unwrap_or(0.0);
+            *c
+        };
+        let eta = time_left(
+            t0.elapsed().as_secs_f64(),
+            (n, pending.len()),
+            (finished_cost, total_cost),
+        );
+        say(finished_line(n, pending.len(), i, &r, describe) + &eta);
         if let Some(b) = &bar {
             b.inc(1);
             b.set_message(format!(
@@ -260,7 +272,11 @@ fn look_up(store: &Store, jobs: &[Job]) -> Result<(Vec<Option<Record>>, Vec<usiz
 /// The phases of the `pending` jobs (indices into `jobs`): largest first, the dominant ones
 /// alone (see the module's doc). Costing builds each scene once, in parallel, which is cheap
 /// against the runs; a single run needs no order.
-fn order_runs(jobs: &[Job], pending: &[usize], opts: &ExecOptions) -> Vec<Phase> {
+fn order_runs(
+    jobs: &[Job],
+    pending: &[usize],
+    opts: &ExecOptions,
+) -> (Vec<Phase>, std::collections::HashMap<usize, f64>) {
     let costs: Vec<f64> = if pending.len() > 1 {
         pending
             .par_iter()
@@ -270,13 +286,43 @@ fn order_runs(jobs: &[Job], pending: &[usize], opts: &ExecOptions) -> Vec<Phase>
     } else {
         vec![0.0; pending.len()]
     };
-    schedule(opts.threads, opts.jobs, &costs)
+    let phases = schedule(opts.threads, opts.jobs, &costs)
         .into_iter()
         .map(|p| Phase {
             runs: p.runs.iter().map(|&k| pending[k]).collect(),
             ..p
         })
-        .collect()
+        .collect();
+    (phases, pending.iter().copied().zip(costs).collect())
+}
+
+/// The time left after `done.0` of `done.1` runs, `elapsed` seconds in: the elapsed time
+/// scaled by the cost still to run over the cost run (particles x base steps; by the count
+/// when the costs are unknown), e.g. `; 6 left, about 4.2 min`. Empty after the last run.
+fn time_left(elapsed: f64, done: (usize, usize), cost: (f64, f64)) -> String {
+    let (n, total) = done;
+    if n >= total || n == 0 {
+        return String::new();
+    }
+    let (run, all) = cost;
+    let share = if run > 0.0 && all > run {
+        run / all
+    } else {
+        n as f64 / total as f64
+    };
+    let left = elapsed * (1.0 - share) / share;
+    format!("; {} left, about {}", total - n, duration_words(left))
+}
+
+/// A duration for a reader: `40 s`, `12 min`, `3.5 h`.
+pub fn duration_words(seconds: f64) -> String {
+    if seconds >= 5400.0 {
+        format!("{:.1} h", seconds / 3600.0)
+    } else if seconds >= 90.0 {
+        format!("{:.0} min", seconds / 60.0)
+    } else {
+        format!("{seconds:.0} s")
+    }
 }
 
 /// The progress bar over the `pending` runs (drawn only on a terminal), when progress is on
@@ -467,6 +513,19 @@ fn gather_records(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_time_left_scales_the_elapsed_time_by_the_cost_still_to_run() {
+        // A quarter of the cost done in 60 s: 180 s left, though half the runs are done.
+        assert_eq!(time_left(60.0, (2, 4), (1.0, 4.0)), "; 2 left, about 3 min");
+        // Costs unknown: by the count.
+        assert_eq!(time_left(10.0, (1, 3), (0.0, 0.0)), "; 2 left, about 20 s");
+        assert_eq!(
+            time_left(3600.0, (1, 4), (1.0, 4.0)),
+            "; 3 left, about 3.0 h"
+        );
+        assert_eq!(time_left(10.0, (3, 3), (3.0, 3.0)), "");
+    }
 
     #[test]
     fn threads_go_to_runs_first_then_inside_runs() {

@@ -51,6 +51,53 @@ pub struct RunOptions {
     /// Write checkpoints there, this often, and resume from one left by the same run
     /// ([`crate::checkpoint`]); `None`: neither.
     pub checkpoint: Option<CheckpointOptions>,
+    /// Keep [`PROGRESS_FILE`] in the output directory up to date (every
+    /// [`PROGRESS_EVERY`] of wall time), for `hvi-study status` to read while the run goes.
+    pub progress_file: bool,
+}
+
+/// A running run's progress, in its output directory when [`RunOptions::progress_file`].
+pub const PROGRESS_FILE: &str = "progress.json";
+
+/// How often [`PROGRESS_FILE`] is rewritten, wall time.
+pub const PROGRESS_EVERY: Duration = Duration::from_secs(5);
+
+/// What [`PROGRESS_FILE`] holds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Progress {
+    /// Base steps taken of the run's `steps`.
+    pub step: u64,
+    /// The run's base steps.
+    pub steps: u64,
+    /// Simulated time reached, s.
+    pub time_s: f64,
+    /// The run's end time, s.
+    pub end_time_s: f64,
+    /// Wall time in the step loop so far (this process), s.
+    pub wall_s: f64,
+}
+
+impl Progress {
+    /// Reads a run directory's progress file (None: none, or unreadable mid-write).
+    pub fn read(dir: &Path) -> Option<Progress> {
+        let text = std::fs::read_to_string(dir.join(PROGRESS_FILE)).ok()?;
+        serde_json::from_str(&text).ok()
+    }
+
+    /// `43 % (13.8 of 32 us simulated, 2.1 min so far)`.
+    pub fn describe(&self) -> String {
+        let pct = 100.0 * self.step as f64 / self.steps.max(1) as f64;
+        let wall = if self.wall_s >= 90.0 {
+            format!("{:.1} min", self.wall_s / 60.0)
+        } else {
+            format!("{:.0} s", self.wall_s)
+        };
+        format!(
+            "{pct:.0} % ({:.1} of {:.1} us simulated, {wall} so far)",
+            self.time_s * 1e6,
+            self.end_time_s * 1e6
+        )
+    }
 }
 
 /// One row of `energy.csv`.
@@ -857,7 +904,24 @@ impl Gathered {
         let energy_every = spec.run.energy_every;
         let from = (sim.step, sim.steps_taken);
         let mut next_thermo = next_multiple(sim.step, thermo_every);
+        let mut progress_written: Option<Instant> = None;
         while sim.step < d.steps {
+            if opts.progress_file && progress_written.is_none_or(|t| t.elapsed() >= PROGRESS_EVERY)
+            {
+                progress_written = Some(Instant::now());
+                let p = Progress {
+                    step: sim.step,
+                    steps: d.steps,
+                    time_s: sim.time_s(),
+                    end_time_s: spec.run.end_time_s,
+                    wall_s: step_wall0.elapsed().as_secs_f64(),
+                };
+                // Progress is a courtesy: a run never fails for want of it.
+                let _ = crate::files::write_atomic_bytes(
+                    &opts.out_dir.join(PROGRESS_FILE),
+                    &serde_json::to_vec(&p).unwrap_or_default(),
+                );
+            }
             // Ctrl-C or SIGTERM: stop here, after a checkpoint when the run writes them (the
             // caller removes what else the run wrote).
             if let Some(sig) = crate::interrupt::requested() {
@@ -1294,4 +1358,36 @@ pub fn describe_cloud(c: &CloudReport) -> String {
         m.largest_fragment_particles,
         f(m.mean_fragment_diameter_m, 1e3, 3),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_run_keeps_its_progress_file_only_when_asked() {
+        let spec = SceneSpec::calibration(1000.0, 1e-6);
+        let base = std::env::temp_dir().join(format!("hvi-progress-{}", std::process::id()));
+        for asked in [true, false] {
+            let dir = base.join(asked.to_string());
+            let opts = RunOptions {
+                out_dir: dir.clone(),
+                progress_file: asked,
+                ..RunOptions::default()
+            };
+            run_scene(&spec, &opts).expect("runs");
+            match Progress::read(&dir) {
+                Some(p) => {
+                    assert!(asked);
+                    // Written at the loop's first step and then every PROGRESS_EVERY: a
+                    // short run leaves the first (the store removes it at the end).
+                    assert!(p.step < p.steps, "{p:?}");
+                    assert_eq!(p.end_time_s, spec.run.end_time_s);
+                    assert!(p.describe().contains(" % ("), "{}", p.describe());
+                }
+                None => assert!(!asked, "no progress file"),
+            }
+        }
+        let _ = std::fs::remove_dir_all(&base);
+    }
 }

@@ -149,6 +149,9 @@ pub struct Store {
 
 static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 
+/// The study's log of runs started and ended, in the study directory ([`Store::log_path`]).
+pub const LOG_FILE: &str = "study.log";
+
 /// Whether the process with this id is alive (Linux: /proc; elsewhere assumed alive, so
 /// nothing of a running process is ever removed).
 fn process_alive(pid: u32) -> bool {
@@ -428,12 +431,62 @@ impl Store {
         if tmp.exists() {
             fs::remove_dir_all(&tmp)?;
         }
+        let params = serde_json::Value::Object(job.params.clone());
+        self.log(&format!(
+            "start {digits} on {} process {} with {threads} thread(s): {params}",
+            host_name(),
+            std::process::id()
+        ));
+        let t0 = Instant::now();
         let outcome = self.execute_in(job, threads, &tmp);
+        let wall = t0.elapsed().as_secs_f64();
+        self.log(&match &outcome {
+            Ok(r) if r.status == RunStatus::Completed => {
+                format!("end {digits}: completed in {wall:.1} s")
+            }
+            Ok(r) => format!(
+                "end {digits}: FAILED after {wall:.1} s: {}",
+                r.error.as_deref().unwrap_or("").replace('\n', " ")
+            ),
+            Err(e) if crate::interrupt::of(e).is_some() => {
+                format!(
+                    "end {digits}: stopped by a signal after {wall:.1} s (runs again when resumed)"
+                )
+            }
+            Err(e) => {
+                format!("end {digits}: store error after {wall:.1} s: {e:#}").replace('\n', " ")
+            }
+        });
         if outcome.is_err() {
             // A store error (a full disk, say) or an interrupt: nothing half-written stays.
             let _ = fs::remove_dir_all(&tmp);
         }
         outcome
+    }
+
+    /// The study's log ([`LOG_FILE`] beside the run store): one line per run started and
+    /// ended, with the time (UTC), appended by every process that runs into this store.
+    pub fn log_path(&self) -> PathBuf {
+        self.runs
+            .parent()
+            .map_or_else(|| PathBuf::from(LOG_FILE), |p| p.join(LOG_FILE))
+    }
+
+    /// Appends `line` to the study's log, in one write (lines of processes sharing the store
+    /// do not interleave). The log is a record for the reader: a run never fails for it.
+    fn log(&self, line: &str) {
+        use std::io::Write as _;
+        let stamped = format!(
+            "{} {line}\n",
+            humantime::format_rfc3339_seconds(std::time::SystemTime::now())
+        );
+        if let Ok(mut f) = fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(self.log_path())
+        {
+            let _ = f.write_all(stamped.as_bytes());
+        }
     }
 
     /// Runs `job` in the temporary directory `tmp` and moves it into place with its record.
@@ -458,6 +511,7 @@ impl Store {
             progress: false,
             render: true,
             checkpoint,
+            progress_file: true,
             ..RunOptions::default()
         };
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -497,6 +551,8 @@ impl Store {
                     .unwrap_or_else(|| "(no message)".into())
             )),
         };
+        // Only a running run has progress to show.
+        let _ = fs::remove_file(tmp.join(crate::run::PROGRESS_FILE));
         let summary = read_summary(&tmp);
         let observables = summary
             .as_ref()

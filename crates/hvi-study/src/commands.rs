@@ -240,6 +240,8 @@ fn run(args: RunArgs) -> Result<()> {
             path: args.out.join(hvi_run::checkpoint::CHECKPOINT_FILE),
             every: args.checkpoint_every,
         }),
+        // The run shows its own progress on the terminal.
+        progress_file: false,
     };
     // A run that left a checkpoint here resumes: what it wrote stays (run_scene checks the
     // checkpoint whole and starts from t = 0 if it is not).

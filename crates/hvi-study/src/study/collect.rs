@@ -143,7 +143,8 @@ pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
                     format!("in progress on {h}, process {} (not checkable here)", m.pid)
                 }
                 _ => format!("in progress here, process {}", m.pid),
-            })
+            } + &hvi_run::run::Progress::read(&m.path)
+                .map_or(String::new(), |p| format!(": {}", p.describe())))
             .next();
         let active = queue.active.get(&run.fingerprint);
         let state = if matches!(&record, Some(r) if r.status == RunStatus::Completed) {

@@ -137,6 +137,7 @@ pub(super) fn search(
     let seeds = seed_list(settings);
     let mut runs = 0;
     let mut batch = 0;
+    let started = std::time::Instant::now();
     let (converged_now, termination, noise, noise_source) = loop {
         let obs = observations(problem, &evaluations);
         let (noise, noise_source) = noise_of(&evaluations, settings.noise_floor);
@@ -160,8 +161,22 @@ pub(super) fn search(
             None => String::new(),
         };
         if problem.progress {
+            // What is left at most: the batches not yet run, at this search's wall time per
+            // run so far (the search can stop sooner).
+            let left = settings.max_batches.saturating_sub(batch) * settings.batch * seeds.len();
+            let bound = if runs > 0 && !next.converged {
+                let per_run = started.elapsed().as_secs_f64() / runs as f64;
+                format!(
+                    "; batch {} of at most {}, at most {left} runs (about {}) left",
+                    batch + 1,
+                    settings.max_batches,
+                    hvi_run::exec::duration_words(per_run * left as f64)
+                )
+            } else {
+                String::new()
+            };
             eprintln!(
-                "ego: {} points scored, noise {noise:.4}, largest expected improvement {ei:.4}{own}",
+                "ego: {} points scored, noise {noise:.4}, largest expected improvement {ei:.4}{own}{bound}",
                 obs.len()
             );
         }
