@@ -1214,6 +1214,7 @@ fn render_pictures(
                 sil,
                 &info,
                 c.report.measurement.tau_s,
+                c.report.front_velocity_ratio,
             )
             .context("rendering shadowgraph.png")?;
         }
