@@ -811,3 +811,37 @@ fn output_into_a_pipe_closed_early_ends_quietly() {
         assert_ne!(status.code(), Some(101), "{err}");
     }
 }
+
+/// A binary built on a cluster's login node must run on its compute nodes: the workspace's
+/// build settings ask for no particular processor (reports/benchmark-portable measures what
+/// the native opt-in gains).
+#[test]
+fn builds_are_portable_by_default() {
+    let path = repo().join(".cargo/config.toml");
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return; // no build settings at all: portable
+    };
+    let config: toml::Value = toml::from_str(&text).expect("config.toml parses");
+    let flags = |v: Option<&toml::Value>| -> Vec<String> {
+        match v {
+            Some(toml::Value::Array(a)) => a
+                .iter()
+                .filter_map(|f| f.as_str().map(String::from))
+                .collect(),
+            Some(toml::Value::String(s)) => s.split_whitespace().map(String::from).collect(),
+            _ => Vec::new(),
+        }
+    };
+    let mut all = flags(config.get("build").and_then(|b| b.get("rustflags")));
+    if let Some(targets) = config.get("target").and_then(|t| t.as_table()) {
+        for t in targets.values() {
+            all.extend(flags(t.get("rustflags")));
+        }
+    }
+    assert!(
+        !all.iter()
+            .any(|f| f.contains("target-cpu") || f.contains("target-feature")),
+        "{}: {all:?}",
+        path.display()
+    );
+}

@@ -335,7 +335,10 @@ mod tests {
         let near = |a: f64, b: f64, tol: f64| (a - b).abs() < tol;
         assert!(near(z0, -4.0 - 0.04 * 294.0, 1.0), "{z0}");
         assert!(near(z1, 290.0 + 0.04 * 294.0, 1.0), "{z1}");
-        assert!(near(x0, -100.0 - 8.0, 1.0) && near(x1, 100.0 + 8.0, 1.0), "{x0} {x1}");
+        assert!(
+            near(x0, -100.0 - 8.0, 1.0) && near(x1, 100.0 + 8.0, 1.0),
+            "{x0} {x1}"
+        );
     }
 
     #[test]
