@@ -412,6 +412,29 @@ fn status_shows_a_running_runs_progress() {
             && line.contains(": 50 % (1.0 of 2.0 us simulated, 2.0 min so far)"),
         "{line}"
     );
+    // Asked with a study file whose plan differs from the directory's (another tier here, as a
+    // ladder level's or a running calibration's directory differs from its study file's
+    // grid), status looks and writes nothing.
+    let before = std::fs::read(out.join("plan.json")).expect("plan");
+    let o = bin()
+        .arg("status")
+        .arg(&study)
+        .arg("--out")
+        .arg(&out)
+        .args(["--set", "run.end_time_s=3e-6"])
+        .output()
+        .expect("runs");
+    assert_ok(&o);
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("4 pending"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    assert_eq!(
+        std::fs::read(out.join("plan.json")).expect("plan"),
+        before,
+        "status rewrote plan.json"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

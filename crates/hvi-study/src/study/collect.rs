@@ -20,8 +20,10 @@ use hvi_run::store::{Record, RunStatus, Store};
 use hvi_run::table::{results_table, Table};
 
 /// Reads a plan and its study directory: a study directory or its `plan.json` as is, or a
-/// study file planned like every other command (which writes plan.json).
-pub fn open_plan(args: &StudyArgs) -> Result<(Plan, PathBuf)> {
+/// study file planned like every other command (which writes plan.json when `write`; a
+/// command that only looks, `status`, writes nothing: the directory may hold another plan,
+/// a ladder level's or a running calibration's).
+pub fn open_plan(args: &StudyArgs, write: bool) -> Result<(Plan, PathBuf)> {
     let p = &args.study;
     let plan_path = if p.is_dir() {
         Some(p.join("plan.json"))
@@ -31,7 +33,11 @@ pub fn open_plan(args: &StudyArgs) -> Result<(Plan, PathBuf)> {
         None
     };
     let Some(path) = plan_path else {
-        let (_, plan, out) = args.plan()?;
+        let (_, plan, out) = if write {
+            args.plan()?
+        } else {
+            args.build_plan()?
+        };
         return Ok((plan, out));
     };
     if args.tier.is_some()
@@ -212,7 +218,7 @@ impl Survey {
 /// `hvi-study status`: counts on the first line (`... N runs: D done, F failed, R running, P
 /// pending (Q queued in Slurm)`), then the Slurm jobs, then with --verbose one line per run.
 pub fn status(args: &StatusArgs) -> Result<()> {
-    let (plan, dir) = open_plan(&args.store.to_study())?;
+    let (plan, dir) = open_plan(&args.store.to_study(), false)?;
     let survey = survey(&plan, &dir)?;
     let (done, failed, running, pending, queued) = survey.counts();
     let mut s = format!(
@@ -313,7 +319,7 @@ fn missing_record(plan: &Plan, i: usize) -> Record {
 /// listed on stderr; the command still writes everything and exits 0, so a partial study can
 /// be looked at while the rest runs.
 pub fn collect(args: &CollectArgs) -> Result<()> {
-    let (plan, dir) = open_plan(&args.store.to_study())?;
+    let (plan, dir) = open_plan(&args.store.to_study(), true)?;
     let store = Store::open(&dir)?;
     let records: Vec<Option<Record>> = plan
         .runs
