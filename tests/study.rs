@@ -412,6 +412,33 @@ fn status_shows_a_running_runs_progress() {
             && line.contains(": 50 % (1.0 of 2.0 us simulated, 2.0 min so far)"),
         "{line}"
     );
+    // A run beyond the plan (a calibration's search) in progress: listed with its progress.
+    let beyond = out
+        .join("runs")
+        .join(format!(".tmp-ffffffffffffffff-{}-0", std::process::id()));
+    std::fs::create_dir_all(&beyond).expect("work dir");
+    std::fs::write(
+        beyond.join("progress.json"),
+        r#"{"step":250,"steps":1000,"time_s":8e-6,"end_time_s":3.2e-5,"wall_s":30.0}"#,
+    )
+    .expect("progress");
+    let o = bin()
+        .arg("status")
+        .arg(out.join("plan.json"))
+        .arg("--verbose")
+        .output()
+        .expect("runs");
+    assert_ok(&o);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("1 in progress here"), "{text}");
+    assert!(
+        text.contains(&format!(
+            "  runs/ffffffffffffffff in progress here, process {}: 25 % (8.0 of 32.0 us simulated, 30 s so far)",
+            std::process::id()
+        )),
+        "{text}"
+    );
+    std::fs::remove_dir_all(&beyond).expect("removed");
     // Asked with a study file whose plan differs from the directory's (another tier here, as a
     // ladder level's or a running calibration's directory differs from its study file's
     // grid), status looks and writes nothing.

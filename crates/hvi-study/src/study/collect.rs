@@ -107,6 +107,8 @@ pub struct Survey {
     /// Runs in the store beyond the plan (a calibration's search, a batch's plan): done, and
     /// in progress here now.
     pub beyond_plan: (usize, usize),
+    /// The runs in progress beyond the plan, one line each: directory, process and progress.
+    pub running_beyond: Vec<String>,
 }
 
 /// Surveys a study directory: records from the store, running and queued runs from Slurm (when
@@ -137,6 +139,15 @@ pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
     running_beyond.sort_unstable();
     running_beyond.dedup();
     let beyond_plan = (done_beyond, running_beyond.len());
+    let running_beyond: Vec<String> = running_beyond
+        .iter()
+        .filter_map(|d| {
+            markers
+                .iter()
+                .find(|m| m.digits == *d && m.alive != Some(false))
+        })
+        .map(|m| format!("runs/{} {}", m.digits, in_progress_words(m)))
+        .collect();
     let mut runs = Vec::with_capacity(plan.runs.len());
     for run in &plan.runs {
         let record = store.lookup(&run.fingerprint)?;
@@ -144,13 +155,7 @@ pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
         let marker = markers
             .iter()
             .filter(|m| m.digits == digits && m.alive != Some(false))
-            .map(|m| match (&m.host, m.alive) {
-                (Some(h), None) => {
-                    format!("in progress on {h}, process {} (not checkable here)", m.pid)
-                }
-                _ => format!("in progress here, process {}", m.pid),
-            } + &hvi_run::run::Progress::read(&m.path)
-                .map_or(String::new(), |p| format!(": {}", p.describe())))
+            .map(in_progress_words)
             .next();
         let active = queue.active.get(&run.fingerprint);
         let state = if matches!(&record, Some(r) if r.status == RunStatus::Completed) {
@@ -193,7 +198,18 @@ pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
         runs,
         queue,
         beyond_plan,
+        running_beyond,
     })
+}
+
+/// A run in progress in the store: where, and how far (from its progress file).
+fn in_progress_words(m: &hvi_run::store::InProgress) -> String {
+    let at = match (&m.host, m.alive) {
+        (Some(h), None) => format!("in progress on {h}, process {} (not checkable here)", m.pid),
+        _ => format!("in progress here, process {}", m.pid),
+    };
+    at + &hvi_run::run::Progress::read(&m.path)
+        .map_or(String::new(), |p| format!(": {}", p.describe()))
 }
 
 impl Survey {
@@ -238,6 +254,11 @@ pub fn status(args: &StatusArgs) -> Result<()> {
             s,
             "beyond the plan (a calibration's search, or runs of another plan in this store): {done_beyond} done, {running_beyond} in progress here"
         );
+        if args.verbose {
+            for line in &survey.running_beyond {
+                let _ = writeln!(s, "  {line}");
+            }
+        }
     }
     let q = &survey.queue;
     for sub in &q.submissions {
