@@ -1,10 +1,12 @@
-//! How numbers are rounded and printed in tables, plot labels and reports.
+//! How numbers (and durations) are rounded and printed in tables, plot labels, reports and
+//! progress lines.
 //!
 //! ```
-//! use hvi_analysis::number::{fmt_num, round_sig, short};
+//! use hvi_analysis::number::{fmt_duration, fmt_num, round_sig, short};
 //! assert_eq!(round_sig(4.5612e6, 3), 4.56e6);
 //! assert_eq!(short(4.56e6), "4.56e6");
 //! assert_eq!(fmt_num(0.123456), "0.1235");
+//! assert_eq!(fmt_duration(210.0), "3.5 min");
 //! ```
 
 /// `x` rounded to `digits` significant digits.
@@ -45,5 +47,20 @@ pub fn fmt_num(x: f64) -> String {
     } else {
         let digits = (3 - a.log10().floor() as i32).max(0) as usize;
         format!("{x:.digits$}")
+    }
+}
+
+/// A duration for people: `42 s`, `3.5 min`, `7.2 h`, `2.9 days`.
+pub fn fmt_duration(s: f64) -> String {
+    if !s.is_finite() {
+        "n/a".into()
+    } else if s < 120.0 {
+        format!("{s:.0} s")
+    } else if s < 2.0 * 3600.0 {
+        format!("{:.1} min", s / 60.0)
+    } else if s < 48.0 * 3600.0 {
+        format!("{:.1} h", s / 3600.0)
+    } else {
+        format!("{:.1} days", s / 86400.0)
     }
 }

@@ -311,18 +311,11 @@ fn time_left(elapsed: f64, done: (usize, usize), cost: (f64, f64)) -> String {
         n as f64 / total as f64
     };
     let left = elapsed * (1.0 - share) / share;
-    format!("; {} left, about {}", total - n, duration_words(left))
-}
-
-/// A duration for a reader: `40 s`, `12 min`, `3.5 h`.
-pub fn duration_words(seconds: f64) -> String {
-    if seconds >= 5400.0 {
-        format!("{:.1} h", seconds / 3600.0)
-    } else if seconds >= 90.0 {
-        format!("{:.0} min", seconds / 60.0)
-    } else {
-        format!("{seconds:.0} s")
-    }
+    format!(
+        "; {} left, about {}",
+        total - n,
+        hvi_analysis::number::fmt_duration(left)
+    )
 }
 
 /// The progress bar over the `pending` runs (drawn only on a terminal), when progress is on
@@ -517,7 +510,10 @@ mod tests {
     #[test]
     fn the_time_left_scales_the_elapsed_time_by_the_cost_still_to_run() {
         // A quarter of the cost done in 60 s: 180 s left, though half the runs are done.
-        assert_eq!(time_left(60.0, (2, 4), (1.0, 4.0)), "; 2 left, about 3 min");
+        assert_eq!(
+            time_left(60.0, (2, 4), (1.0, 4.0)),
+            "; 2 left, about 3.0 min"
+        );
         // Costs unknown: by the count.
         assert_eq!(time_left(10.0, (1, 3), (0.0, 0.0)), "; 2 left, about 20 s");
         assert_eq!(

@@ -87,15 +87,11 @@ impl Progress {
     /// `43 % (13.8 of 32 us simulated, 2.1 min so far)`.
     pub fn describe(&self) -> String {
         let pct = 100.0 * self.step as f64 / self.steps.max(1) as f64;
-        let wall = if self.wall_s >= 90.0 {
-            format!("{:.1} min", self.wall_s / 60.0)
-        } else {
-            format!("{:.0} s", self.wall_s)
-        };
         format!(
-            "{pct:.0} % ({:.1} of {:.1} us simulated, {wall} so far)",
+            "{pct:.0} % ({:.1} of {:.1} us simulated, {} so far)",
             self.time_s * 1e6,
-            self.end_time_s * 1e6
+            self.end_time_s * 1e6,
+            hvi_analysis::number::fmt_duration(self.wall_s)
         )
     }
 }

@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 
-pub use hvi_analysis::number::{fmt_num, short};
+pub use hvi_analysis::number::{fmt_duration, fmt_num, short};
 
 use hvi_run::output::write_atomic_bytes;
 
@@ -301,21 +301,6 @@ impl Estimate {
     /// Total seconds.
     pub fn seconds(&self) -> f64 {
         self.rows.iter().map(|r| r.seconds).sum()
-    }
-}
-
-/// A duration for people: `42 s`, `3.5 min`, `7.2 h`, `2.9 days`.
-pub fn fmt_duration(s: f64) -> String {
-    if !s.is_finite() {
-        "n/a".into()
-    } else if s < 120.0 {
-        format!("{s:.0} s")
-    } else if s < 2.0 * 3600.0 {
-        format!("{:.1} min", s / 60.0)
-    } else if s < 48.0 * 3600.0 {
-        format!("{:.1} h", s / 3600.0)
-    } else {
-        format!("{:.1} days", s / 86400.0)
     }
 }
 

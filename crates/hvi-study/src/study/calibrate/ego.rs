@@ -170,7 +170,7 @@ pub(super) fn search(
                     "; batch {} of at most {}, at most {left} runs (about {}) left",
                     batch + 1,
                     settings.max_batches,
-                    hvi_run::exec::duration_words(per_run * left as f64)
+                    hvi_analysis::number::fmt_duration(per_run * left as f64)
                 )
             } else {
                 String::new()
