@@ -363,18 +363,22 @@ fn a_failed_run_is_recorded_and_the_study_goes_on() {
     assert_eq!(counts(&o), (2, 1, 1, 1), "{}", stderr(&o));
 }
 
+/// `hvi-study ARGS`, its output.
+fn hvi_study(args: &[&std::ffi::OsStr]) -> Output {
+    bin().args(args).output().expect("runs")
+}
+
 #[test]
 fn status_shows_a_running_runs_progress() {
     let dir = scratch("status-progress");
     let study = write_study(&dir, "progress", GRID_2X2, TINY);
     let out = dir.join("out");
-    let o = bin()
-        .arg("plan")
-        .arg(&study)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .expect("runs");
+    let o = hvi_study(&[
+        "plan".as_ref(),
+        study.as_ref(),
+        "--out".as_ref(),
+        out.as_ref(),
+    ]);
     assert_ok(&o);
     let doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).expect("plan"))
@@ -392,14 +396,13 @@ fn status_shows_a_running_runs_progress() {
         r#"{"step":500,"steps":1000,"time_s":1e-6,"end_time_s":2e-6,"wall_s":120.0}"#,
     )
     .expect("progress");
-    let o = bin()
-        .arg("status")
-        .arg(&study)
-        .arg("--out")
-        .arg(&out)
-        .arg("--verbose")
-        .output()
-        .expect("runs");
+    let o = hvi_study(&[
+        "status".as_ref(),
+        study.as_ref(),
+        "--out".as_ref(),
+        out.as_ref(),
+        "--verbose".as_ref(),
+    ]);
     assert_ok(&o);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("1 running"), "{text}");
@@ -422,12 +425,11 @@ fn status_shows_a_running_runs_progress() {
         r#"{"step":250,"steps":1000,"time_s":8e-6,"end_time_s":3.2e-5,"wall_s":30.0}"#,
     )
     .expect("progress");
-    let o = bin()
-        .arg("status")
-        .arg(out.join("plan.json"))
-        .arg("--verbose")
-        .output()
-        .expect("runs");
+    let o = hvi_study(&[
+        "status".as_ref(),
+        out.join("plan.json").as_os_str(),
+        "--verbose".as_ref(),
+    ]);
     assert_ok(&o);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("1 in progress here"), "{text}");
@@ -439,18 +441,18 @@ fn status_shows_a_running_runs_progress() {
         "{text}"
     );
     std::fs::remove_dir_all(&beyond).expect("removed");
-    // Asked with a study file whose plan differs from the directory's (another tier here, as a
-    // ladder level's or a running calibration's directory differs from its study file's
+    // Asked with a study file whose plan differs from the directory's (another end time here,
+    // as a ladder level's or a running calibration's directory differs from its study file's
     // grid), status looks and writes nothing.
     let before = std::fs::read(out.join("plan.json")).expect("plan");
-    let o = bin()
-        .arg("status")
-        .arg(&study)
-        .arg("--out")
-        .arg(&out)
-        .args(["--set", "run.end_time_s=3e-6"])
-        .output()
-        .expect("runs");
+    let o = hvi_study(&[
+        "status".as_ref(),
+        study.as_ref(),
+        "--out".as_ref(),
+        out.as_ref(),
+        "--set".as_ref(),
+        "run.end_time_s=3e-6".as_ref(),
+    ]);
     assert_ok(&o);
     assert!(
         String::from_utf8_lossy(&o.stdout).contains("4 pending"),
