@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # R under each reading of the experiment's film, measured again on a stored calibration grid
-# (no new run): the particle quantiles with the width as a cylindrical radius (the default
-# reading) and as seen side-on, and the synthetic shadowgraph's silhouette at several optical
+# (no new run): the particle quantiles with the width as a cylindrical radius and as seen
+# side-on (the default reading, `analysis.width`), and the synthetic shadowgraph's silhouette at several optical
 # depths. For each reading: R at every grid point, its slope per decade of eps at each kappa,
 # and the eps where R meets the experiment's 1.55 (interpolated in log eps).
 #
@@ -40,7 +40,7 @@ for n in names:
             key = (float(r["material.eps_j"]), float(r["material.kappa_n_m"]), r.get("run.seed", ""))
             cols = {}
             if n == "quantile":
-                cols["cylindrical"] = r["length_ratio"]
+                cols["cylindrical"] = r["length_ratio_cylindrical"]
                 cols["side"] = r["length_ratio_side"]
             else:
                 cols[f"silhouette {n}"] = r["length_ratio_silhouette"]

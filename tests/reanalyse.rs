@@ -18,7 +18,7 @@ use std::process::Output;
 
 use hvi_analysis::observable::{Observable, Observables};
 use hvi_engine::cloud::{remeasure, CloudObserver, CloudResult};
-use hvi_engine::scene::{Analysis, SceneSpec, DEFAULT_QUANTILE};
+use hvi_engine::scene::{Analysis, SceneSpec, Width, DEFAULT_QUANTILE};
 use hvi_engine::sim::Simulation;
 use hvi_run::run::{run_scene, RunOptions, Summary};
 use hvi_run::state::{file_bytes, STATE_FILE};
@@ -38,9 +38,10 @@ fn small_scene() -> SceneSpec {
 }
 
 /// Other analysis settings than the defaults: every one a re-analysis may change.
-fn other_settings() -> [String; 4] {
+fn other_settings() -> [String; 5] {
     [
         "analysis.quantile=0.95".into(),
+        "analysis.width=cylindrical".into(),
         "analysis.shadowgraph_pixel_m=1e-3".into(),
         "analysis.shadowgraph_optical_depth=0.5".into(),
         "analysis.witness_standoff_m=0.05".into(),
@@ -81,6 +82,7 @@ fn remeasuring_the_kept_states_in_memory_is_bit_identical() {
     let spec = small_scene();
     let mut other = spec.analysis.clone();
     other.quantile = 0.95;
+    other.width = Width::Cylindrical;
     other.shadowgraph_pixel_m = 1e-3;
     other.shadowgraph_optical_depth = 0.5;
     other.witness_standoff_m = 0.05;
@@ -248,6 +250,7 @@ fn reanalysis_from_disk_gives_the_runs_numbers_and_a_fresh_runs_with_other_setti
         .expect("reads")
         .expect("has state");
     assert_eq!(changed.analysis.quantile, 0.95);
+    assert_eq!(changed.analysis.width, Width::Cylindrical);
     assert_eq!(changed.analysis.witness_standoff_m, 0.05);
     assert_same_observables(&changed.summary.observables(), &fresh.observables());
     assert_same_fragments(&changed.summary, &fresh);

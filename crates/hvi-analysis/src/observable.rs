@@ -35,14 +35,18 @@ pub enum Observable {
     NFrag,
     /// Axial length La.
     LengthAxial,
-    /// Radial length Lr.
+    /// Radial length Lr, as `analysis.width` reads it (side-on by default).
     LengthRadial,
-    /// R = La / Lr.
+    /// R = La / Lr, as `analysis.width` reads Lr.
     LengthRatio,
     /// Lr seen side-on (the projection a shadowgraph records).
     LengthRadialSide,
     /// R seen side-on.
     LengthRatioSide,
+    /// Lr as a cylindrical radius (distance from the axis).
+    LengthRadialCylindrical,
+    /// R with the cylindrical Lr.
+    LengthRatioCylindrical,
     /// Front velocity va.
     FrontVelocity,
     /// va / v0.
@@ -111,7 +115,7 @@ const fn def(
 }
 
 /// Every observable, in table order (a plain table: the one place an observable is named).
-pub const DEFINITIONS: [Definition; 26] = {
+pub const DEFINITIONS: [Definition; 28] = {
     use Observable::*;
     [
         def(Particles, "particles", "N", "1", "particles in the run"),
@@ -148,7 +152,7 @@ pub const DEFINITIONS: [Definition; 26] = {
             "length_radial_m",
             "Lr",
             "m",
-            "radial length (full width) of the cloud",
+            "full width of the cloud as `analysis.width` reads it (default side-on)",
         ),
         def(
             LengthRatio,
@@ -170,6 +174,20 @@ pub const DEFINITIONS: [Definition; 26] = {
             "R (side)",
             "1",
             "length ratio La / Lr with Lr seen side-on",
+        ),
+        def(
+            LengthRadialCylindrical,
+            "length_radial_cylindrical_m",
+            "Lr (cylindrical)",
+            "m",
+            "full width of the cloud as twice the quantile of the distance from the axis",
+        ),
+        def(
+            LengthRatioCylindrical,
+            "length_ratio_cylindrical",
+            "R (cylindrical)",
+            "1",
+            "length ratio La / Lr with Lr a cylindrical radius",
         ),
         def(
             FrontVelocity,

@@ -17,10 +17,14 @@
 //!   is exactly the sum of its fragments' masses; how many fragments straddle is reported
 //!   (`fragments_crossing_rear_face`, normally 0 once the cloud has left the plate).
 //! - **Fragmentation** F = N_frag / N_part (eq. 21): 1 when every cloud particle is alone.
-//! - **Front** z_f: the `quantile` (default 99.5 %) of the cloud particles' z. **Axial length**
-//!   La = z_f - `plate_rear_z_m`. **Radial length** Lr: twice the same quantile of the
-//!   particles' distance from the impact axis x = y = 0 (the full width). **R** = La / Lr. The
-//!   plain maxima (quantile 1) are reported beside them. Positions are particle centres.
+//! - **Front** z_f: the `quantile` (default 0.9) of the cloud particles' z. **Axial length**
+//!   La = z_f - `plate_rear_z_m`. **Radial length** Lr, the full width, as `analysis.width`
+//!   reads it ([`Width`]): side-on (the default), twice the same quantile of the particles'
+//!   distances |x| and |y| from the two planes of view through the axis, pooled (what a
+//!   side-view shadowgraph's projection records); or cylindrical, twice the quantile of their
+//!   distance from the impact axis x = y = 0. Both readings are reported beside the chosen one
+//!   (docs/model-decisions.md, "The width of the cloud"). **R** = La / Lr. The plain maxima
+//!   (quantile 1) are reported beside them. Positions are particle centres.
 //!   Quantiles interpolate linearly between order statistics (numpy's default, Hyndman-Fan
 //!   type 7), see [`quantile`].
 //! - **Front velocity** va = (z_f(t2) - z_f(t1)) / (t2 - t1): the front located at two times,
@@ -56,7 +60,7 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::scene::{Analysis, Derived};
+use crate::scene::{Analysis, Derived, Width};
 use crate::shadowgraph::{Shadowgraph, ShadowgraphSettings};
 use crate::sim::Simulation;
 use crate::state::{Body, Particles};
@@ -269,7 +273,8 @@ pub struct Extent {
     pub front_z_m: Option<f64>,
     /// La = z_f - rear face, m.
     pub length_axial_m: Option<f64>,
-    /// Lr = 2 x quantile of the distance from the axis, m.
+    /// Lr as `analysis.width` reads it (`length_radial_side_m` or
+    /// `length_radial_cylindrical_m`), m.
     pub length_radial_m: Option<f64>,
     /// R = La / Lr.
     pub length_ratio: Option<f64>,
@@ -277,23 +282,37 @@ pub struct Extent {
     pub front_z_max_m: Option<f64>,
     /// Largest z - rear face, m.
     pub length_axial_max_m: Option<f64>,
-    /// Twice the largest distance from the axis, m.
+    /// Twice the largest width as `analysis.width` reads it (largest |x| or |y| side-on,
+    /// largest distance from the axis cylindrically), m.
     pub length_radial_max_m: Option<f64>,
     /// La / Lr by the maxima.
     pub length_ratio_max: Option<f64>,
     /// Lr seen side-on: twice the quantile of the particles' distance from the plane of view
     /// through the axis (|x| and |y| pooled: two perpendicular side views), m. The width a
-    /// shadowgraph's projection records, where `length_radial_m` is a cylindrical radius no
-    /// camera sees.
+    /// shadowgraph's projection records.
     #[serde(default)]
     pub length_radial_side_m: Option<f64>,
     /// R seen side-on: La / `length_radial_side_m`.
     #[serde(default)]
     pub length_ratio_side: Option<f64>,
+    /// Lr as a cylindrical radius: twice the quantile of the distance from the axis, m (a
+    /// width no camera sees).
+    #[serde(default)]
+    pub length_radial_cylindrical_m: Option<f64>,
+    /// R with the cylindrical width: La / `length_radial_cylindrical_m`.
+    #[serde(default)]
+    pub length_ratio_cylindrical: Option<f64>,
 }
 
-/// The extent of the particles marked `in_cloud` (see the module's definitions).
-pub fn extent(p: &Particles, in_cloud: &[bool], plate_rear_z_m: f64, q: f64) -> Extent {
+/// The extent of the particles marked `in_cloud` (see the module's definitions), at quantile
+/// `q`, its width Lr read as `width` says (both readings are reported beside it).
+pub fn extent(
+    p: &Particles,
+    in_cloud: &[bool],
+    plate_rear_z_m: f64,
+    q: f64,
+    width: Width,
+) -> Extent {
     let mut z: Vec<f64> = Vec::new();
     let mut rho: Vec<f64> = Vec::new();
     let mut side: Vec<f64> = Vec::new();
@@ -306,7 +325,7 @@ pub fn extent(p: &Particles, in_cloud: &[bool], plate_rear_z_m: f64, q: f64) -> 
     let n_part = z.len();
     let max = |v: &[f64]| v.iter().copied().reduce(f64::max);
     let front_z_max_m = max(&z);
-    let rho_max = max(&rho);
+    let (rho_max, side_max) = (max(&rho), max(&side));
     let front_z_m = quantile(&mut z, q);
     let rho_q = quantile(&mut rho, q);
     let side_q = quantile(&mut side, q);
@@ -314,11 +333,15 @@ pub fn extent(p: &Particles, in_cloud: &[bool], plate_rear_z_m: f64, q: f64) -> 
         (Some(a), Some(b)) if b > 0.0 => Some(a / b),
         _ => None,
     };
+    let twice = |r: Option<f64>| r.map(|r| 2.0 * r);
     let length_axial_m = front_z_m.map(|f| f - plate_rear_z_m);
-    let length_radial_m = rho_q.map(|r| 2.0 * r);
     let length_axial_max_m = front_z_max_m.map(|f| f - plate_rear_z_m);
-    let length_radial_max_m = rho_max.map(|r| 2.0 * r);
-    let length_radial_side_m = side_q.map(|r| 2.0 * r);
+    let length_radial_side_m = twice(side_q);
+    let length_radial_cylindrical_m = twice(rho_q);
+    let (length_radial_m, length_radial_max_m) = match width {
+        Width::Side => (length_radial_side_m, twice(side_max)),
+        Width::Cylindrical => (length_radial_cylindrical_m, twice(rho_max)),
+    };
     Extent {
         n_part,
         front_z_m,
@@ -331,6 +354,8 @@ pub fn extent(p: &Particles, in_cloud: &[bool], plate_rear_z_m: f64, q: f64) -> 
         length_ratio_max: ratio(length_axial_max_m, length_radial_max_m),
         length_radial_side_m,
         length_ratio_side: ratio(length_axial_m, length_radial_side_m),
+        length_radial_cylindrical_m,
+        length_ratio_cylindrical: ratio(length_axial_m, length_radial_cylindrical_m),
     }
 }
 
@@ -367,6 +392,10 @@ pub struct CloudMeasurement {
     pub tau_s: f64,
     /// Quantile used for the front and the radial extent.
     pub quantile: f64,
+    /// How Lr was read (`analysis.width`); a measurement written before the key existed was
+    /// cylindrical.
+    #[serde(default = "Width::legacy")]
+    pub width: Width,
     /// Cloud particles.
     pub n_part: usize,
     /// Distinct fragments among them.
@@ -395,6 +424,12 @@ pub struct CloudMeasurement {
     /// R seen side-on: La over the side-on Lr.
     #[serde(default)]
     pub length_ratio_side: Option<f64>,
+    /// Lr as a cylindrical radius (twice the quantile of the distance from the axis), m.
+    #[serde(default)]
+    pub length_radial_cylindrical_m: Option<f64>,
+    /// R with the cylindrical width.
+    #[serde(default)]
+    pub length_ratio_cylindrical: Option<f64>,
     /// The cloud's mass, kg (the sum of its fragments' masses).
     pub mass_kg: f64,
     /// Share of the impactor's mass that is in the cloud.
@@ -503,6 +538,7 @@ pub fn measure(
     members: &CloudMembers,
     reference: &CloudReference,
     q: f64,
+    width: Width,
     time_s: f64,
     tau_s: f64,
 ) -> CloudAnalysis {
@@ -510,7 +546,7 @@ pub fn measure(
     let order: Vec<usize> = ids_in_order(p).collect();
     let (fragments, fragments_crossing_rear_face) = cloud_fragments(p, members, &order, rho);
 
-    let ext = extent(p, &members.in_cloud, reference.plate_rear_z_m, q);
+    let ext = extent(p, &members.in_cloud, reference.plate_rear_z_m, q, width);
     let n_part = ext.n_part;
     let n_frag = fragments.len();
     let mass_kg: f64 = fragments.iter().map(|f| f.mass_kg).sum();
@@ -540,6 +576,7 @@ pub fn measure(
         time_s,
         tau_s,
         quantile: q,
+        width,
         n_part,
         n_frag,
         fragmentation: (n_part > 0).then(|| n_frag as f64 / n_part as f64),
@@ -553,6 +590,8 @@ pub fn measure(
         length_ratio_max: ext.length_ratio_max,
         length_radial_side_m: ext.length_radial_side_m,
         length_ratio_side: ext.length_ratio_side,
+        length_radial_cylindrical_m: ext.length_radial_cylindrical_m,
+        length_ratio_cylindrical: ext.length_ratio_cylindrical,
         mass_kg,
         impactor_mass_fraction_in_cloud: per_impactor(impactor_in_cloud),
         largest_fragment_mass_kg: largest.map(|f| f.mass_kg),
@@ -822,6 +861,7 @@ pub struct ObserverState {
 #[derive(Debug, Clone, Copy)]
 struct Settings {
     quantile: f64,
+    width: Width,
     shadowgraph: ShadowgraphSettings,
     witness_plate: WitnessPlate,
 }
@@ -830,6 +870,7 @@ impl Settings {
     fn of(analysis: &Analysis) -> Self {
         Settings {
             quantile: analysis.quantile,
+            width: analysis.width,
             shadowgraph: analysis.shadowgraph(),
             witness_plate: analysis.witness_plate(),
         }
@@ -926,6 +967,7 @@ impl CloudObserver {
             &members.in_cloud,
             self.reference.plate_rear_z_m,
             self.settings.quantile,
+            self.settings.width,
         );
         let tau = sim.tau_s();
         if track {
@@ -1101,7 +1143,15 @@ fn cloud_result(
     time_s: f64,
     tau_s: f64,
 ) -> CloudResult {
-    let analysis = measure(p, members, reference, settings.quantile, time_s, tau_s);
+    let analysis = measure(
+        p,
+        members,
+        reference,
+        settings.quantile,
+        settings.width,
+        time_s,
+        tau_s,
+    );
     let [a, b] = *front;
     let va = match (a, b) {
         (
@@ -1314,7 +1364,13 @@ pub fn remeasure(kept: &KeptStates, analysis: &Analysis) -> CloudResult {
         state.as_ref().map(|s| {
             let p = s.particles();
             let reference = s.reference();
-            let ext = extent(&p, &s.in_cloud, s.plate_rear_z_m, settings.quantile);
+            let ext = extent(
+                &p,
+                &s.in_cloud,
+                s.plate_rear_z_m,
+                settings.quantile,
+                settings.width,
+            );
             front_sample(
                 &p,
                 &s.in_cloud,

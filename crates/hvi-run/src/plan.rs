@@ -349,6 +349,15 @@ mod tests {
         assert_eq!(fa, fingerprint(&a.clone(), "quick").expect("fp"));
         assert_ne!(fa, fingerprint(&b, "quick").expect("fp"));
         assert_ne!(fa, fingerprint(&a, "paper").expect("fp"));
+        // R's reading is part of the run: a store never serves one reading's record as the
+        // other's.
+        let c = parse_scene(text, &["analysis.width=cylindrical".into()]).expect("scene");
+        assert_ne!(fa, fingerprint(&c, "quick").expect("fp"));
+        let json = serde_json::to_value(&a).expect("json");
+        assert_eq!(
+            json["analysis"]["width"], "side",
+            "written even at its default"
+        );
         // A scene survives the JSON round trip of plan.json with the same fingerprint.
         let back: SceneSpec =
             serde_json::from_str(&serde_json::to_string(&a).expect("json")).expect("back");

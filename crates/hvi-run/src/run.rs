@@ -298,6 +298,10 @@ impl Summary {
                 Observable::LengthRatio => m.and_then(|m| m.length_ratio),
                 Observable::LengthRadialSide => m.and_then(|m| m.length_radial_side_m),
                 Observable::LengthRatioSide => m.and_then(|m| m.length_ratio_side),
+                Observable::LengthRadialCylindrical => {
+                    m.and_then(|m| m.length_radial_cylindrical_m)
+                }
+                Observable::LengthRatioCylindrical => m.and_then(|m| m.length_ratio_cylindrical),
                 Observable::FrontVelocity => cloud.and_then(|c| c.front_velocity_m_s),
                 Observable::FrontVelocityRatio => cloud.and_then(|c| c.front_velocity_ratio),
                 Observable::LargestFragmentMassFraction => {
@@ -1332,7 +1336,7 @@ pub fn describe_cloud(c: &CloudReport) -> String {
     };
     format!(
         "cloud at tau = {:.2} us: N_part {}, N_frag {}, F = {}; La = {} mm, Lr = {} mm, R = {} \
-         ({:.1} % quantile; by the maxima {} / {} mm, R = {})\n\
+         ({:.1} % quantile, Lr {}; by the maxima {} / {} mm, R = {})\n\
          front velocity va = {} m/s, va/v0 = {} (front at tau = {} and {} us); largest fragment \
          {} mm, {} of the impactor mass ({} particles); mass-weighted mean d = {} mm",
         m.tau_s * 1e6,
@@ -1343,6 +1347,7 @@ pub fn describe_cloud(c: &CloudReport) -> String {
         f(m.length_radial_m, 1e3, 2),
         f(m.length_ratio, 1.0, 3),
         100.0 * m.quantile,
+        m.width.label(),
         f(m.length_axial_max_m, 1e3, 2),
         f(m.length_radial_max_m, 1e3, 2),
         f(m.length_ratio_max, 1.0, 3),

@@ -407,8 +407,9 @@ pub struct ReanalyseArgs {
     /// The study directory (the --out of a sweep: plan.json and runs/), or its plan.json.
     pub study_dir: PathBuf,
     /// Measure with another analysis setting, analysis.KEY=VALUE with KEY one of quantile,
-    /// shadowgraph_pixel_m, shadowgraph_blur_m, shadowgraph_grain_m, shadowgraph_optical_depth, witness_standoff_m (default: each
-    /// run's own).
+    /// width (side or cylindrical), shadowgraph_pixel_m, shadowgraph_blur_m,
+    /// shadowgraph_grain_m, shadowgraph_optical_depth, witness_standoff_m (default: each run's
+    /// own).
     #[arg(long = "set", value_name = "analysis.KEY=VALUE")]
     pub sets: Vec<String>,
     /// The table's name in the study directory: NAME.csv and NAME.json.

@@ -18,6 +18,58 @@ pub const DEFAULT_QUANTILE: f64 = 0.9;
 /// section 5: "for instance 28 and 32 us", like the experiment's X-ray pair).
 pub const DEFAULT_FRONT_TIMES_S: [f64; 2] = [28e-6, 32e-6];
 
+/// How the cloud's width Lr (and so R = La / Lr) is read (docs/model-decisions.md, "The width
+/// of the cloud: cylindrical or side-on").
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Width {
+    /// As a side-view shadowgraph records it: twice the quantile of the particles' distance
+    /// from the plane of view through the axis (|x| and |y| pooled: two perpendicular views of
+    /// one cloud). The experiment's reading, and the default.
+    #[default]
+    Side,
+    /// Twice the quantile of the particles' distance from the impact axis: a radius no camera
+    /// sees, the project's default until the side-on reading replaced it.
+    Cylindrical,
+}
+
+impl Width {
+    /// The name a scene file gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Width::Side => "side",
+            Width::Cylindrical => "cylindrical",
+        }
+    }
+
+    /// How a caption names it: "side-on" or "cylindrical".
+    pub fn label(self) -> &'static str {
+        match self {
+            Width::Side => "side-on",
+            Width::Cylindrical => "cylindrical",
+        }
+    }
+
+    /// Parses a scene file's name, naming the key and the allowed values on error.
+    pub fn parse(text: &str) -> Result<Self> {
+        match text.trim() {
+            "side" => Ok(Width::Side),
+            "cylindrical" => Ok(Width::Cylindrical),
+            other => Err(EngineError::invalid(
+                "analysis.width",
+                other,
+                "`side` or `cylindrical`",
+            )),
+        }
+    }
+
+    /// What a measurement written before the key existed read: the cylindrical
+    /// width.
+    pub fn legacy() -> Self {
+        Width::Cylindrical
+    }
+}
+
 /// What a run measures of the debris cloud, and when. The observables themselves are defined in
 /// [`crate::cloud`] (MODEL.md section 5); these keys only choose the quantile, the times and
 /// how often. Only what is asked for is computed.
@@ -31,6 +83,12 @@ pub struct Analysis {
     /// the radial extent (so that a few stray particles do not decide La and Lr), in [0.5, 1];
     /// 1 is the plain maximum (always reported as well).
     pub quantile: f64,
+    /// How the width Lr (and R) is read: `side` (the shadowgraph's projection, the default)
+    /// or `cylindrical` (the distance from the axis). Both readings are always reported as
+    /// well (`length_ratio_side`, `length_ratio_cylindrical`); this one is `length_ratio`, the
+    /// R that the calibration, the figures and the verdicts use. Always written into the
+    /// scene's JSON, so a run's fingerprint says which R its record holds.
+    pub width: Width,
     /// The two times since first contact at which the front is located for va, s, with
     /// 0 <= t1 < t2 <= `run.end_time_s`. When not given: the experiment's 28 and 32 us if the
     /// run reaches 32 us, else 7/8 of the end time and the end time
@@ -100,6 +158,7 @@ impl Default for Analysis {
         Analysis {
             cloud: true,
             quantile: DEFAULT_QUANTILE,
+            width: Width::default(),
             front_times_s: None,
             track_every: 100,
             render_times_s: paper::FIG12_TIMES_S.to_vec(),

@@ -354,11 +354,21 @@ pub const KEYS: &[Key] = &[
     },
     Key {
         name: "analysis.quantile",
-        meaning: "quantile of the cloud particles' z and distance from the axis that defines \
-                  the front and the width (why 0.9: [model \
+        meaning: "quantile of the cloud particles' z and of their width (`analysis.width`) that \
+                  defines the front and the width (why 0.9: [model \
                   decisions](model-decisions.md#the-readings-of-the-paper-behind-figs-9-and-10))",
         allowed: interval(0.5, false, 1.0, false),
         default: "0.9",
+    },
+    Key {
+        name: "analysis.width",
+        meaning: "how the cloud's width Lr (and R = La / Lr) is read: `side`, as a side-view \
+                  shadowgraph records it (the quantile of |x| and |y|), or `cylindrical`, the \
+                  quantile of the distance from the axis; both are reported, this one is \
+                  `length_ratio` (why side: [model \
+                  decisions](model-decisions.md#the-width-of-the-cloud-cylindrical-or-side-on))",
+        allowed: Allowed::Text("`side` or `cylindrical`"),
+        default: "side",
     },
     Key {
         name: "analysis.front_times_s",

@@ -335,11 +335,12 @@ fn cloud_numbers(c: &CloudMeasurement) -> [String; 4] {
     };
     [
         format!(
-            "La = {} mm, Lr = {} mm, R = La/Lr = {}  ({:.1} % quantile)",
+            "La = {} mm, Lr = {} mm, R = La/Lr = {}  ({:.1} % quantile, Lr {})",
             f(c.length_axial_m, mm, 1),
             f(c.length_radial_m, mm, 1),
             f(c.length_ratio, 1.0, 3),
-            100.0 * c.quantile
+            100.0 * c.quantile,
+            c.width.label()
         ),
         format!(
             "by the maxima: La = {} mm, Lr = {} mm, R = {}",

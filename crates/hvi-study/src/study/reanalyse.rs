@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 use hvi_engine::cloud::{remeasure, CloudResult};
-use hvi_engine::scene::Analysis;
+use hvi_engine::scene::{Analysis, Width};
 use hvi_run::plan::{describe_values, Plan};
 use hvi_run::run::Summary;
 use hvi_run::state::{read_state, STATE_FILE};
@@ -20,8 +20,9 @@ use crate::cli::ReanalyseArgs;
 
 /// The `[analysis]` keys a re-analysis may change; the others (the front times, the track,
 /// the pictures) are fixed by what the run kept.
-pub const CHANGEABLE_KEYS: [&str; 6] = [
+pub const CHANGEABLE_KEYS: [&str; 7] = [
     "analysis.quantile",
+    "analysis.width",
     "analysis.shadowgraph_pixel_m",
     "analysis.shadowgraph_blur_m",
     "analysis.shadowgraph_grain_m",
@@ -35,6 +36,8 @@ pub const CHANGEABLE_KEYS: [&str; 6] = [
 pub struct AnalysisChanges {
     /// `analysis.quantile`.
     pub quantile: Option<f64>,
+    /// `analysis.width`.
+    pub width: Option<Width>,
     /// `analysis.shadowgraph_pixel_m`, m.
     pub shadowgraph_pixel_m: Option<f64>,
     /// `analysis.shadowgraph_blur_m`, m.
@@ -57,6 +60,10 @@ impl AnalysisChanges {
                 anyhow!("--set `{set}`: expected analysis.KEY=VALUE, e.g. analysis.quantile=0.99")
             })?;
             let key = key.trim();
+            if key == "analysis.width" {
+                c.width = Some(Width::parse(value.trim().trim_matches('"'))?);
+                continue;
+            }
             let slot = match key {
                 "analysis.quantile" => &mut c.quantile,
                 "analysis.shadowgraph_pixel_m" => &mut c.shadowgraph_pixel_m,
@@ -112,6 +119,9 @@ impl AnalysisChanges {
             if let Some(v) = change {
                 *field = v;
             }
+        }
+        if let Some(w) = self.width {
+            a.width = w;
         }
         a.validate(end_time_s)?;
         Ok(a)
@@ -315,8 +325,9 @@ pub fn reanalyse_study(study_dir: &Path, changes: &AnalysisChanges) -> Result<St
 }
 
 /// The settings columns the re-analysis table adds after the results columns.
-pub const SETTINGS_COLUMNS: [&str; 6] = [
+pub const SETTINGS_COLUMNS: [&str; 7] = [
     "analysis_quantile",
+    "analysis_width",
     "analysis_shadowgraph_pixel_m",
     "analysis_shadowgraph_blur_m",
     "analysis_shadowgraph_grain_m",
@@ -361,6 +372,7 @@ impl StudyReanalysis {
                 let a = re.map(|r| &r.analysis);
                 cells.extend([
                     num(a.map(|a| a.quantile)),
+                    a.map_or(Value::Null, |a| Value::from(a.width.name())),
                     num(a.map(|a| a.shadowgraph_pixel_m)),
                     num(a.map(|a| a.shadowgraph_blur_m)),
                     num(a.map(|a| a.shadowgraph_grain_m)),
