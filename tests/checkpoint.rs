@@ -1,7 +1,8 @@
 //! Checkpoints (`--checkpoint-every`): a run killed at any moment resumes from its last
 //! checkpoint and ends bit-identical to a run never stopped, at any thread count; a damaged
 //! checkpoint is reported and not used; a study's run killed or stopped mid-way resumes from its
-//! checkpoint in the store, with the study's results identical to an uninterrupted study's.
+//! checkpoint in the store, with the study's results identical to an uninterrupted study's; a
+//! finished or stopped run extended to a later end time equals a run made to it in one go.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -14,6 +15,11 @@ use common::{bin, repo};
 /// A run of the default scene at 2000 particles through 6 us, with pictures (frames captured at
 /// render times inside the run) and dumps, so that a checkpoint must carry all of them.
 fn run(out: &Path, every: &str, threads: usize) -> Command {
+    run_to(out, "6e-6", every, threads)
+}
+
+/// [`run`] to another end time, s.
+fn run_to(out: &Path, end_time_s: &str, every: &str, threads: usize) -> Command {
     let mut c = bin();
     c.arg("run")
         .arg(repo().join("studies/scenes/default.toml"))
@@ -23,7 +29,7 @@ fn run(out: &Path, every: &str, threads: usize) -> Command {
             "--set",
             "resolution.particles=2000",
             "--set",
-            "run.end_time_s=6e-6",
+            &format!("run.end_time_s={end_time_s}"),
             "--set",
             "analysis.render_times_s=[0.0, 3.3e-6, 5.1e-6]",
             "--render",
@@ -50,6 +56,10 @@ fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
             }
             let rel = p.strip_prefix(root).expect("under root");
             let rel = rel.to_string_lossy().into_owned();
+            // The state a later end continues from holds wall times, like a checkpoint.
+            if rel == "continuation.bin" {
+                continue;
+            }
             let bytes = std::fs::read(&p).expect("file");
             let bytes = if rel == "summary.json" {
                 let mut s: serde_json::Value = serde_json::from_slice(&bytes).expect("json");
@@ -185,6 +195,86 @@ fn a_run_killed_at_twenty_random_moments_resumes_bit_identical() {
         steps_seen.len()
     );
     assert_same(&files(&out), &want, "killed 20 times");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Runs `c`, which must succeed; its stderr.
+fn succeeds(mut c: Command) -> String {
+    let o = c.stderr(Stdio::piped()).output().expect("runs");
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{err}");
+    err
+}
+
+/// Runs `c`, which must fail; its stderr.
+fn fails(mut c: Command) -> String {
+    let o = c.stderr(Stdio::piped()).output().expect("runs");
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!o.status.success(), "it ran: {err}");
+    err
+}
+
+#[test]
+fn a_finished_or_stopped_run_extends_to_a_later_end_bit_identical_to_one_run_in_one_go() {
+    let dir = common::scratch("hvi-checkpoint", "extend");
+    // The reference: to 8 us in one go. Runs shorter than 32 us place their front times at
+    // 7/8 of the end and at the end, so a run to 6 us lands on steps one to 8 us does not:
+    // the continuation must come from before 5.25 us.
+    let one = dir.join("one");
+    succeeds(run_to(&one, "8e-6", "off", 2));
+    let want = files(&one);
+
+    // Finished at 6 us, then extended to 8 us, at another thread count.
+    let out = dir.join("finished");
+    succeeds(run_to(&out, "6e-6", "off", 1));
+    assert!(out.join("continuation.bin").is_file());
+    let err = succeeds(run_to(&out, "8e-6", "off", 2));
+    assert!(
+        err.contains("extending the run from its continuation"),
+        "{err}"
+    );
+    assert_same(&files(&out), &want, "extended from 6 us");
+
+    // Killed on its way to 7 us after a few checkpoints, then asked for 8 us: it continues
+    // from its last checkpoint before its first end-dependent landing.
+    let out = dir.join("stopped");
+    let mut child = run_to(&out, "7e-6", "40steps", 1).spawn().expect("spawns");
+    let t0 = Instant::now();
+    while checkpoint_step(&out.join("checkpoint.bin")).is_none_or(|s| s < 400) {
+        assert!(t0.elapsed() < Duration::from_secs(60), "no checkpoint");
+        assert!(child.try_wait().expect("wait").is_none(), "ended first");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    child.kill().expect("SIGKILL");
+    child.wait().expect("reaped");
+    let err = succeeds(run_to(&out, "8e-6", "40steps", 2));
+    assert!(
+        err.contains("extending the run from its continuation") && !err.contains("t = 0"),
+        "{err}"
+    );
+    assert_same(&files(&out), &want, "a stopped run extended");
+
+    // Refused, naming why, with nothing touched: an earlier end, another scene, other output
+    // flags. --fresh runs from t = 0 instead.
+    let before = files(&out);
+    let err = fails(run_to(&out, "7e-6", "off", 2));
+    assert!(
+        err.contains("run.end_time_s = 8e-6 s") && err.contains("--fresh"),
+        "{err}"
+    );
+    let mut other = run_to(&out, "9e-6", "off", 2);
+    other.args(["--set", "material.eps_j=0.1"]);
+    let err = fails(other);
+    assert!(err.contains("material.eps_j: "), "{err}");
+    let mut flags = run_to(&out, "9e-6", "off", 2);
+    flags.args(["--dump-format", "extxyz"]);
+    let err = fails(flags);
+    assert!(err.contains("other output flags"), "{err}");
+    assert_same(&files(&out), &before, "after the refusals");
+    let mut fresh = run_to(&out, "6e-6", "off", 2);
+    fresh.arg("--fresh");
+    let err = succeeds(fresh);
+    assert!(err.contains("held an earlier run"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

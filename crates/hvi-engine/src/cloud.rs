@@ -836,6 +836,8 @@ pub struct CloudObserver {
     track_every: u64,
     last_step: u64,
     front_steps: [u64; 2],
+    /// Whether the front times follow the end time (the defaults of a run shorter than 32 us).
+    front_follows_end: bool,
     finder: CloudFinder,
     /// The cloud track so far.
     pub track: Vec<TrackRow>,
@@ -890,6 +892,8 @@ impl CloudObserver {
             track_every: analysis.track_every,
             last_step: sim.derived.steps,
             front_steps: [step_at_tau(&sim.derived, t1), step_at_tau(&sim.derived, t2)],
+            front_follows_end: analysis.front_times_s(end_time_s)
+                != analysis.front_times_s(f64::INFINITY),
             finder: CloudFinder::default(),
             track: Vec::new(),
             front: [None, None],
@@ -921,6 +925,19 @@ impl CloudObserver {
         self.front = s.front;
         self.front_states = s.front_states;
         self.elapsed = s.elapsed;
+    }
+
+    /// The first base step at which this observer samples something only because the run
+    /// ends where it does: the end itself (the track's last sample and the measurement), or
+    /// the first front time when the front times follow the end (`analysis.front_times_s`
+    /// not given and a run shorter than 32 us). Every sample before it a run to a later end
+    /// takes too, at the same steps.
+    pub fn first_end_dependent_step(&self) -> u64 {
+        if self.measure_cloud && self.front_follows_end {
+            self.front_steps[0].min(self.last_step)
+        } else {
+            self.last_step
+        }
     }
 
     /// The first step after `step` at which something is due (a track sample or a front

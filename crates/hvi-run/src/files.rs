@@ -24,6 +24,10 @@ pub const DIR_DIGITS: usize = 16;
 /// A single run's checkpoint file, in its output directory.
 pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
 
+/// A single run's continuation state, in its output directory: what a later end time takes
+/// up from (`crate::run::RunOptions::continuation`).
+pub const CONTINUATION_FILE: &str = "continuation.bin";
+
 /// Serialises a JSON value with object keys sorted and no whitespace: the same value always
 /// gives the same bytes (serde_json writes floats in their shortest round-trip form).
 pub fn canonical_json(v: &serde_json::Value) -> String {

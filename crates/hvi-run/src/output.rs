@@ -202,12 +202,20 @@ impl Trajectory {
 
     /// The trajectory of a resumed run in `dir`, as [`Self::save_state`] left it: the partial
     /// extended XYZ file cut back to its length then (an error when it is shorter or missing:
-    /// the frames before the checkpoint are gone, and the run must start again).
+    /// the frames before the checkpoint are gone, and the run must start again). A finished
+    /// run's `trajectory.extxyz` (a run extended to a later end) is continued in a copy.
     pub fn resume(dir: &Path, s: TrajectoryState) -> Result<Self> {
         let path = dir.join(TRAJECTORY_FILE);
         let partial = dir.join(format!(".{TRAJECTORY_FILE}.partial"));
         let w = match s.extxyz_bytes {
             Some(bytes) => {
+                // A finished run's trajectory, extended to a later end: continued in a copy, so
+                // that the finished file stays whole until the extension finishes.
+                if !partial.exists() && path.is_file() {
+                    fs::copy(&path, &partial).with_context(|| {
+                        format!("cannot copy {} to continue it", path.display())
+                    })?;
+                }
                 let f = fs::OpenOptions::new()
                     .write(true)
                     .open(&partial)
@@ -505,6 +513,7 @@ fn is_run_file(name: &str) -> bool {
         || name == format!(".{TRAJECTORY_FILE}.partial")
         || name == PVD_FILE
         || name == crate::files::CHECKPOINT_FILE
+        || name == crate::files::CONTINUATION_FILE
         || (name.starts_with('.') && name.contains(".tmp."))
 }
 

@@ -54,6 +54,18 @@ pub struct RunOptions {
     /// Keep [`PROGRESS_FILE`] in the output directory up to date (every
     /// [`PROGRESS_EVERY`] of wall time), for `hvi-study status` to read while the run goes.
     pub progress_file: bool,
+    /// Keep the run's continuation here: its state at the last landing before the first
+    /// sample it takes only because it ends where it does (the end, or the default front
+    /// times of a run shorter than 32 us; `CloudObserver::first_end_dependent_step`), in the
+    /// checkpoint format under [`continuation_key`]. Every landing before that point a run of
+    /// the same scene to a later end makes too, so that run can start from it
+    /// ([`Self::extend`]) and end bit-identical to one made in one go.
+    pub continuation: Option<PathBuf>,
+    /// Start from the continuation at [`Self::continuation`] (left by this scene run to an
+    /// earlier end), not from t = 0, unless a checkpoint of this very run is there to resume.
+    /// An error, before anything is written, when it cannot: no continuation, one of another
+    /// scene, flags or version, or one that lies past this run's first end-dependent sample.
+    pub extend: bool,
 }
 
 /// A running run's progress, in its output directory when [`RunOptions::progress_file`].
@@ -482,9 +494,13 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
     if opts.progress {
         print_end(&summary, &sim, &table);
     }
-    // The run has ended (completed or failed: both are results): its checkpoint is spent.
+    // The run has ended (completed or failed: both are results): its checkpoint is spent, and
+    // a failed run has nothing to continue.
     if let Some(c) = &opts.checkpoint {
         checkpoint::remove(&c.path)?;
+    }
+    if let (Some(path), Some(_)) = (&opts.continuation, &run.failure) {
+        checkpoint::remove(path)?;
     }
     if let Some(e) = run.failure {
         return Err(anyhow::Error::new(e).context(format!(
@@ -611,6 +627,8 @@ struct Gathered {
     loop_before: Duration,
     /// The base step of the checkpoint the run resumed from.
     resumed_from: Option<u64>,
+    /// Where the run keeps its continuation, when it does.
+    continuation: Option<Continuation>,
 }
 
 /// When a run writes its next checkpoint, and where.
@@ -656,6 +674,31 @@ pub fn checkpoint_key(spec: &SceneSpec, opts: &RunOptions) -> Result<[u8; 32]> {
     })))
 }
 
+/// The key of a run's continuation ([`RunOptions::continuation`]): [`checkpoint_key`] with the
+/// end time left out, so that the same scene run to another end time has the same one.
+pub fn continuation_key(spec: &SceneSpec, opts: &RunOptions) -> Result<[u8; 32]> {
+    let mut scene = serde_json::to_value(spec)?;
+    if let Some(run) = scene.get_mut("run").and_then(|r| r.as_object_mut()) {
+        run.remove("end_time_s");
+    }
+    Ok(checkpoint::key(&serde_json::json!({
+        "continuation_of": scene,
+        "render": opts.render,
+        "dump_every": opts.dump_every,
+        "dump_format": format!("{:?}", opts.dump_format),
+    })))
+}
+
+/// Where a run keeps its continuation, and the base step it must be written before.
+struct Continuation {
+    path: PathBuf,
+    key: [u8; 32],
+    /// The run's first end-dependent landing ([`RunOptions::continuation`]).
+    before: u64,
+    /// Written by this process.
+    written: bool,
+}
+
 impl Gathered {
     /// Nothing gathered yet: the series empty, the observer and the schedules set up.
     fn new(sim: &Simulation, spec: &SceneSpec, opts: &RunOptions, wall0: Instant) -> Self {
@@ -680,6 +723,7 @@ impl Gathered {
             wall_before: Duration::ZERO,
             loop_before: Duration::ZERO,
             resumed_from: None,
+            continuation: None,
         }
     }
 
@@ -705,9 +749,24 @@ impl Gathered {
                 },
                 last_step: None,
             });
-            if run.resume(sim, opts)? {
-                return Ok(run);
-            }
+        }
+        if let Some(path) = &opts.continuation {
+            run.continuation = Some(Continuation {
+                path: path.clone(),
+                key: continuation_key(spec, opts)?,
+                before: run
+                    .observer
+                    .as_ref()
+                    .map_or(sim.derived.steps, CloudObserver::first_end_dependent_step),
+                written: false,
+            });
+        }
+        if run.resume(sim, opts)? {
+            return Ok(run);
+        }
+        if opts.extend {
+            run.extend(sim, opts, spec.run.end_time_s)?;
+            return Ok(run);
         }
         let t = Instant::now();
         if let Some(path) = &opts.lammps_data {
@@ -732,7 +791,7 @@ impl Gathered {
     /// another run, a damaged one, or one whose dumps are gone is reported on stderr and
     /// removed, and the run starts from t = 0 (`sim` untouched).
     fn resume(&mut self, sim: &mut Simulation, opts: &RunOptions) -> Result<bool> {
-        let Some(c) = self.checkpoint.as_mut() else {
+        let Some(c) = self.checkpoint.as_ref() else {
             return Ok(false);
         };
         let path = c.opts.path.clone();
@@ -759,23 +818,97 @@ impl Gathered {
             Found::Damaged(why) => return start_over(format!("damaged ({why})")),
             Found::Resume { step, payload } => (step, payload),
         };
+        if let Some(why) = self.take_up(sim, opts, step, saved)? {
+            return start_over(why);
+        }
+        if opts.progress {
+            eprintln!(
+                "resuming from checkpoint {} at base step {step} of {} (tau = {:.3} us)",
+                path.display(),
+                sim.derived.steps,
+                sim.tau_s() * 1e6
+            );
+        }
+        Ok(true)
+    }
+
+    /// Takes up the run from the continuation a run of the same scene to an earlier end left
+    /// ([`RunOptions::extend`]); an error naming why when it cannot (`sim` and the run's
+    /// files untouched then).
+    fn extend(&mut self, sim: &mut Simulation, opts: &RunOptions, end_time_s: f64) -> Result<()> {
+        let Some(c) = self.continuation.as_ref() else {
+            anyhow::bail!("extending a run needs the path of its continuation state");
+        };
+        let (path, before) = (c.path.clone(), c.before);
+        let fresh = "run it from t = 0 instead (`hvi-study run --fresh`)";
+        let (step, saved) = match checkpoint::read::<Saved>(&path, &c.key)? {
+            Found::Resume { step, payload } => (step, payload),
+            Found::Nothing => anyhow::bail!(
+                "{} is missing: there is no state to extend the run from; {fresh}",
+                path.display()
+            ),
+            Found::OtherRun => anyhow::bail!(
+                "{} is another run's (another scene apart from run.end_time_s, another \
+                 hvi-study version or other output flags); {fresh}",
+                path.display()
+            ),
+            Found::Damaged(why) => {
+                anyhow::bail!("{} is damaged ({why}); {fresh}", path.display())
+            }
+        };
+        if step >= before {
+            anyhow::bail!(
+                "{} holds the state at base step {step}, at or past base step {before}, the \
+                 first sample this run takes because of its end time (a front time follows \
+                 the end of a run shorter than 32 us): the runs part before it, so this one \
+                 cannot continue it bit-identically; {fresh}",
+                path.display()
+            );
+        }
+        if let Some(why) = self.take_up(sim, opts, step, saved)? {
+            anyhow::bail!("{}: {why}; {fresh}", path.display());
+        }
+        if opts.progress {
+            eprintln!(
+                "extending the run from its continuation at base step {step} (tau = {:.3} us) \
+                 to base step {} (tau = {:.3} us)",
+                sim.tau_s() * 1e6,
+                sim.derived.steps,
+                end_time_s * 1e6
+            );
+        }
+        Ok(())
+    }
+
+    /// Restores what a checkpoint or continuation saved at base step `step`: `Some(why)`, with
+    /// `sim` untouched, when it cannot be taken up (its dumps are gone, the state does not
+    /// fit the scene).
+    fn take_up(
+        &mut self,
+        sim: &mut Simulation,
+        opts: &RunOptions,
+        step: u64,
+        saved: Saved,
+    ) -> Result<Option<String>> {
         let trajectory = match saved.trajectory {
             Some(t) => match Trajectory::resume(&opts.out_dir, t) {
                 Ok(t) => Some(t),
-                Err(e) => return start_over(format!("its dumps cannot be continued ({e:#})")),
+                Err(e) => return Ok(Some(format!("its dumps cannot be continued ({e:#})"))),
             },
             None => None,
         };
         if let Err(e) = sim.restore_state(saved.sim) {
-            return start_over(e.to_string());
+            return Ok(Some(e.to_string()));
         }
         // The run's own files that a kill left half-written (dumps, pictures, tables).
         crate::files::remove_stale_partials(&opts.out_dir, None)?;
         crate::files::remove_stale_partials(&opts.out_dir.join(crate::output::VTK_DIR), None)?;
-        if let Every::Steps(k) = c.opts.every {
-            c.next_step = next_multiple(step, k);
+        if let Some(c) = self.checkpoint.as_mut() {
+            if let Every::Steps(k) = c.opts.every {
+                c.next_step = next_multiple(step, k);
+            }
+            c.last_step = Some(step);
         }
-        c.last_step = Some(step);
         self.rows = saved.rows;
         self.e0 = sim.energy_initial.total_j();
         self.max_drift = saved.max_drift;
@@ -791,31 +924,17 @@ impl Gathered {
         self.wall_before = saved.wall;
         self.loop_before = saved.loop_wall;
         self.resumed_from = Some(step);
-        if opts.progress {
-            eprintln!(
-                "resuming from checkpoint {} at base step {step} of {} (tau = {:.3} us)",
-                path.display(),
-                sim.derived.steps,
-                sim.tau_s() * 1e6
-            );
-        }
-        Ok(true)
+        Ok(None)
     }
 
-    /// Writes a checkpoint of the run now (a landing), unless it has one of this step.
-    fn save(&mut self, sim: &Simulation, loop_wall: Duration) -> Result<()> {
-        let Some(c) = self.checkpoint.as_ref() else {
-            return Ok(());
-        };
-        if sim.step == 0 || c.last_step == Some(sim.step) {
-            return Ok(());
-        }
-        let t = Instant::now();
+    /// Everything the run has gathered up to now (a landing), for a checkpoint or the
+    /// continuation.
+    fn gather(&mut self, sim: &Simulation, loop_wall: Duration) -> Result<Saved> {
         let trajectory = match self.trajectory.as_mut() {
             Some(t) => Some(t.save_state()?),
             None => None,
         };
-        let saved = Saved {
+        Ok(Saved {
             sim: sim.save_state(),
             rows: self.rows.clone(),
             max_drift: self.max_drift,
@@ -828,14 +947,57 @@ impl Gathered {
             render_time: self.render_time,
             wall: self.wall_before + self.wall0.elapsed(),
             loop_wall: self.loop_before + loop_wall,
+        })
+    }
+
+    /// Writes a checkpoint of the run now (a landing), unless it has one of this step.
+    fn save(&mut self, sim: &Simulation, loop_wall: Duration) -> Result<()> {
+        let Some(c) = self.checkpoint.as_ref() else {
+            return Ok(());
         };
-        checkpoint::write(&c.opts.path, &c.key, sim.step, &saved)?;
+        if sim.step == 0 || c.last_step == Some(sim.step) {
+            return Ok(());
+        }
+        let t = Instant::now();
+        let saved = self.gather(sim, loop_wall)?;
+        // Before the first end-dependent landing, the checkpoint's state is one a run to a
+        // later end shares too: it is the continuation so far (so an unfinished run can be
+        // extended as well as resumed).
+        if let Some(c) = self.continuation.as_ref().filter(|c| sim.step < c.before) {
+            checkpoint::write(&c.path, &c.key, sim.step, &saved)?;
+        }
         if let Some(c) = self.checkpoint.as_mut() {
+            checkpoint::write(&c.opts.path, &c.key, sim.step, &saved)?;
             c.since = Instant::now();
             c.last_step = Some(sim.step);
             if let Every::Steps(k) = c.opts.every {
                 c.next_step = next_multiple(sim.step, k);
             }
+        }
+        self.output_time += t.elapsed();
+        Ok(())
+    }
+
+    /// Keeps the continuation when the step to `next` would reach the run's first
+    /// end-dependent landing: the state now is the last one a run to a later end shares.
+    fn keep_continuation(
+        &mut self,
+        sim: &Simulation,
+        next: u64,
+        loop_wall: Duration,
+    ) -> Result<()> {
+        let due = self
+            .continuation
+            .as_ref()
+            .is_some_and(|c| !c.written && sim.step < c.before && next >= c.before);
+        if !due {
+            return Ok(());
+        }
+        let t = Instant::now();
+        let saved = self.gather(sim, loop_wall)?;
+        if let Some(c) = self.continuation.as_mut() {
+            checkpoint::write(&c.path, &c.key, sim.step, &saved)?;
+            c.written = true;
         }
         self.output_time += t.elapsed();
         Ok(())
@@ -932,6 +1094,7 @@ impl Gathered {
                 self.save(sim, step_wall0.elapsed())?;
             }
             let next = self.next_landing(sim.step, d.steps, energy_every);
+            self.keep_continuation(sim, next, step_wall0.elapsed())?;
             if let Err(e) = sim.step_until(next) {
                 self.failure = Some(e);
                 break;

@@ -611,7 +611,8 @@ impl SubmitArgs {
 pub struct RunArgs {
     /// Scene file (TOML), e.g. studies/scenes/default.toml.
     pub scene: PathBuf,
-    /// Output directory.
+    /// Output directory. A finished run of this scene there to an earlier run.end_time_s is
+    /// extended; another earlier run's files are replaced (see --fresh).
     #[arg(long, default_value = "runs/last")]
     pub out: PathBuf,
     /// Override a scene key: section.key=value (e.g. scene.v0_m_s=6500, run.dt_s=auto).
@@ -647,6 +648,16 @@ pub struct RunArgs {
     /// resumes from it and ends bit-identical to a run never stopped.
     #[arg(long, value_name = "EVERY", default_value = "10m")]
     pub checkpoint_every: Every,
+    /// Run from t = 0 whatever --out holds. Without it, a finished run of this scene there to
+    /// an earlier run.end_time_s is extended from its continuation.bin (bit-identical to a run
+    /// made to the new end in one go), and a finished run of another scene or to a later end
+    /// is refused, naming the keys that differ.
+    #[arg(long)]
+    pub fresh: bool,
+    /// Do not keep --out/continuation.bin, the state a later end time continues the run from
+    /// (the checkpoint format: about 300 bytes per particle).
+    #[arg(long)]
+    pub no_continuation: bool,
 }
 
 /// `hvi-study completions` arguments.

@@ -242,6 +242,9 @@ fn run(args: RunArgs) -> Result<()> {
         }),
         // The run shows its own progress on the terminal.
         progress_file: false,
+        continuation: (!args.no_continuation)
+            .then(|| args.out.join(hvi_run::files::CONTINUATION_FILE)),
+        extend: false,
     };
     // A run that left a checkpoint here resumes: what it wrote stays (run_scene checks the
     // checkpoint whole and starts from t = 0 if it is not).
@@ -250,7 +253,25 @@ fn run(args: RunArgs) -> Result<()> {
         .checkpoint
         .as_ref()
         .is_some_and(|c| hvi_run::checkpoint::key_of(&c.path) == Some(key));
-    let removed = match resumes {
+    let opts = RunOptions {
+        extend: !resumes && !args.fresh && extends_finished_run(&args.out, &spec, &opts)?,
+        ..opts
+    };
+    if opts.extend {
+        // An unfinished run's checkpoint of another end time: the run continues from its
+        // continuation instead, and the checkpoint would only be reported as another run's.
+        if let Some(c) = opts.checkpoint.as_ref().filter(|c| c.path.exists()) {
+            hvi_run::checkpoint::remove(&c.path)?;
+            if !args.quiet {
+                eprintln!(
+                    "{}: of this scene to another end time; the run continues from {} instead",
+                    c.path.display(),
+                    hvi_run::files::CONTINUATION_FILE
+                );
+            }
+        }
+    }
+    let removed = match resumes || opts.extend {
         true => Vec::new(),
         false => hvi_run::output::clear_run_dir(&args.out, &keep)?,
     };
@@ -265,6 +286,114 @@ fn run(args: RunArgs) -> Result<()> {
     pool.install(|| run_scene(&spec, &opts))?;
     println!("{}", args.out.join("summary.json").display());
     Ok(())
+}
+
+/// Whether the run should extend the finished run in `out` (`hvi-study run` without
+/// `--fresh`): true for a completed run of this scene to an earlier end time that kept its
+/// continuation; false for nothing there, a failed or unfinished run, or this very run (run
+/// again from t = 0). A completed run of another scene, or of this one to a later end, is
+/// refused with the keys that differ, as is one that cannot be extended; nothing in `out`
+/// is touched then.
+fn extends_finished_run(
+    out: &std::path::Path,
+    spec: &hvi_engine::scene::SceneSpec,
+    opts: &RunOptions,
+) -> Result<bool> {
+    let here = out.display();
+    let continues = |path: &std::path::Path| -> Result<bool> {
+        Ok(hvi_run::checkpoint::key_of(path) == Some(hvi_run::run::continuation_key(spec, opts)?))
+    };
+    let Some(old) = hvi_run::store::read_summary(out).filter(|s| s.status == "completed") else {
+        // An unfinished run (stopped at a checkpoint) of this scene to another end: its
+        // continuation is its last state that the new run shares (run_scene checks that it
+        // lies before the new run's first end-dependent sample).
+        return match &opts.continuation {
+            Some(path) if continues(path)? => Ok(true),
+            _ => Ok(false),
+        };
+    };
+    let other = "pass --fresh to replace it, or choose another --out";
+    let differ = scene_differences(&old.scene, spec)?;
+    if !differ.is_empty() {
+        anyhow::bail!(
+            "{here} holds a finished run of another scene ({}); {other}",
+            differ.join("; ")
+        );
+    }
+    let (was, now) = (old.scene.run.end_time_s, spec.run.end_time_s);
+    if now == was {
+        return Ok(false);
+    }
+    if now < was {
+        anyhow::bail!(
+            "{here} holds this scene run to run.end_time_s = {was:e} s; a run to {now:e} s is \
+             not a part of it (the samples at its end differ); {other}"
+        );
+    }
+    let cannot = |why: String| -> Result<bool> {
+        anyhow::bail!(
+            "{here} holds this scene run to run.end_time_s = {was:e} s, which cannot be \
+             extended to {now:e} s: {why}; pass --fresh to run it from t = 0"
+        )
+    };
+    let Some(path) = &opts.continuation else {
+        return cannot("--no-continuation asks not to keep the state to continue from".into());
+    };
+    match hvi_run::checkpoint::key_of(path) {
+        None => cannot(format!(
+            "it kept no continuation ({} is missing: the run had --no-continuation or an \
+             earlier hvi-study)",
+            path.display()
+        )),
+        Some(_) if !continues(path)? => cannot(format!(
+            "{} was written with other output flags (--render, --dump-every, --dump-format) or \
+             another hvi-study version",
+            path.display()
+        )),
+        Some(_) => Ok(true),
+    }
+}
+
+/// The keys whose values differ between two scenes, apart from `run.end_time_s`, as
+/// `key: old -> new`.
+fn scene_differences(
+    old: &hvi_engine::scene::SceneSpec,
+    new: &hvi_engine::scene::SceneSpec,
+) -> Result<Vec<String>> {
+    fn flatten(prefix: &str, v: &serde_json::Value, out: &mut Vec<(String, serde_json::Value)>) {
+        match v.as_object() {
+            Some(map) => {
+                for (k, v) in map {
+                    let key = if prefix.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{prefix}.{k}")
+                    };
+                    flatten(&key, v, out);
+                }
+            }
+            None => out.push((prefix.to_string(), v.clone())),
+        }
+    }
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    flatten("", &serde_json::to_value(old)?, &mut a);
+    flatten("", &serde_json::to_value(new)?, &mut b);
+    let mut keys: Vec<&String> = a.iter().chain(&b).map(|(k, _)| k).collect();
+    keys.sort();
+    keys.dedup();
+    let get = |list: &[(String, serde_json::Value)], k: &str| {
+        list.iter()
+            .find(|(key, _)| key == k)
+            .map_or("(not set)".to_string(), |(_, v)| v.to_string())
+    };
+    Ok(keys
+        .into_iter()
+        .filter(|k| k.as_str() != "run.end_time_s")
+        .filter_map(|k| {
+            let (x, y) = (get(&a, k), get(&b, k));
+            (x != y).then(|| format!("{k}: {x} there, {y} here"))
+        })
+        .collect())
 }
 
 /// `hvi-study bench`.
