@@ -1505,6 +1505,26 @@ fn a_resolution_ladder_steers_each_level_by_the_last_and_resumes_without_running
     assert_eq!(l["converged_in_n"], overlap && interior, "{l}");
     let verdict = l["verdict"].as_str().expect("verdict");
     assert_eq!(verdict.starts_with("CONVERGED IN N"), overlap && interior);
+    // The region to carry: the overlap of the last two levels' spans of the points that meet
+    // every target, recomputed here from the levels' own counts.
+    let span = |lv: &serde_json::Value| -> Option<(f64, f64)> {
+        let m = &lv["targets_met"];
+        (num(&m["points"]) > 0.0).then_some(())?;
+        let s = m["spans"].get("material.eps_j")?;
+        Some((num(&s[0]), num(&s[1])))
+    };
+    let want = match (span(&levels[1]), span(&levels[2])) {
+        (Some(a), Some(b)) if a.0.max(b.0) <= a.1.min(b.1) => {
+            serde_json::json!({"material.eps_j": [a.0.max(b.0), a.1.min(b.1)]})
+        }
+        _ => serde_json::Value::Null,
+    };
+    assert_eq!(l["targets_met_in_n"], want, "{l}");
+    assert_eq!(
+        verdict.contains("The region to carry across resolutions"),
+        !want.is_null(),
+        "{verdict}"
+    );
     let trend = (num(&levels[2]["best"]["material.eps_j"]).log10() - best2) / 1.5f64.log10();
     assert!(
         (num(&l["trend_per_decade"]["material.eps_j"]) - trend).abs() < 1e-9,

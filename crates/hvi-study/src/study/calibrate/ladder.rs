@@ -13,7 +13,9 @@
 //! - Optionally (`--ladder-check N`, `calibrate.ladder_check`) the last answer is run at a
 //!   finer resolution at the search's seeds and scored.
 //! - The verdict: converged in N when the last two levels' intervals overlap on every
-//!   searched parameter and both answers are interior; else not, with the trend.
+//!   searched parameter and both answers are interior; else not, with the trend. Beside it,
+//!   model-free, the region to carry across resolutions: where the spans of the points that
+//!   meet every target at the last two levels overlap on every searched parameter.
 //!
 //! Writes `ladder.json`, `ladder.md` and `ladder.png` beside the levels' directories
 //! (`n<N>/`, each with its own calibration.json, store and maps). docs/calibration.md
@@ -117,6 +119,11 @@ pub struct LadderResult {
     /// Whether the last two levels' answers agree (intervals overlap on every parameter,
     /// both interior).
     pub converged_in_n: bool,
+    /// Where the last two levels' runs both meet every target: per searched key, the overlap
+    /// of the two levels' spans of such points ([`TargetsMet`]); `None` when a level has none,
+    /// or the spans are apart on some key. The spans bound the points, so the overlap is a
+    /// box around the shared part of the valley, not a guarantee for each point inside it.
+    pub targets_met_in_n: Option<BTreeMap<String, (f64, f64)>>,
     /// The verdict in words.
     pub verdict: String,
     /// Per searched key, the change of its answer per decade of N between the last two levels
@@ -278,7 +285,12 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
         Some(n) => Some(check_run(args, &study, &cfg, &keys, &root, n, &results)?),
         None => None,
     };
-    let (converged_in_n, trend_per_decade, verdict) = verdict(&keys, &levels);
+    let InN {
+        converged: converged_in_n,
+        region: targets_met_in_n,
+        trend: trend_per_decade,
+        words: verdict,
+    } = verdict(&keys, &levels);
     let runs = levels.iter().map(|l| l.runs).sum::<usize>() + check.as_ref().map_or(0, |c| c.runs);
     let run_core_seconds = levels.iter().map(|l| l.run_core_seconds).sum::<f64>()
         + check.as_ref().map_or(0.0, |c| c.run_core_seconds);
@@ -289,6 +301,7 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
         levels,
         check,
         converged_in_n,
+        targets_met_in_n,
         verdict,
         trend_per_decade,
         runs,
@@ -555,15 +568,54 @@ fn check_run(
     })
 }
 
-/// Converged in N or not, the trend per decade of N between the last two levels, and the
-/// verdict in words.
-fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> (bool, BTreeMap<String, f64>, String) {
+/// The verdict in N ([`verdict`]).
+#[derive(Debug, Clone, PartialEq)]
+struct InN {
+    /// The last two levels' intervals overlap on every parameter, both answers interior.
+    converged: bool,
+    /// The overlap of the last two levels' spans of the points that meet every target, on
+    /// every searched parameter ([`LadderResult::targets_met_in_n`]).
+    region: Option<BTreeMap<String, (f64, f64)>>,
+    /// Per searched key, the answer's change per decade of N between the last two levels.
+    trend: BTreeMap<String, f64>,
+    /// The verdict in words.
+    words: String,
+}
+
+/// The overlap of two levels' spans of the points that meet every target, on every key of
+/// `dims`: `None` when a level has no such point, a key has no span, or two spans are apart.
+fn targets_met_overlap(
+    dims: &[Dim],
+    a: &LadderLevel,
+    b: &LadderLevel,
+) -> Option<BTreeMap<String, (f64, f64)>> {
+    let (ma, mb) = (a.targets_met.as_ref()?, b.targets_met.as_ref()?);
+    if ma.points == 0 || mb.points == 0 {
+        return None;
+    }
+    dims.iter()
+        .map(|dim| {
+            let (sa, sb) = (ma.spans.get(&dim.0)?, mb.spans.get(&dim.0)?);
+            let (lo, hi) = (sa.0.max(sb.0), sa.1.min(sb.1));
+            (lo <= hi).then(|| (dim.0.clone(), (lo, hi)))
+        })
+        .collect()
+}
+
+/// Converged in N or not, the region that meets the targets at the last two levels, the trend
+/// per decade of N between them, and the verdict in words.
+fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
     let mut trend = BTreeMap::new();
     let (Some(a), Some(b)) = (
         levels.len().checked_sub(2).map(|i| &levels[i]),
         levels.last(),
     ) else {
-        return (false, trend, "one level: no verdict in N".into());
+        return InN {
+            converged: false,
+            region: None,
+            trend,
+            words: "one level: no verdict in N".into(),
+        };
     };
     let decades = b.particles.log10() - a.particles.log10();
     let mut apart = Vec::new();
@@ -666,9 +718,21 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> (bool, BTreeMap<String, f64>
         String::new()
     };
     let converged = apart.is_empty() && edges.is_empty();
+    let region = targets_met_overlap(dims, a, b);
+    let region_words = match &region {
+        Some(r) => format!(
+            ". The region to carry across resolutions: the points that meet every target at \
+             both levels overlap in {}",
+            r.iter()
+                .map(|(k, (lo, hi))| format!("{k} [{}, {}]", fmt_value(*lo), fmt_value(*hi)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        None => ". No region meets every target at both levels".into(),
+    };
     let verdict = if converged {
         format!(
-            "CONVERGED IN N: the intervals at {} and {} particles overlap on every parameter ({trend_words}){met_words}{warning}",
+            "CONVERGED IN N: the intervals at {} and {} particles overlap on every parameter ({trend_words}){met_words}{warning}{region_words}",
             fmt_value(a.particles),
             fmt_value(b.particles)
         )
@@ -676,11 +740,16 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> (bool, BTreeMap<String, f64>
         let mut why = apart;
         why.extend(edges);
         format!(
-            "NOT CONVERGED IN N: {}; {trend_words}{met_words}{warning}",
+            "NOT CONVERGED IN N: {}; {trend_words}{met_words}{warning}{region_words}",
             why.join("; ")
         )
     };
-    (converged, trend, verdict)
+    InN {
+        converged,
+        region,
+        trend,
+        words: verdict,
+    }
 }
 
 /// The console's report.
@@ -916,13 +985,17 @@ mod tests {
             level(2e4, 0.02, (0.01, 0.04)),
             level(8e4, 0.03, (0.015, 0.05)),
         ];
-        let (ok, trend, words) = verdict(&dims, &near);
-        assert!(ok, "{words}");
-        let t = trend["material.eps_j"];
+        let v = verdict(&dims, &near);
+        assert!(v.converged, "{}", v.words);
+        let t = v.trend["material.eps_j"];
         assert!((t - (0.03f64 / 0.02).log10() / 4f64.log10()).abs() < 1e-12);
         let far = [level(2e4, 0.02, (0.01, 0.04)), level(8e4, 1.0, (0.5, 2.0))];
-        let (ok, _, words) = verdict(&dims, &far);
-        assert!(!ok && words.starts_with("NOT CONVERGED IN N"), "{words}");
+        let v = verdict(&dims, &far);
+        assert!(
+            !v.converged && v.words.starts_with("NOT CONVERGED IN N"),
+            "{}",
+            v.words
+        );
         let mut edge = near.clone();
         edge[1].edges.push(Edge {
             key: "material.eps_j".into(),
@@ -931,6 +1004,63 @@ mod tests {
             touched_by: "confidence region".into(),
             limit: None,
         });
-        assert!(!verdict(&dims, &edge).0);
+        assert!(!verdict(&dims, &edge).converged);
+    }
+
+    fn met(points: usize, spans: &[(&str, f64, f64)]) -> Option<TargetsMet> {
+        Some(TargetsMet {
+            points,
+            scored: 10,
+            spans: spans
+                .iter()
+                .map(|&(k, lo, hi)| (k.to_string(), (lo, hi)))
+                .collect(),
+        })
+    }
+
+    #[test]
+    fn the_region_that_meets_the_targets_carries_when_the_last_two_levels_share_it() {
+        let dims = [eps_dim()];
+        // Intervals apart (each search's slice of a valley), the valley shared: the region is
+        // the overlap of the two levels' spans, whatever the intervals say.
+        let mut far = [
+            level(8e4, 1.5e-3, (1.3e-3, 1.8e-3)),
+            level(2.7e5, 8e-3, (4e-3, 1.1e-2)),
+        ];
+        far[0].targets_met = met(5, &[("material.eps_j", 7.5e-4, 1e-2)]);
+        far[1].targets_met = met(9, &[("material.eps_j", 1.4e-3, 3.3e-2)]);
+        let v = verdict(&dims, &far);
+        assert!(!v.converged);
+        assert_eq!(
+            v.region,
+            Some(BTreeMap::from([(
+                "material.eps_j".to_string(),
+                (1.4e-3, 1e-2)
+            )]))
+        );
+        assert!(
+            v.words.contains("material.eps_j [1.4e-3, 1e-2]"),
+            "{}",
+            v.words
+        );
+        // Spans apart, or a level where no point meets the targets: no region.
+        far[1].targets_met = met(3, &[("material.eps_j", 2e-2, 3.3e-2)]);
+        let v = verdict(&dims, &far);
+        assert_eq!(v.region, None);
+        assert!(
+            v.words.contains("No region meets every target"),
+            "{}",
+            v.words
+        );
+        far[1].targets_met = met(0, &[]);
+        assert_eq!(verdict(&dims, &far).region, None);
+        // A searched key without a span at one level (it did not vary there): no region.
+        let two = [
+            eps_dim(),
+            ("material.kappa_n_m".to_string(), true, 6.0, 7.0),
+        ];
+        far[0].targets_met = met(5, &[("material.eps_j", 7.5e-4, 1e-2)]);
+        far[1].targets_met = met(9, &[("material.eps_j", 1.4e-3, 3.3e-2)]);
+        assert_eq!(verdict(&two, &far).region, None);
     }
 }
