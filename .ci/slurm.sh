@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A private single-node Slurm (munged + slurmctld + slurmd on 127.0.0.1) for the cluster test
-# (tests/slurm.rs), started as root without systemd; see ../shared/SLURM-NOTES.md.
+# (tests/slurm.rs), started as root without systemd; see docs/cluster.md ("Tested against a real Slurm").
 #
 #   .ci/slurm.sh start DIR   install the packages if missing, write DIR/slurm.conf, start the
 #                            daemons, wait until the node is idle; prints SLURM_CONF=DIR/slurm.conf

@@ -7,6 +7,9 @@
 //! sees the parent's private items, and often holds more of the parent's own types' methods,
 //! as `neighbour::images` does for `NeighbourList`); every other circle, between siblings,
 //! cousins or through a parent's children, is one.
+//!
+//! And the project cites nothing outside itself: no source, study, script or doc names the
+//! model's old out-of-tree spec or a path beside the repository (the spec is docs/model.md).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -267,4 +270,156 @@ fn a_circle_is_found_through_use_lines_inline_paths_and_parents() {
         1,
         "{graph:?}"
     );
+}
+
+/// Where the sources and docs are: directories searched recursively, and single files.
+const CITING_DIRS: [&str; 8] = [
+    "crates",
+    "tests",
+    "docs",
+    "studies",
+    "experiments_data",
+    "bench",
+    "scripts",
+    ".ci",
+];
+const CITING_FILES: [&str; 2] = ["README.md", "ARCHITECTURE.md"];
+
+/// Every file under `dir` whose name ends in one of the extensions (or has none, for the
+/// scripts of `.ci`), skipping build output.
+fn sources_under(dir: &Path, out: &mut Vec<PathBuf>) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries {
+        let path = entry.expect("entry").path();
+        if path.is_dir() {
+            if path.file_name().is_some_and(|n| n == "target") {
+                continue;
+            }
+            sources_under(&path, out);
+        } else {
+            let ext = path.extension().and_then(|e| e.to_str());
+            if matches!(ext, Some("rs" | "md" | "toml" | "sh") | None) {
+                out.push(path);
+            }
+        }
+    }
+}
+
+/// The citations of a path outside the repository in `text`, as (line number, line).
+fn outside_citations(text: &str) -> Vec<(usize, String)> {
+    // Spelled in pieces so that this file does not cite them itself.
+    let needles = [concat!("MODEL", ".md"), concat!("../", "shared")];
+    text.lines()
+        .enumerate()
+        .filter(|(_, line)| needles.iter().any(|n| line.contains(n)))
+        .map(|(i, line)| (i + 1, line.trim().to_string()))
+        .collect()
+}
+
+#[test]
+fn no_source_or_doc_cites_a_path_outside_the_repository() {
+    let root = repo();
+    let mut files = Vec::new();
+    for dir in CITING_DIRS {
+        sources_under(&root.join(dir), &mut files);
+    }
+    files.extend(CITING_FILES.iter().map(|f| root.join(f)));
+    assert!(files.len() > 100, "only {} files found", files.len());
+    let mut found = Vec::new();
+    for path in &files {
+        let Ok(text) = std::fs::read_to_string(path) else {
+            continue; // not text
+        };
+        for (n, line) in outside_citations(&text) {
+            let rel = path.strip_prefix(&root).unwrap_or(path);
+            found.push(format!("{}:{n}: {line}", rel.display()));
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "cite docs/model.md (and its section) instead of a path outside the repository:\n{}",
+        found.join("\n")
+    );
+    // The check itself finds what it is for.
+    let bad = format!(
+        "see {} section 5 in {}/",
+        concat!("MODEL", ".md"),
+        concat!("../", "shared")
+    );
+    assert_eq!(outside_citations(&bad).len(), 1);
+    assert!(outside_citations("see docs/model.md section 5").is_empty());
+}
+
+/// The library crates: they report through the `log` facade, and the binary prints.
+const LIBRARY_SOURCES: [&str; 4] = [
+    "crates/hvi-engine/src",
+    "crates/hvi-analysis/src",
+    "crates/hvi-plot/src",
+    "crates/hvi-run/src",
+];
+
+/// The lines of `text` outside its `#[cfg(test)]` module that print to the terminal, as (line
+/// number, line). Comments do not count.
+fn prints(text: &str) -> Vec<(usize, String)> {
+    // Spelled in pieces so that this file does not match itself.
+    let macros = [
+        concat!("println", "!("),
+        concat!("eprintln", "!("),
+        concat!("print", "!("),
+        concat!("eprint", "!("),
+        concat!("dbg", "!("),
+    ];
+    text.lines()
+        .enumerate()
+        .take_while(|(_, line)| line.trim() != "#[cfg(test)]")
+        .filter(|(_, line)| !line.trim_start().starts_with("//"))
+        .filter(|(_, line)| {
+            macros.iter().any(|m| {
+                line.match_indices(m).any(|(i, _)| {
+                    // `print!(` inside `eprint!(` or `println!(` counts once, as itself.
+                    !line[..i].ends_with(|c: char| c.is_alphanumeric() || c == '_')
+                })
+            })
+        })
+        .map(|(i, line)| (i + 1, line.trim().to_string()))
+        .collect()
+}
+
+#[test]
+fn library_crates_never_print() {
+    let root = repo();
+    let mut found = Vec::new();
+    let mut files = 0;
+    for dir in LIBRARY_SOURCES {
+        let mut sources = Vec::new();
+        sources_under(&root.join(dir), &mut sources);
+        for path in sources
+            .iter()
+            .filter(|p| p.extension().is_some_and(|e| e == "rs"))
+        {
+            files += 1;
+            let text = std::fs::read_to_string(path).expect("source");
+            for (n, line) in prints(&text) {
+                let rel = path.strip_prefix(&root).unwrap_or(path);
+                found.push(format!("{}:{n}: {line}", rel.display()));
+            }
+        }
+    }
+    assert!(files > 40, "only {files} library sources found");
+    assert!(
+        found.is_empty(),
+        "a library prints; report through the log facade (log::info!, log::warn!) and let \
+         the binary print:\n{}",
+        found.join("\n")
+    );
+    // The check itself finds what it is for, and leaves comments and tests alone.
+    let sample = format!(
+        "fn f() {{\n    {}\"x\");\n    // {}\"y\");\n}}\n#[cfg(test)]\nmod tests {{ fn g() {{ {}\"z\"); }} }}\n",
+        concat!("eprintln", "!("),
+        concat!("println", "!("),
+        concat!("println", "!("),
+    );
+    assert_eq!(prints(&sample).len(), 1, "{sample}");
 }

@@ -1,4 +1,4 @@
-//! Tests of the debris-cloud observables (`hvi_engine::cloud`, MODEL.md section 5): synthetic
+//! Tests of the debris-cloud observables (`hvi_engine::cloud`, docs/model.md section 5): synthetic
 //! configurations with known answers (fragments, F, sizes, La, Lr, R, va, outliers), a small
 //! real impact (consistency, plausibility, thread independence), and `hvi-study run --render`
 //! end to end.
@@ -678,7 +678,8 @@ fn small_impact_cloud_is_consistent_plausible_and_thread_independent() {
         .sum();
     assert!(residual > 0.5 * plate_mass && residual < plate_mass);
 
-    // va / v0 near the 1-D shock estimate of the rear free surface (about 1.03, MODEL.md 6).
+    // va / v0 near the 1-D shock estimate of the rear free surface (about 1.03, docs/model.md
+    // section 6).
     let ratio = a.report.front_velocity_ratio.expect("va");
     assert!(ratio > 0.8 && ratio < 1.3, "va/v0 = {ratio}");
     let r = m.length_ratio.expect("R");

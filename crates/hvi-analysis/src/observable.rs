@@ -1,9 +1,9 @@
 //! The run observables: one typed definition of each number a study reads of a run (its
 //! name in tables and target files, its symbol, unit and meaning), and the values of one run.
 //!
-//! The debris-cloud observables are computed once, in `hvi_engine::cloud` (MODEL.md section
-//! 5); the run crate fills [`Observables`] from a run's summary. Tables, scores, tolerances,
-//! plots and reports iterate over [`Observable::ALL`] instead of naming them again, so adding
+//! The debris-cloud observables are computed once, in `hvi_engine::cloud` (docs/model.md
+//! section 5); the run crate fills [`Observables`] from a run's summary. Tables, scores,
+//! tolerances, plots and reports iterate over [`Observable::ALL`] instead of naming them again, so adding
 //! an observable is one row of [`DEFINITIONS`] plus its computation.
 //!
 //! ```

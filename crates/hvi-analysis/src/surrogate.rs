@@ -814,7 +814,7 @@ mod tests {
         let (obs, conv) = search(&space, f, noise, 2, 15);
         assert!(conv, "did not converge in {} evaluations", obs.len());
         let r = region(&space, &obs, noise, None).expect("region");
-        eprintln!(
+        log::info!(
             "quadratic: {} evaluations, best {:?}, region {:?}",
             obs.len(),
             r.best,
@@ -844,7 +844,7 @@ mod tests {
         let (obs, _) = search(&space, f, noise, 3, 12);
         let r = region(&space, &obs, noise, None).expect("region");
         let truth = f(&r.best);
-        eprintln!(
+        log::info!(
             "branin: {} evaluations, best {:?}, f = {truth}",
             obs.len(),
             r.best

@@ -1,4 +1,5 @@
-//! The debris cloud and its observables (MODEL.md section 5): the one place that defines them.
+//! The debris cloud and its observables (docs/model.md section 5): the one place that defines
+//! them.
 //!
 //! Every number a run reports about the cloud, every plot of it and every score compares is
 //! computed here; the study crate calls these functions and never re-derives a definition.
@@ -28,7 +29,7 @@
 //!   Quantiles interpolate linearly between order statistics (numpy's default, Hyndman-Fan
 //!   type 7), see [`quantile`].
 //! - **Front velocity** va = (z_f(t2) - z_f(t1)) / (t2 - t1): the front located at two times,
-//!   as the experiment's pair of X-ray images does (default 28 and 32 us, see
+//!   as the experiment's pair of high-speed photographs does (default 28 and 32 us, see
 //!   [`crate::scene::Analysis::front_times_s`]); also va / v0.
 //! - **Fragment size**: particles; mass; volume-equivalent diameter d = (6 V / pi)^(1/3) with
 //!   V = mass / density. A particle stands for the volume mass / density, which is its body's

@@ -2,15 +2,15 @@
 //!
 //! Every test, default and report that needs one of these numbers calls this module; none of
 //! them repeats the literal. Units are SI. The paper states its parameters without units or
-//! the particle diameter they belong to; `../shared/MODEL.md` section 4 reads them as SI at the
-//! calibration resolution, and [`reference_sigma_m`] computes that diameter.
+//! the particle diameter they belong to; the project reads them as SI at the calibration
+//! resolution (docs/model.md section 4), and [`reference_sigma_m`] computes that diameter.
 
 /// Impactor (sphere) diameter D, m. Section 3.2 states it for the Fig. 13 comparison ("9.53 mm
 /// in the simulation and experiment"); the EMI calibration shot's diameter is not given, and
-/// MODEL.md section 1 uses the same D for the calibration scene.
+/// the project uses the same D for the calibration scene (docs/model.md section 1).
 pub const IMPACTOR_DIAMETER_M: f64 = 9.53e-3;
 /// Aluminium density of impactor and plate, kg/m^3. Not given in the paper: our choice (the
-/// density of aluminium alloys), MODEL.md section 1.
+/// density of aluminium alloys), docs/model.md section 1.
 pub const ALUMINIUM_DENSITY_KG_M3: f64 = 2700.0;
 /// Impact velocity of the paper's calibration simulations, m/s (section 3.1, Fig. 12 caption
 /// text: "v0 = 6.7 km/s").
@@ -22,10 +22,11 @@ pub const CALIBRATION_T_OVER_D: f64 = 0.425;
 pub const CALIBRATION_SHOT_V0_M_S: f64 = 6500.0;
 /// Plate thickness over diameter of the EMI calibration shot (section 3.1: "t/D = 0.41").
 pub const CALIBRATION_SHOT_T_OVER_D: f64 = 0.41;
-/// Plate side over impactor diameter. Not given in the paper; MODEL.md section 1 decides 3.
+/// Plate side over impactor diameter. Not given in the paper; the project decides 3
+/// (docs/model.md section 1).
 pub const DEFAULT_WIDTH_OVER_D: f64 = 3.0;
 /// Total particle count of the calibration runs (section 2.3: "N = 2.7 x 10^5"), the reference
-/// resolution of eps and kappa (MODEL.md section 4).
+/// resolution of eps and kappa (docs/model.md section 4).
 pub const CALIBRATION_PARTICLES: f64 = 2.7e5;
 /// Total particle count of the final runs, Figs. 11, 12 (section 2.3: "N = 7.4 x 10^5").
 pub const FINAL_PARTICLES: f64 = 7.4e5;

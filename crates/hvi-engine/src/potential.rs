@@ -4,7 +4,7 @@
 //!   `phi_rep(r) = c eps [(sigma/r)^12 - (sigma/r)^6] + c eps / 4`, with `c = 1` for the form
 //!   printed in the paper and `c = 4` for the usual WCA form. The shift `c eps / 4` makes the
 //!   energy zero at r_eq, so energy is continuous there (the printed `+ eps` is not; see
-//!   MODEL.md section 3).
+//!   docs/model.md section 3).
 //! * Cohesive spring, intact bonds stretched past r_eq: `phi_coh(r) = kappa/2 (r - r_eq)^2`.
 //! * A bond breaks for good the first time `r > rcut`.
 //!
@@ -12,7 +12,7 @@
 
 use serde::{Deserialize, Serialize};
 
-/// Which prefactor the contact repulsion carries (MODEL.md section 3).
+/// Which prefactor the contact repulsion carries (docs/model.md section 3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum ContactForm {

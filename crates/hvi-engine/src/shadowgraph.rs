@@ -1,9 +1,9 @@
 //! A synthetic shadowgraph: the debris cloud as the experiment's side-on camera sees it.
 //!
 //! The experiment measures La, Lr and the front from high-speed photographs of the cloud's
-//! silhouette (MODEL.md 5), not from particle positions. The model's particles stand for much
-//! finer debris, so the camera is modelled on the cloud's projected areal mass density, not on
-//! the particles' own cross-sections: each particle's mass is deposited on a pixel grid in
+//! silhouette (docs/model.md section 5), not from particle positions. The model's particles
+//! stand for much finer debris, so the camera is modelled on the cloud's projected areal mass
+//! density, not on the particles' own cross-sections: each particle's mass is deposited on a pixel grid in
 //! (x, z), seen side-on along y (cloud-in-cell, in particle-id order), and blurred with a
 //! Gaussian of standard deviation `blur_m` (the camera's resolution, and the scale over which
 //! the model's discrete particles stand for a continuous cloud). Debris of grain diameter

@@ -47,7 +47,7 @@ pub const LEDGER_DRIFT_BOUND: f64 = 1e-3;
 /// Owned bonds per vectorised block of the bond kernel.
 const BLOCK_BONDS: usize = 192;
 
-/// The energy ledger (MODEL.md section 3): kinetic + contact + bond + broken is conserved.
+/// The energy ledger (docs/model.md section 3): kinetic + contact + bond + broken is conserved.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Energy {
     /// Kinetic energy, J.
@@ -150,7 +150,7 @@ pub struct Simulation {
     /// Time per phase.
     pub timing: Timing,
     /// Ids of the target particles on the plate's lateral rim at t = 0 (the residual plate is
-    /// the fragment holding them, MODEL.md section 5).
+    /// the fragment holding them, docs/model.md section 5).
     pub rim_ids: Vec<u32>,
     /// F/r of each owned bond (0 when empty or broken and stretched), per owned slot.
     bond_force_over_r: Vec<f64>,
@@ -994,7 +994,7 @@ fn bond_chunk(
             if intact && r2 > rcut2 {
                 *slot = s | BROKEN_FLAG;
                 part.broken += 1;
-                // Book the energy the bond holds at rcut (MODEL.md 3), not at the
+                // Book the energy the bond holds at rcut (docs/model.md section 3), not at the
                 // overshoot r2 > rcut2: velocity Verlet's trapezoidal work over the
                 // step in which the force drops to zero matches E(rcut) to O(dt^2),
                 // while E(r) over-books by about kappa (rcut - r_eq) dr / 2.

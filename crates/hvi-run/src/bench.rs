@@ -57,7 +57,7 @@ pub fn bench(spec: &SceneSpec, threads: &[usize], out: &Path) -> Result<(Vec<Ben
             progress: false,
             ..Default::default()
         };
-        eprintln!("bench: {t} thread(s)...");
+        log::info!("bench: {t} thread(s)...");
         let outcome = pool.install(|| run_scene(spec, &opts))?;
         let s = &outcome.summary;
         let fingerprint = (s.energy.total_final_j.to_bits(), s.bonds_broken);

@@ -43,7 +43,6 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
-use std::sync::Mutex;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
@@ -135,22 +134,6 @@ pub struct CheckpointOptions {
     pub path: PathBuf,
     /// The interval.
     pub every: Every,
-}
-
-/// The interval of the runs a study store computes ([`set_interval`]).
-static INTERVAL: Mutex<Option<Every>> = Mutex::new(None);
-
-/// Sets the checkpoint interval of every run a study store computes in this process (the
-/// commands' `--checkpoint-every`); [`Every::default`] until set.
-pub fn set_interval(every: Every) {
-    if let Ok(mut i) = INTERVAL.lock() {
-        *i = Some(every);
-    }
-}
-
-/// The interval of the runs a study store computes.
-pub fn interval() -> Every {
-    INTERVAL.lock().ok().and_then(|i| *i).unwrap_or_default()
 }
 
 /// The key of a run: the SHA-256 of the canonical JSON of what its checkpoint depends on.

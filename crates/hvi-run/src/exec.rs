@@ -35,6 +35,8 @@ pub struct ExecOptions {
     pub jobs: Option<usize>,
     /// Progress bar and one line per finished run on stderr.
     pub progress: bool,
+    /// How often each run writes a checkpoint.
+    pub checkpoint_every: crate::checkpoint::Every,
 }
 
 impl Default for ExecOptions {
@@ -43,6 +45,7 @@ impl Default for ExecOptions {
             threads: 0,
             jobs: None,
             progress: true,
+            checkpoint_every: crate::checkpoint::Every::default(),
         }
     }
 }
@@ -176,7 +179,7 @@ pub fn execute(
         if opts.progress {
             match &bar {
                 Some(b) if !b.is_hidden() => b.println(line),
-                _ => eprintln!("{line}"),
+                _ => log::info!("{line}"),
             }
         }
     };

@@ -28,7 +28,7 @@ static WARNED: AtomicBool = AtomicBool::new(false);
 
 fn unsupported(path: &Path, e: &std::io::Error) {
     if !WARNED.swap(true, Ordering::Relaxed) {
-        eprintln!(
+        log::warn!(
             "warning: cannot lock {} ({e}); going on without advisory locks: the run store's \
              atomic renames still keep every result whole, but two processes may compute the \
              same run",
@@ -82,7 +82,7 @@ fn acquire(path: &Path, waiting: &dyn Fn(&str) -> String) -> Result<Option<File>
     match file.try_lock() {
         Ok(()) => {}
         Err(TryLockError::WouldBlock) => {
-            eprintln!("{}", waiting(&holder(&mut file)));
+            log::info!("{}", waiting(&holder(&mut file)));
             if let Err(e) = file.lock() {
                 unsupported(path, &e);
                 return Ok(None);

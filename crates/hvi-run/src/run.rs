@@ -535,11 +535,11 @@ fn set_up(spec: &SceneSpec, opts: &RunOptions) -> Result<(Simulation, Counts)> {
     let copies = sim.symmetry.copies() as usize;
     if opts.progress {
         let full = sim.full_particle_count();
-        eprintln!("{}", describe(&sim.derived, full, sim.bonds_initial));
+        log::info!("{}", describe(&sim.derived, full, sim.bonds_initial));
         if copies > 1 {
-            eprintln!("quarter symmetry: {n} particles simulated, with their mirror images");
+            log::info!("quarter symmetry: {n} particles simulated, with their mirror images");
         }
-        eprintln!("threads {}", rayon::current_num_threads());
+        log::info!("threads {}", rayon::current_num_threads());
     }
     let counts = Counts {
         particles: sim.full_particle_count(),
@@ -564,7 +564,7 @@ fn render_steps(spec: &SceneSpec, d: &Derived, opts: &RunOptions) -> Vec<(u64, f
                 render_steps.push((s, t));
             }
         } else if opts.render && opts.progress {
-            eprintln!(
+            log::info!(
                 "render: tau = {:.2} us is beyond the end of the run ({:.2} us), skipped",
                 t * 1e6,
                 end_tau * 1e6
@@ -796,7 +796,7 @@ impl Gathered {
         };
         let path = c.opts.path.clone();
         let start_over = |why: String| -> Result<bool> {
-            eprintln!(
+            log::info!(
                 "checkpoint {}: {why}; the run starts from t = 0",
                 path.display()
             );
@@ -822,7 +822,7 @@ impl Gathered {
             return start_over(why);
         }
         if opts.progress {
-            eprintln!(
+            log::info!(
                 "resuming from checkpoint {} at base step {step} of {} (tau = {:.3} us)",
                 path.display(),
                 sim.derived.steps,
@@ -869,7 +869,7 @@ impl Gathered {
             anyhow::bail!("{}: {why}; {fresh}", path.display());
         }
         if opts.progress {
-            eprintln!(
+            log::info!(
                 "extending the run from its continuation at base step {step} (tau = {:.3} us) \
                  to base step {} (tau = {:.3} us)",
                 sim.tau_s() * 1e6,
@@ -1178,7 +1178,7 @@ impl Gathered {
             if sim.fragments_separating(&labels) {
                 sim.start_coasting(&labels);
                 if progress {
-                    eprintln!(
+                    log::info!(
                         "ballistic cut-off at tau = {:.3} us: bonds broken grew by at most {} over {:.3} us and no fragments touch or close in; fragments now move rigidly",
                         tau * 1e6,
                         run.cutoff_break_fraction,
@@ -1267,7 +1267,7 @@ fn thermo(
             b.set_position(s);
             b.set_message(msg);
         }
-        None => eprintln!("step {s:>9}/{steps}  {msg} ETA {eta:.0} s"),
+        None => log::info!("step {s:>9}/{steps}  {msg} ETA {eta:.0} s"),
     }
     t.elapsed()
 }
@@ -1394,7 +1394,7 @@ fn render_pictures(
     }
     let took = t.elapsed();
     if opts.progress {
-        eprintln!(
+        log::info!(
             "pictures: {:.2} s for {} particles ({} series frames)",
             took.as_secs_f64(),
             n,

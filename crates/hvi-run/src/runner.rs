@@ -66,6 +66,16 @@ impl SlurmBatches {
 }
 
 impl Runner {
+    /// The store of the study directory `out` for this runner's runs: locally, they write
+    /// checkpoints as its options say (a Slurm task's run follows its job script).
+    pub fn store(&self, out: &Path) -> Result<Store> {
+        let store = Store::open(out)?;
+        Ok(match self {
+            Runner::Local(o) => store.with_checkpoint_every(o.checkpoint_every),
+            Runner::Slurm(_) => store,
+        })
+    }
+
     /// Executes `jobs` into `store` (the store of the study directory `out`), labelling each
     /// with `describe` in progress lines. `template` is the study's plan: a Slurm batch's plan
     /// takes its study, tier and files from it. `who` names the batch in the job script.
@@ -114,7 +124,7 @@ impl SlurmBatches {
         opts.quiet = !self.progress;
         let (job_id, earlier) = submit_batch(&plan, out, &opts, who)?;
         if self.progress && !earlier.is_empty() {
-            eprintln!(
+            log::info!(
                 "{who}: waiting for runs an earlier submission is running (job {})",
                 earlier.join(", ")
             );
@@ -176,7 +186,7 @@ impl SlurmBatches {
                 }
             }
             if self.progress && last != Some((done, running, queued)) {
-                eprintln!(
+                log::info!(
                     "{who}: {done} of {} runs done, {running} running, {queued} queued on Slurm",
                     plan.runs.len()
                 );

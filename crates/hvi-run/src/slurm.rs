@@ -56,6 +56,8 @@ pub struct SlurmOptions {
     pub dry_run: bool,
     /// No per-task lines and hints after submitting.
     pub quiet: bool,
+    /// How often each task's run writes a checkpoint (`--checkpoint-every`).
+    pub checkpoint_every: crate::checkpoint::Every,
 }
 
 /// One array task of a submission.
@@ -599,7 +601,7 @@ fn pending(plan: &Plan, out: &Path) -> Result<Pending> {
         QueueView::of(out)?
     };
     if let Some(note) = &queue.note {
-        eprintln!("note: {note}");
+        log::warn!("note: {note}");
     }
     let mut jobs = Vec::new();
     let mut queued = 0;
@@ -669,15 +671,32 @@ fn array_suffix(limit: Option<usize>) -> String {
     limit.map_or(String::new(), |k| format!("%{k}"))
 }
 
+/// What [`submit`] did: the caller prints the script of a dry run and the job id.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Submitted {
+    /// Every run is done or already queued.
+    Nothing,
+    /// A dry run: the job script that would be submitted.
+    DryRun {
+        /// The script.
+        script: String,
+    },
+    /// The job array's id.
+    Job {
+        /// Slurm's job id.
+        id: String,
+    },
+}
+
 /// `hvi-study submit STUDY --slurm`: the runs the store of `out` lacks (and Slurm is not
-/// already running) as one job array of `run-unit`s; prints the job id.
-pub fn submit(plan: &Plan, out: &Path, opts: &SlurmOptions) -> Result<()> {
+/// already running) as one job array of `run-unit`s.
+pub fn submit(plan: &Plan, out: &Path, opts: &SlurmOptions) -> Result<Submitted> {
     opts.validate()?;
     let pending = pending(plan, out)?;
-    eprintln!("{}", pending.status_line(plan));
+    log::info!("{}", pending.status_line(plan));
     let todo = &pending.todo;
     if todo.is_empty() {
-        return Ok(());
+        return Ok(Submitted::Nothing);
     }
     let study_dir = absolute(out)?;
     let sub_dir = if opts.dry_run {
@@ -695,8 +714,7 @@ pub fn submit(plan: &Plan, out: &Path, opts: &SlurmOptions) -> Result<()> {
         "hvi-study submit",
     )?;
     if opts.dry_run {
-        print!("{}", spec.script());
-        eprintln!(
+        log::info!(
             "dry run: would submit {} runs as array 0-{}{} from {} (tasks.txt: {}); nothing written, nothing submitted",
             todo.len(),
             todo.len() - 1,
@@ -707,14 +725,15 @@ pub fn submit(plan: &Plan, out: &Path, opts: &SlurmOptions) -> Result<()> {
                 .collect::<Vec<_>>()
                 .join(" ")
         );
-        return Ok(());
+        return Ok(Submitted::DryRun {
+            script: spec.script(),
+        });
     }
     let job_id = submit_script(plan, todo, &spec)?;
     if !opts.quiet {
         print_submitted(plan, todo, opts, &job_id, &sub_dir, &study_dir);
     }
-    println!("{job_id}");
-    Ok(())
+    Ok(Submitted::Job { id: job_id })
 }
 
 /// The job script of `tasks` runs of `plan` submitted from `sub_dir` by `who` (a command,
@@ -749,7 +768,7 @@ fn script_spec(
         partition: opts.partition.clone(),
         time: opts.time.clone(),
         extra: opts.sbatch_options.clone(),
-        checkpoint_every: crate::checkpoint::interval(),
+        checkpoint_every: opts.checkpoint_every,
         study_dir: study_dir.to_path_buf(),
         submission_dir: sub_dir.to_path_buf(),
         exe,
@@ -777,7 +796,7 @@ pub fn submit_batch(
     let spec = script_spec(plan, pending.todo.len(), opts, &study_dir, &sub_dir, who)?;
     let job_id = submit_script(plan, &pending.todo, &spec)?;
     if !opts.quiet {
-        eprintln!(
+        log::info!(
             "submitted job {job_id}: {} runs as array 0-{}{}, {} CPU(s) each; logs in {}",
             pending.todo.len(),
             pending.todo.len() - 1,
@@ -849,12 +868,12 @@ fn print_submitted(
     study_dir: &Path,
 ) {
     for (task, &i) in todo.iter().enumerate() {
-        eprintln!(
+        log::info!(
             "  task {task}: run {i} ({})",
             describe_values(&plan.axes, &plan.runs[i].values)
         );
     }
-    eprintln!(
+    log::info!(
         "submitted job {job_id}: {} runs as array 0-{}{}, {} CPU(s) each; logs and record in {}",
         todo.len(),
         todo.len() - 1,
@@ -862,7 +881,7 @@ fn print_submitted(
         opts.cpus_per_task,
         sub_dir.display()
     );
-    eprintln!(
+    log::info!(
         "follow it with `hvi-study status {}`; `hvi-study collect {}` writes the tables when it is done",
         study_dir.display(),
         study_dir.display()

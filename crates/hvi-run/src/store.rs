@@ -22,7 +22,7 @@
 //! is refused, never reused.
 //!
 //! A long run also writes checkpoints beside its lock ([`crate::checkpoint`], every
-//! [`crate::checkpoint::interval`] and when a signal stops it): a run killed mid-way resumes
+//! [`Store::with_checkpoint_every`] and when a signal stops it): a run killed mid-way resumes
 //! from its last checkpoint in a new temporary directory and ends as it would have, and the
 //! checkpoint is removed once the run is stored.
 
@@ -145,6 +145,8 @@ pub struct Store {
     elsewhere: std::sync::Arc<AtomicU64>,
     /// Whether a damaged run is moved aside (and so runs again) rather than an error.
     repair: bool,
+    /// How often each run it computes writes a checkpoint ([`Store::with_checkpoint_every`]).
+    checkpoint_every: crate::checkpoint::Every,
 }
 
 static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
@@ -219,9 +221,19 @@ impl Store {
             runs,
             repair: true,
             elsewhere: Default::default(),
+            checkpoint_every: crate::checkpoint::Every::default(),
         };
         store.sweep_stale()?;
         Ok(store)
+    }
+
+    /// The store, its runs writing a checkpoint this often ([`crate::checkpoint::Every`];
+    /// every 10 minutes of wall time unless set).
+    pub fn with_checkpoint_every(self, every: crate::checkpoint::Every) -> Store {
+        Store {
+            checkpoint_every: every,
+            ..self
+        }
     }
 
     /// The store of `study_dir` as it is, for reading: neither created nor swept (an error
@@ -238,6 +250,7 @@ impl Store {
             runs,
             repair: false,
             elsewhere: Default::default(),
+            checkpoint_every: crate::checkpoint::Every::default(),
         })
     }
 
@@ -398,7 +411,7 @@ impl Store {
             )
         })?;
         sync_dir(&self.runs);
-        eprintln!(
+        log::warn!(
             "run store: {} is damaged ({why}); moved it to {} and it runs again",
             dir.display(),
             aside.display()
@@ -499,7 +512,7 @@ impl Store {
             .build()
             .context("cannot start worker threads")?;
         // Pictures too (cloud_side.png feeds the snapshot matrices): about 1 % of a run.
-        let every = crate::checkpoint::interval();
+        let every = self.checkpoint_every;
         let checkpoint = (every != crate::checkpoint::Every::Off).then(|| {
             crate::checkpoint::CheckpointOptions {
                 path: self.checkpoint_path(&job.fingerprint),
@@ -518,7 +531,7 @@ impl Store {
             pool.install(|| run_scene(&job.scene, &opts).map(|o| o.resumed_from_step))
         }));
         if let Ok(Ok(Some(step))) = &outcome {
-            eprintln!(
+            log::info!(
                 "run store: run {} resumed from its checkpoint at base step {step}",
                 &job.fingerprint[..DIR_DIGITS.min(job.fingerprint.len())]
             );

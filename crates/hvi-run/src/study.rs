@@ -36,7 +36,7 @@ pub fn job_of(plan: &Plan, index: usize) -> Result<Job> {
 /// Executes every run of a plan whose `plan.json` lives in `dir`, and writes the results
 /// table there. Returns the table and what the execution did.
 pub fn execute_plan(plan: &Plan, dir: &Path, opts: &ExecOptions) -> Result<(Table, ExecReport)> {
-    let store = Store::open(dir)?;
+    let store = Store::open(dir)?.with_checkpoint_every(opts.checkpoint_every);
     let jobs: Vec<Job> = (0..plan.runs.len())
         .map(|i| job_of(plan, i))
         .collect::<Result<_>>()?;

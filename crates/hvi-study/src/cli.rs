@@ -273,7 +273,8 @@ impl CalibrateArgs {
                 );
             }
             Some((
-                self.slurm_flags.options(false, self.study.quiet)?,
+                self.slurm_flags
+                    .options(false, self.study.quiet, self.study.checkpoint_every)?,
                 self.poll,
             ))
         } else {
@@ -568,8 +569,14 @@ impl Default for SlurmFlags {
 }
 
 impl SlurmFlags {
-    /// The Slurm options these flags give, checked.
-    pub fn options(&self, dry_run: bool, quiet: bool) -> Result<SlurmOptions> {
+    /// The Slurm options these flags give, checked; each task's run checkpoints every
+    /// `checkpoint_every`.
+    pub fn options(
+        &self,
+        dry_run: bool,
+        quiet: bool,
+        checkpoint_every: Every,
+    ) -> Result<SlurmOptions> {
         let opts = SlurmOptions {
             partition: self.partition.clone(),
             time: self.time.clone(),
@@ -578,6 +585,7 @@ impl SlurmFlags {
             sbatch_options: self.sbatch_options.clone(),
             dry_run,
             quiet,
+            checkpoint_every,
         };
         opts.validate()?;
         Ok(opts)
@@ -602,7 +610,8 @@ impl SubmitArgs {
         if self.study.jobs.is_some() {
             bail!("submit: --jobs is not used (--array-limit K caps the runs at once)");
         }
-        self.slurm_flags.options(self.dry_run, self.study.quiet)
+        self.slurm_flags
+            .options(self.dry_run, self.study.quiet, self.study.checkpoint_every)
     }
 }
 

@@ -16,18 +16,6 @@ use crate::cli::{
 
 /// Runs one subcommand.
 pub fn dispatch(command: Command) -> Result<()> {
-    // The checkpoint interval of every run a study store computes in this process.
-    let every = match &command {
-        Command::Sweep(a) => Some(a.checkpoint_every),
-        Command::Calibrate(a) => Some(a.study.checkpoint_every),
-        Command::ValidityMap(a) => Some(a.study.checkpoint_every),
-        Command::Submit(a) => Some(a.study.checkpoint_every),
-        Command::RunUnit(a) => Some(a.checkpoint_every),
-        _ => None,
-    };
-    if let Some(every) = every {
-        hvi_run::checkpoint::set_interval(every);
-    }
     match command {
         Command::Run(args) => run(args),
         Command::Keys(args) => {
@@ -449,7 +437,12 @@ fn accuracy(args: AccuracyArgs) -> Result<()> {
 fn submit(args: &SubmitArgs) -> Result<()> {
     let opts = args.slurm_options()?;
     let (_, plan, out) = args.study.build_plan()?;
-    hvi_run::slurm::submit(&plan, &out, &opts)
+    match hvi_run::slurm::submit(&plan, &out, &opts)? {
+        hvi_run::slurm::Submitted::Nothing => {}
+        hvi_run::slurm::Submitted::DryRun { script } => print!("{script}"),
+        hvi_run::slurm::Submitted::Job { id } => println!("{id}"),
+    }
+    Ok(())
 }
 
 /// `hvi-study run-unit`: a failed run is an error (recorded in its directory).
@@ -459,6 +452,7 @@ fn run_unit(args: &RunUnitArgs) -> Result<()> {
         args.index,
         args.threads,
         args.study_dir.as_deref(),
+        args.checkpoint_every,
     )?;
     if completed {
         Ok(())

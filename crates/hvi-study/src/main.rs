@@ -7,6 +7,26 @@ use std::process::ExitCode;
 use clap::Parser;
 use hvi_study::cli::Cli;
 
+/// Prints the libraries' progress lines and warnings (the `log` facade) on stderr, each
+/// message as it is: the words carry their own "warning:" or "note:".
+struct Stderr;
+
+impl log::Log for Stderr {
+    fn enabled(&self, metadata: &log::Metadata) -> bool {
+        metadata.level() <= log::Level::Info
+    }
+
+    fn log(&self, record: &log::Record) {
+        if self.enabled(record.metadata()) {
+            eprintln!("{}", record.args());
+        }
+    }
+
+    fn flush(&self) {}
+}
+
+static STDERR: Stderr = Stderr;
+
 fn main() -> ExitCode {
     // Output piped into a reader that stops early (`hvi-study keys | head`) ends the process
     // quietly, as it ends `ls | head`, instead of a panic on the failed write: Rust ignores
@@ -16,6 +36,9 @@ fn main() -> ExitCode {
     // other thread exists, has no memory-safety conditions.
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+    if log::set_logger(&STDERR).is_ok() {
+        log::set_max_level(log::LevelFilter::Info);
     }
     let cli = Cli::parse();
     if let Err(e) = hvi_run::interrupt::install() {

@@ -8,14 +8,14 @@ use super::keys;
 use crate::error::{EngineError, Result};
 use crate::paper;
 
-/// Default quantile of the front and of the radial extent. MODEL.md section 5 suggests "for
-/// instance 99.5 %"; the readings study (docs/model-decisions.md, "The readings of the paper
-/// behind Figs. 9 and 10") found the 0.9 quantile the reading closest to the paper: at 0.99 and
+/// Default quantile of the front and of the radial extent (docs/model.md section 5). The paper
+/// does not say; the readings study (docs/model-decisions.md, "The readings of the paper behind
+/// Figs. 9 and 10") found the 0.9 quantile the reading closest to the paper: at 0.99 and
 /// above the front is a spray of a few per cent of the particles, which speeds up as eps grows
 /// while the bulk of the cloud slows down, so va/v0 rises with eps where the paper's falls.
 pub const DEFAULT_QUANTILE: f64 = 0.9;
-/// Default times since first contact at which the front is located for va, s (MODEL.md
-/// section 5: "for instance 28 and 32 us", like the experiment's X-ray pair).
+/// Default times since first contact at which the front is located for va, s (docs/model.md
+/// section 5: a pair ending at the analysis time, like the experiment's two photographs).
 pub const DEFAULT_FRONT_TIMES_S: [f64; 2] = [28e-6, 32e-6];
 
 /// How the cloud's width Lr (and so R = La / Lr) is read (docs/model-decisions.md, "The width
@@ -71,7 +71,7 @@ impl Width {
 }
 
 /// What a run measures of the debris cloud, and when. The observables themselves are defined in
-/// [`crate::cloud`] (MODEL.md section 5); these keys only choose the quantile, the times and
+/// [`crate::cloud`] (docs/model.md section 5); these keys only choose the quantile, the times and
 /// how often. Only what is asked for is computed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

@@ -100,7 +100,7 @@ pub struct Setup {
     /// Particles and bonds at t = 0.
     pub particles: Particles,
     /// Particles of the target that lie on its lateral rim at t = 0 (by id): the residual
-    /// plate is the fragment that holds them (MODEL.md section 5).
+    /// plate is the fragment that holds them (docs/model.md section 5).
     pub rim_ids: Vec<u32>,
 }
 

@@ -47,7 +47,7 @@ pub enum Geometry {
         diameter_m: f64,
         /// Plate thickness over sphere diameter, t/D.
         t_over_d: f64,
-        /// Plate side over sphere diameter, W/D (MODEL.md decision: 3).
+        /// Plate side over sphere diameter, W/D (default 3: docs/model.md section 1).
         #[serde(default = "default_width_over_d")]
         width_over_d: f64,
         /// Impact velocity v0, m/s.
@@ -124,7 +124,7 @@ fn default_true() -> bool {
     true
 }
 
-/// Material parameters. Give (eps, kappa) at the reference diameter of MODEL.md section 4, or
+/// Material parameters. Give (eps, kappa) at the reference diameter of docs/model.md section 4, or
 /// the size-invariant (gamma, lambda) with eps = gamma sigma^3 and kappa = lambda sigma (eq. 12).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -157,7 +157,7 @@ pub struct Material {
     pub sizing_rule: SizingRule,
 }
 
-/// The scaling of eps with the particle diameter under geometric sizing (MODEL.md section 4).
+/// The scaling of eps with the particle diameter under geometric sizing (docs/model.md section 4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 pub enum SizingRule {
     /// Eq. (12): eps = gamma sigma^3, energy per bond proportional to volume per particle.
@@ -367,8 +367,9 @@ fn is_default_stride_displacement(c: &f64) -> bool {
 pub const DEFAULT_SKIN_OVER_SIGMA: f64 = 0.45;
 
 impl SceneSpec {
-    /// The paper's calibration scene (MODEL.md 1: 9.53 mm sphere at 6.7 km/s, t/D = 0.425,
-    /// W = 3 D, the best-fit material) at `particles` particles, run to `end_time_s`.
+    /// The paper's calibration scene (docs/model.md section 1: 9.53 mm sphere at 6.7 km/s,
+    /// t/D = 0.425, W = 3 D, the best-fit material) at `particles` particles, run to
+    /// `end_time_s`.
     pub fn calibration(particles: f64, end_time_s: f64) -> SceneSpec {
         SceneSpec {
             scene: Geometry::SphereOnPlate {

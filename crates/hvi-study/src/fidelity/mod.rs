@@ -172,6 +172,7 @@ pub fn fidelity(args: &FidelityArgs) -> Result<Option<FidelityResult>> {
         threads: args.threads.unwrap_or(0),
         jobs: args.jobs,
         progress: !args.quiet,
+        ..ExecOptions::default()
     };
     let mut executed: Vec<Option<Executed>> = Vec::new();
     for (r, p) in config.readings.iter().zip(plans) {

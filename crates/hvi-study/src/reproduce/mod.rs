@@ -207,8 +207,8 @@ fn model_notes(plans: &Plans, runs: &Path) -> Vec<String> {
     vec![
         format!(
             "Contact form `{contact}` (eq. 3 with the prefactor as printed is the default; \
-             MODEL.md section 3); eps and kappa are the paper's values at \u{3c3}_ref = {:.4} mm \
-             and are sized to each run's \u{3c3} (eq. 12).",
+             docs/model.md section 3); eps and kappa are the paper's values at \
+             \u{3c3}_ref = {:.4} mm and are sized to each run's \u{3c3} (eq. 12).",
             paper::reference_sigma_m() * 1e3
         ),
         format!(
@@ -275,6 +275,7 @@ fn stage_context(args: &ReproduceArgs, out: &Path, runs: &Path) -> Ctx {
             threads: args.threads.unwrap_or(0),
             jobs: args.jobs,
             progress: !args.quiet,
+            ..ExecOptions::default()
         },
         threads: args.threads,
         jobs: args.jobs,

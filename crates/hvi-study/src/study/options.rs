@@ -95,6 +95,7 @@ impl StudyOptions {
             threads: self.threads.unwrap_or(0),
             jobs: self.jobs,
             progress: !self.quiet,
+            checkpoint_every: self.checkpoint_every,
         }
     }
 }

@@ -138,7 +138,7 @@ fn run_slice(args: &StabilityArgs, file: &Path) -> Result<Slice> {
         out: Some(args.store.join(&stem)),
         threads: args.threads,
         jobs: None,
-        checkpoint_every: hvi_run::checkpoint::interval(),
+        checkpoint_every: hvi_run::checkpoint::Every::default(),
         quiet: args.quiet,
     };
     let (study, plan, out) = study_args.plan()?;

@@ -68,6 +68,7 @@ pub fn run_unit(
     index: usize,
     threads: Option<usize>,
     study_dir: Option<&std::path::Path>,
+    checkpoint_every: hvi_run::checkpoint::Every,
 ) -> Result<bool> {
     if threads == Some(0) {
         anyhow::bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
@@ -80,7 +81,7 @@ pub fn run_unit(
             .unwrap_or_else(|| std::path::Path::new("."))
     });
     let job = job_of(&plan, index)?;
-    let store = Store::open(dir)?;
+    let store = Store::open(dir)?.with_checkpoint_every(checkpoint_every);
     let record = match store.lookup(&job.fingerprint)? {
         Some(r) if r.status == RunStatus::Completed => {
             eprintln!("run {index}: already done");

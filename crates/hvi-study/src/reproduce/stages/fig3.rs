@@ -93,7 +93,7 @@ fn figure(sigma: f64, printed: &Interaction, wca: &Interaction) -> Figure {
         f.number(
             format!("{name}: |repulsion energy at r_eq| / \u{3b5}"),
             Value::Number(at.energy),
-            "zero energy at r_eq: our shift c\u{3b5}/4 (MODEL.md 3; the printed +\u{3b5} would leave 3\u{3b5}/4)",
+            "zero energy at r_eq: our shift c\u{3b5}/4 (docs/model.md section 3; the printed +\u{3b5} would leave 3\u{3b5}/4)",
         );
         checks.push(at.force < 1e-9 && at.energy < 1e-9);
         checks.push(at.zero_beyond);

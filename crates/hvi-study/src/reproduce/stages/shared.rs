@@ -71,7 +71,7 @@ impl Ctx {
             out: Some(dir.to_path_buf()),
             threads: self.threads,
             jobs: self.jobs,
-            checkpoint_every: hvi_run::checkpoint::interval(),
+            checkpoint_every: hvi_run::checkpoint::Every::default(),
             quiet: self.quiet,
         }
     }

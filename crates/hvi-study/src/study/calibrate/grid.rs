@@ -64,7 +64,7 @@ pub(super) fn grid_stage(
     progress: bool,
 ) -> Result<Grid> {
     let stored = stored_before(plan, out)?;
-    let store = Store::open(out)?;
+    let store = runner.store(out)?;
     let jobs: Vec<Job> = (0..plan.runs.len())
         .map(|i| job_of(plan, i))
         .collect::<Result<_>>()?;

@@ -516,7 +516,7 @@ fn check_run(
     }
     let targets = cfg.load_targets(study)?;
     let runner = runner_of(&check_args)?;
-    let store = Store::open(&out)?;
+    let store = runner.store(&out)?;
     let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
     let stage = Stage {
         study: &one,

@@ -24,7 +24,7 @@ use anyhow::Result;
 use hvi_run::exec::thread_split;
 use hvi_run::runner::{Runner, SlurmBatches};
 use hvi_run::slurm::SlurmOptions;
-use hvi_run::store::{Record, Store};
+use hvi_run::store::Record;
 
 pub use config::{CalibrateConfig, Method};
 pub use grid::score_table;
@@ -166,7 +166,7 @@ pub(crate) fn calibrate_plan(
     let best_run = plan.run(grid.best)?;
     let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
     let fixed = fixed_overrides(plan, &best_run.values, |k| refine_keys.contains(k))?;
-    let store = Store::open(out)?;
+    let store = runner.store(out)?;
     let stage = Stage {
         study,
         plan,
