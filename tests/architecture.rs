@@ -423,3 +423,61 @@ fn library_crates_never_print() {
     );
     assert_eq!(prints(&sample).len(), 1, "{sample}");
 }
+
+/// Every module of a crate's `src`, as its path under `src` without `.rs` or `/mod.rs`
+/// (`study/calibrate/ego`), the crate roots left out.
+fn module_paths(src: &Path) -> Vec<String> {
+    let mut files = Vec::new();
+    sources_under(src, &mut files);
+    files
+        .iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "rs"))
+        .filter_map(|p| {
+            let rel = p
+                .strip_prefix(src)
+                .ok()?
+                .to_string_lossy()
+                .replace('\\', "/");
+            let rel = rel.strip_suffix(".rs")?;
+            let rel = rel.strip_suffix("/mod").unwrap_or(rel);
+            (!matches!(rel, "lib" | "main")).then(|| rel.to_string())
+        })
+        .collect()
+}
+
+#[test]
+fn architecture_md_names_every_module() {
+    let root = repo();
+    let text = std::fs::read_to_string(root.join("ARCHITECTURE.md")).expect("ARCHITECTURE.md");
+    let mut missing = Vec::new();
+    let mut count = 0;
+    for krate in [
+        "hvi-engine",
+        "hvi-analysis",
+        "hvi-plot",
+        "hvi-run",
+        "hvi-study",
+    ] {
+        for m in module_paths(&root.join("crates").join(krate).join("src")) {
+            count += 1;
+            // Named as `a::b::c`, or as `c` inside its parent's row (`sim::band`,
+            // `stages::shared`, `render::side`).
+            let full = m.replace('/', "::");
+            let last = m.rsplit('/').next().unwrap_or(&m);
+            let parent = m.rsplit('/').nth(1);
+            let named = text.contains(&format!("`{full}`"))
+                || parent.is_some_and(|p| text.contains(&format!("`{p}::{last}`")))
+                || (parent.is_none() && text.contains(&format!("| `{last}` |")))
+                || (parent.is_some() && text.contains(&format!("`{last}`")));
+            if !named {
+                missing.push(format!("{krate}: {full}"));
+            }
+        }
+    }
+    assert!(count > 80, "only {count} modules found");
+    assert!(
+        missing.is_empty(),
+        "ARCHITECTURE.md does not name these modules:\n{}",
+        missing.join("\n")
+    );
+}
