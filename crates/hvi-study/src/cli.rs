@@ -89,10 +89,13 @@ pub enum Command {
     Accuracy(AccuracyArgs),
 }
 
-/// What every study command takes: the study, its tier and where its results go.
+/// Which study, at which tier and resolution, and where its results are: the flags every
+/// study command shares (`plan`, `sweep`, `status`, `collect`, `calibrate`, `validity-map`,
+/// `submit`), declared once.
 #[derive(Args, Debug, Clone)]
-pub struct StudyArgs {
-    /// Study file (TOML), e.g. studies/calibration.toml.
+pub struct StudySelection {
+    /// Study file (TOML), e.g. studies/calibration.toml (`status` and `collect` also take a
+    /// study directory or its plan.json).
     pub study: PathBuf,
     /// Resolution tier, as named in the study's `[tiers]` (default: its default_tier, `quick`).
     #[arg(long)]
@@ -106,6 +109,38 @@ pub struct StudyArgs {
     /// Output directory (default: `runs/studies/<study>/<tier>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
+}
+
+impl StudySelection {
+    /// The plain options of a study workflow with this selection; the running options
+    /// (threads, jobs, checkpoints) at the values given.
+    fn options(
+        &self,
+        threads: Option<usize>,
+        jobs: Option<usize>,
+        checkpoint_every: Every,
+        quiet: bool,
+    ) -> StudyOptions {
+        StudyOptions {
+            study: self.study.clone(),
+            tier: self.tier.clone(),
+            particles: self.particles,
+            sets: self.sets.clone(),
+            out: self.out.clone(),
+            threads,
+            jobs,
+            checkpoint_every,
+            quiet,
+        }
+    }
+}
+
+/// What every study command that runs takes: the study's selection and how to run it.
+#[derive(Args, Debug, Clone)]
+pub struct StudyArgs {
+    /// The study, its tier and where its results go.
+    #[command(flatten)]
+    pub selection: StudySelection,
     /// Worker threads in all (default: every core).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -125,17 +160,8 @@ pub struct StudyArgs {
 impl StudyArgs {
     /// The plain options these flags give.
     pub fn options(&self) -> StudyOptions {
-        StudyOptions {
-            study: self.study.clone(),
-            tier: self.tier.clone(),
-            particles: self.particles,
-            sets: self.sets.clone(),
-            out: self.out.clone(),
-            threads: self.threads,
-            jobs: self.jobs,
-            checkpoint_every: self.checkpoint_every,
-            quiet: self.quiet,
-        }
+        self.selection
+            .options(self.threads, self.jobs, self.checkpoint_every, self.quiet)
     }
 
     /// Loads the study, builds and validates its plan, and writes `plan.json`.
@@ -158,20 +184,9 @@ impl StudyArgs {
 /// `hvi-study plan` arguments: the study's, without the flags of running (it runs nothing).
 #[derive(Args, Debug, Clone)]
 pub struct PlanArgs {
-    /// Study file (TOML), e.g. studies/calibration.toml.
-    pub study: PathBuf,
-    /// Resolution tier, as named in the study's `[tiers]` (default: its default_tier, `quick`).
-    #[arg(long)]
-    pub tier: Option<String>,
-    /// Override the tier's particle count (resolution.particles).
-    #[arg(long, value_name = "N")]
-    pub particles: Option<f64>,
-    /// Override a scene key in every run: section.key=value (not an axis key).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub sets: Vec<String>,
-    /// Output directory (default: `runs/studies/<study>/<tier>`).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
+    /// The study, its tier and where its plan goes.
+    #[command(flatten)]
+    pub selection: StudySelection,
     /// No progress output.
     #[arg(long)]
     pub quiet: bool,
@@ -180,17 +195,7 @@ pub struct PlanArgs {
 impl PlanArgs {
     /// The plain options these flags give (no threads: nothing runs).
     pub fn options(&self) -> StudyOptions {
-        StudyOptions {
-            study: self.study.clone(),
-            tier: self.tier.clone(),
-            particles: self.particles,
-            sets: self.sets.clone(),
-            out: self.out.clone(),
-            threads: None,
-            jobs: None,
-            checkpoint_every: Every::Off,
-            quiet: self.quiet,
-        }
+        self.selection.options(None, None, Every::Off, self.quiet)
     }
 }
 
@@ -308,24 +313,13 @@ pub struct ValidityArgs {
     pub cutoff: Option<f64>,
 }
 
-/// Which study store `status` and `collect` read: the flags of [`StudyArgs`] that choose the
-/// study, its tier and its directory (no threads or jobs: they run nothing).
+/// Which study store `status` and `collect` read: the study's selection, as the study ran it
+/// (no threads or jobs: they run nothing).
 #[derive(Args, Debug, Clone)]
 pub struct StoreArgs {
-    /// Study file (TOML), e.g. studies/calibration.toml, or a study directory or its plan.json.
-    pub study: PathBuf,
-    /// Resolution tier, as named in the study's `[tiers]` (default: its default_tier, `quick`).
-    #[arg(long)]
-    pub tier: Option<String>,
-    /// The tier's particle count as the study ran it (resolution.particles).
-    #[arg(long, value_name = "N")]
-    pub particles: Option<f64>,
-    /// A scene override of every run as the study ran it: section.key=value.
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub sets: Vec<String>,
-    /// Output directory (default: `runs/studies/<study>/<tier>`).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
+    /// The study, its tier and its directory.
+    #[command(flatten)]
+    pub selection: StudySelection,
     /// No progress output.
     #[arg(long)]
     pub quiet: bool,
@@ -335,11 +329,7 @@ impl StudyArgs {
     /// The store these flags select, for `status` and `collect`.
     pub fn to_store(&self) -> StoreArgs {
         StoreArgs {
-            study: self.study.clone(),
-            tier: self.tier.clone(),
-            particles: self.particles,
-            sets: self.sets.clone(),
-            out: self.out.clone(),
+            selection: self.selection.clone(),
             quiet: true,
         }
     }
@@ -349,11 +339,7 @@ impl StoreArgs {
     /// The same selection as the study flags a running command takes.
     pub fn to_study(&self) -> StudyArgs {
         StudyArgs {
-            study: self.study.clone(),
-            tier: self.tier.clone(),
-            particles: self.particles,
-            sets: self.sets.clone(),
-            out: self.out.clone(),
+            selection: self.selection.clone(),
             threads: None,
             jobs: None,
             checkpoint_every: Every::default(),

@@ -24,7 +24,7 @@ use hvi_run::table::{results_table, Table};
 /// command that only looks, `status`, writes nothing: the directory may hold another plan,
 /// a ladder level's or a running calibration's).
 pub fn open_plan(args: &StudyArgs, write: bool) -> Result<(Plan, PathBuf)> {
-    let p = &args.study;
+    let p = &args.selection.study;
     let plan_path = if p.is_dir() {
         Some(p.join("plan.json"))
     } else if p.extension().is_some_and(|e| e == "json") {
@@ -40,11 +40,8 @@ pub fn open_plan(args: &StudyArgs, write: bool) -> Result<(Plan, PathBuf)> {
         };
         return Ok((plan, out));
     };
-    if args.tier.is_some()
-        || args.particles.is_some()
-        || !args.sets.is_empty()
-        || args.out.is_some()
-    {
+    let s = &args.selection;
+    if s.tier.is_some() || s.particles.is_some() || !s.sets.is_empty() || s.out.is_some() {
         bail!(
             "{} is a study directory's plan: --tier, --particles, --set and --out apply to a \
              study file",

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
-use crate::cli::{StabilityArgs, StudyArgs};
+use crate::cli::{StabilityArgs, StudyArgs, StudySelection};
 use hvi_engine::sim::LEDGER_DRIFT_BOUND;
 use hvi_plot::stability_map::{stability_map, MapCell, StabilityMap};
 use hvi_run::output::{write_atomic_bytes, write_csv_atomic};
@@ -131,11 +131,13 @@ fn run_slice(args: &StabilityArgs, file: &Path) -> Result<Slice> {
         .file_stem()
         .map_or("slice".into(), |s| s.to_string_lossy().into_owned());
     let study_args = StudyArgs {
-        study: file.to_path_buf(),
-        tier: args.tier.clone(),
-        particles: None,
-        sets: Vec::new(),
-        out: Some(args.store.join(&stem)),
+        selection: StudySelection {
+            study: file.to_path_buf(),
+            tier: args.tier.clone(),
+            particles: None,
+            sets: Vec::new(),
+            out: Some(args.store.join(&stem)),
+        },
         threads: args.threads,
         jobs: None,
         checkpoint_every: hvi_run::checkpoint::Every::default(),

@@ -8,7 +8,7 @@ use anyhow::{anyhow, Context, Result};
 use hvi_analysis::observable::Observable;
 use hvi_analysis::score::Target;
 
-use crate::cli::StudyArgs;
+use crate::cli::{StudyArgs, StudySelection};
 use crate::reproduce::report::StageTiming;
 use hvi_run::exec::ExecOptions;
 use hvi_run::output::write_atomic_bytes;
@@ -64,11 +64,13 @@ impl Ctx {
         dir: &Path,
     ) -> StudyArgs {
         StudyArgs {
-            study: study.to_path_buf(),
-            tier: Some(r.tier.clone()),
-            particles: r.particles,
-            sets: r.set.clone(),
-            out: Some(dir.to_path_buf()),
+            selection: StudySelection {
+                study: study.to_path_buf(),
+                tier: Some(r.tier.clone()),
+                particles: r.particles,
+                sets: r.set.clone(),
+                out: Some(dir.to_path_buf()),
+            },
             threads: self.threads,
             jobs: self.jobs,
             checkpoint_every: hvi_run::checkpoint::Every::default(),
