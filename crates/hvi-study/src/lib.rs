@@ -10,7 +10,7 @@
 //! use hvi_study::cli::{Cli, Command};
 //! let cli = Cli::try_parse_from(["hvi-study", "sweep", "studies/calibration.toml", "--tier", "quick"])
 //!     .expect("valid flags");
-//! assert!(matches!(cli.command, Command::Sweep(ref a) if a.tier.as_deref() == Some("quick")));
+//! assert!(matches!(cli.command, Command::Sweep(ref a) if a.selection.tier.as_deref() == Some("quick")));
 //! // Bad flags are refused before anything runs.
 //! assert!(Cli::try_parse_from(["hvi-study", "sweep"]).is_err());
 //! ```
