@@ -123,7 +123,7 @@ SETS=(--set "resolution.particles=$N" --set "run.max_stride=1" "${EXTRA_SETS[@]}
 # resolution), so that STEPS can be turned into an end time that gives exactly STEPS steps.
 log "hvi probe run (writes $DATA)"
 "$HVI" run "$SCENE" --out "$WORKDIR/hvi_probe" "${SETS[@]}" --set run.end_time_s=1e-15 \
-  --lammps "$EXPORT" --threads 1 --quiet >"$WORKDIR/hvi_probe.log" 2>&1 \
+  --lammps "$EXPORT" --threads 1 --fresh --quiet >"$WORKDIR/hvi_probe.log" 2>&1 \
   || die "hvi probe run failed, see $WORKDIR/hvi_probe.log"
 PROBE="$WORKDIR/hvi_probe/summary.json"
 [[ -s "$DATA" ]] || die "hvi did not write $DATA"
@@ -143,13 +143,14 @@ SKIN="$(python3 -c "import sys; print(repr(float(sys.argv[1]) * float(sys.argv[2
 log "particles $PARTICLES, steps $STEPS, dt $DT s, sigma $SIGMA m, eps $EPS J, kappa $KAPPA N/m, rcut $RCUT m, contact c=$CONTACT, thermo every $THERMO"
 
 # ---- (a) hvi timing runs ------------------------------------------------------------------
+# --fresh: a timing is of a whole run from t = 0, never of an earlier run extended to this end.
 HVI_RUNS=()
 if [[ $SKIP_HVI -eq 0 ]]; then
   for th in $THREADS; do
     out="$WORKDIR/hvi_t$th"
     log "hvi run, $th thread(s), $STEPS steps"
     "$HVI" run "$SCENE" --out "$out" "${SETS[@]}" --set "run.end_time_s=$END_TIME" \
-      --set "run.energy_every=$THERMO" --threads "$th" --quiet >"$out.log" 2>&1 \
+      --set "run.energy_every=$THERMO" --threads "$th" --fresh --quiet >"$out.log" 2>&1 \
       || die "hvi run ($th threads) failed, see $out.log"
     got="$(json "$out/summary.json" 'd["steps"]')"
     [[ "$got" == "$STEPS" ]] || die "hvi ran $got steps, expected $STEPS (see $out/summary.json)"
