@@ -56,7 +56,7 @@ for n in $COUNTS; do
   for a in $AMPS; do
     out="$WORK/n$n-$a"
     "$BIN" run "$WORK/plates.toml" --set resolution.particles="$n" --set run.thermal_ratio="$a" \
-      --out "$out" > /dev/null 2>&1
+      --out "$out" --fresh > /dev/null 2>&1
     row="$row $(onset "$out/energy.csv") |"
   done
   actual=$(grep -o '"particles": [0-9]*' "$out/summary.json" | head -1 | grep -o '[0-9]*$')
