@@ -173,7 +173,8 @@ pub fn execute(
     let cached = records.iter().filter(|r| r.is_some()).count();
     let (phases, costs) = order_runs(jobs, &pending, opts);
     let total_cost: f64 = costs.values().sum();
-    let done_cost = std::sync::Mutex::new(0.0f64);
+    // (cost run in this process, cost of the finished runs)
+    let done_cost = std::sync::Mutex::new((0.0f64, 0.0f64));
     let bar = progress_bar(opts, pending.len(), cached);
     let say = |line: String| {
         if opts.progress {
@@ -204,21 +205,25 @@ pub fn execute(
         if r.is_err() {
             store_failed.store(true, Ordering::Relaxed);
         }
-        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
         if !matches!(&r, Ok(rec) if rec.status == RunStatus::Completed) {
             failed_now.fetch_add(1, Ordering::Relaxed);
         }
-        let finished_cost = {
+        // One finished run at a time: its count, the work done and its line together, so the
+        // lines come out in the order of their counts when two runs end at once.
+        {
             let mut c = done_cost.lock().unwrap_or_else(|p| p.into_inner());
-            *c += costs.get(&i).copied().unwrap_or(0.0);
-            *c
-        };
-        let eta = time_left(
-            t0.elapsed().as_secs_f64(),
-            (n, pending.len()),
-            (finished_cost, total_cost),
-        );
-        say(finished_line(n, pending.len(), i, &r, describe) + &eta);
+            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+            // A run resumed from a checkpoint ran only its rest in this process's time.
+            let cost = costs.get(&i).copied().unwrap_or(0.0);
+            c.0 += cost * (1.0 - store.resumed_share(&jobs[i].fingerprint));
+            c.1 += cost;
+            let eta = time_left(
+                t0.elapsed().as_secs_f64(),
+                (n, pending.len()),
+                (c.0, c.1, total_cost),
+            );
+            say(finished_line(n, pending.len(), i, &r, describe) + &eta);
+        }
         if let Some(b) = &bar {
             b.inc(1);
             b.set_message(format!(
@@ -300,20 +305,21 @@ fn order_runs(
 }
 
 /// The time left after `done.0` of `done.1` runs, `elapsed` seconds in: the elapsed time
-/// scaled by the cost still to run over the cost run (particles x base steps; by the count
-/// when the costs are unknown), e.g. `; 6 left, about 4.2 min`. Empty after the last run.
-fn time_left(elapsed: f64, done: (usize, usize), cost: (f64, f64)) -> String {
+/// scaled by the cost still to run over the cost run in that time (particles x base steps; by
+/// the count when the costs are unknown), e.g. `; 6 left, about 4.2 min`. `cost` is (run in
+/// this process, of the finished runs, of all): a run resumed from a checkpoint counts as
+/// finished in full but as run here only from its checkpoint on. Empty after the last run.
+fn time_left(elapsed: f64, done: (usize, usize), cost: (f64, f64, f64)) -> String {
     let (n, total) = done;
     if n >= total || n == 0 {
         return String::new();
     }
-    let (run, all) = cost;
-    let share = if run > 0.0 && all > run {
-        run / all
+    let (here, finished, all) = cost;
+    let left = if here > 0.0 && all > finished {
+        elapsed * (all - finished) / here
     } else {
-        n as f64 / total as f64
+        elapsed * (total - n) as f64 / n as f64
     };
-    let left = elapsed * (1.0 - share) / share;
     format!(
         "; {} left, about {}",
         total - n,
@@ -514,16 +520,25 @@ mod tests {
     fn the_time_left_scales_the_elapsed_time_by_the_cost_still_to_run() {
         // A quarter of the cost done in 60 s: 180 s left, though half the runs are done.
         assert_eq!(
-            time_left(60.0, (2, 4), (1.0, 4.0)),
+            time_left(60.0, (2, 4), (1.0, 1.0, 4.0)),
             "; 2 left, about 3.0 min"
         );
         // Costs unknown: by the count.
-        assert_eq!(time_left(10.0, (1, 3), (0.0, 0.0)), "; 2 left, about 20 s");
         assert_eq!(
-            time_left(3600.0, (1, 4), (1.0, 4.0)),
+            time_left(10.0, (1, 3), (0.0, 0.0, 0.0)),
+            "; 2 left, about 20 s"
+        );
+        assert_eq!(
+            time_left(3600.0, (1, 4), (1.0, 1.0, 4.0)),
             "; 3 left, about 3.0 h"
         );
-        assert_eq!(time_left(10.0, (3, 3), (3.0, 3.0)), "");
+        assert_eq!(time_left(10.0, (3, 3), (3.0, 3.0, 3.0)), "");
+        // A run of cost 2 resumed at 3/4 of its course: 60 s bought 0.5 of cost, so the 2 of
+        // cost left take 4 min, not the 1 min its full cost would promise.
+        assert_eq!(
+            time_left(60.0, (1, 2), (0.5, 2.0, 4.0)),
+            "; 1 left, about 4.0 min"
+        );
     }
 
     #[test]

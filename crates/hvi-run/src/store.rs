@@ -147,6 +147,9 @@ pub struct Store {
     repair: bool,
     /// How often each run it computes writes a checkpoint ([`Store::with_checkpoint_every`]).
     checkpoint_every: crate::checkpoint::Every,
+    /// Per fingerprint, the share of a run (in base steps) done before this process resumed it
+    /// from its checkpoint ([`Store::resumed_share`]).
+    resumed: std::sync::Arc<std::sync::Mutex<std::collections::HashMap<String, f64>>>,
 }
 
 static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
@@ -221,6 +224,7 @@ impl Store {
             runs,
             repair: true,
             elsewhere: Default::default(),
+            resumed: Default::default(),
             checkpoint_every: crate::checkpoint::Every::default(),
         };
         store.sweep_stale()?;
@@ -250,6 +254,7 @@ impl Store {
             runs,
             repair: false,
             elsewhere: Default::default(),
+            resumed: Default::default(),
             checkpoint_every: crate::checkpoint::Every::default(),
         })
     }
@@ -419,6 +424,16 @@ impl Store {
         Ok(None)
     }
 
+    /// The share of the run with this fingerprint (in base steps, 0 to 1) that was done before
+    /// this store resumed it from its checkpoint; 0 for a run computed from t = 0 or not here.
+    pub fn resumed_share(&self, fingerprint: &str) -> f64 {
+        self.resumed
+            .lock()
+            .ok()
+            .and_then(|m| m.get(fingerprint).copied())
+            .unwrap_or(0.0)
+    }
+
     /// Runs a job on `threads` worker threads and stores its directory atomically. A failed
     /// simulation (instability, panic) is a record with status `failed`, not an error; errors
     /// are for the store itself (disk, permissions).
@@ -528,13 +543,21 @@ impl Store {
             ..RunOptions::default()
         };
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            pool.install(|| run_scene(&job.scene, &opts).map(|o| o.resumed_from_step))
+            pool.install(|| {
+                run_scene(&job.scene, &opts).map(|o| (o.resumed_from_step, o.sim.derived.steps))
+            })
         }));
-        if let Ok(Ok(Some(step))) = &outcome {
+        if let Ok(Ok((Some(step), steps))) = &outcome {
             log::info!(
                 "run store: run {} resumed from its checkpoint at base step {step}",
                 &job.fingerprint[..DIR_DIGITS.min(job.fingerprint.len())]
             );
+            if let Ok(mut m) = self.resumed.lock() {
+                m.insert(
+                    job.fingerprint.clone(),
+                    (*step as f64 / (*steps).max(1) as f64).clamp(0.0, 1.0),
+                );
+            }
         }
         if outcome.is_err() {
             // A panic: its checkpoint may hold what caused it; the run starts afresh.
