@@ -666,12 +666,7 @@ struct Saved {
 /// with [`crate::checkpoint::key_of`] to know that a run will resume before it clears a
 /// directory.
 pub fn checkpoint_key(spec: &SceneSpec, opts: &RunOptions) -> Result<[u8; 32]> {
-    Ok(checkpoint::key(&serde_json::json!({
-        "scene": serde_json::to_value(spec)?,
-        "render": opts.render,
-        "dump_every": opts.dump_every,
-        "dump_format": format!("{:?}", opts.dump_format),
-    })))
+    Ok(state_key("scene", serde_json::to_value(spec)?, opts))
 }
 
 /// The key of a run's continuation ([`RunOptions::continuation`]): [`checkpoint_key`] with the
@@ -681,12 +676,19 @@ pub fn continuation_key(spec: &SceneSpec, opts: &RunOptions) -> Result<[u8; 32]>
     if let Some(run) = scene.get_mut("run").and_then(|r| r.as_object_mut()) {
         run.remove("end_time_s");
     }
-    Ok(checkpoint::key(&serde_json::json!({
-        "continuation_of": scene,
+    Ok(state_key("continuation_of", scene, opts))
+}
+
+/// The key of a saved state: the scene (as JSON, under `label`) and the output choices that
+/// shape what the run gathers.
+fn state_key(label: &str, scene: serde_json::Value, opts: &RunOptions) -> [u8; 32] {
+    let mut what = serde_json::json!({
         "render": opts.render,
         "dump_every": opts.dump_every,
         "dump_format": format!("{:?}", opts.dump_format),
-    })))
+    });
+    what[label] = scene;
+    checkpoint::key(&what)
 }
 
 /// Where a run keeps its continuation, and the base step it must be written before.

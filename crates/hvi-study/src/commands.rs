@@ -343,12 +343,13 @@ fn extends_finished_run(
 }
 
 /// The keys whose values differ between two scenes, apart from `run.end_time_s`, as
-/// `key: old -> new`.
+/// `key: old there, new here`.
 fn scene_differences(
     old: &hvi_engine::scene::SceneSpec,
     new: &hvi_engine::scene::SceneSpec,
 ) -> Result<Vec<String>> {
-    fn flatten(prefix: &str, v: &serde_json::Value, out: &mut Vec<(String, serde_json::Value)>) {
+    use std::collections::BTreeMap;
+    fn flatten(prefix: &str, v: &serde_json::Value, out: &mut BTreeMap<String, String>) {
         match v.as_object() {
             Some(map) => {
                 for (k, v) in map {
@@ -360,25 +361,21 @@ fn scene_differences(
                     flatten(&key, v, out);
                 }
             }
-            None => out.push((prefix.to_string(), v.clone())),
+            None => {
+                out.insert(prefix.to_string(), v.to_string());
+            }
         }
     }
-    let (mut a, mut b) = (Vec::new(), Vec::new());
+    let (mut a, mut b) = (BTreeMap::new(), BTreeMap::new());
     flatten("", &serde_json::to_value(old)?, &mut a);
     flatten("", &serde_json::to_value(new)?, &mut b);
-    let mut keys: Vec<&String> = a.iter().chain(&b).map(|(k, _)| k).collect();
-    keys.sort();
-    keys.dedup();
-    let get = |list: &[(String, serde_json::Value)], k: &str| {
-        list.iter()
-            .find(|(key, _)| key == k)
-            .map_or("(not set)".to_string(), |(_, v)| v.to_string())
-    };
+    let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+    let unset = "(not set)".to_string();
     Ok(keys
         .into_iter()
         .filter(|k| k.as_str() != "run.end_time_s")
         .filter_map(|k| {
-            let (x, y) = (get(&a, k), get(&b, k));
+            let (x, y) = (a.get(k).unwrap_or(&unset), b.get(k).unwrap_or(&unset));
             (x != y).then(|| format!("{k}: {x} there, {y} here"))
         })
         .collect())
