@@ -307,6 +307,26 @@ fn sources_under(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
+/// The lines `matcher` finds in each of `files` (text files; others skipped), as
+/// `path:line: text` with the path relative to `root`.
+fn matching_lines(
+    root: &Path,
+    files: &[PathBuf],
+    matcher: fn(&str) -> Vec<(usize, String)>,
+) -> Vec<String> {
+    let mut found = Vec::new();
+    for path in files {
+        let Ok(text) = std::fs::read_to_string(path) else {
+            continue; // not text
+        };
+        for (n, line) in matcher(&text) {
+            let rel = path.strip_prefix(root).unwrap_or(path);
+            found.push(format!("{}:{n}: {line}", rel.display()));
+        }
+    }
+    found
+}
+
 /// The citations of a path outside the repository in `text`, as (line number, line).
 fn outside_citations(text: &str) -> Vec<(usize, String)> {
     // Spelled in pieces so that this file does not cite them itself.
@@ -327,16 +347,7 @@ fn no_source_or_doc_cites_a_path_outside_the_repository() {
     }
     files.extend(CITING_FILES.iter().map(|f| root.join(f)));
     assert!(files.len() > 100, "only {} files found", files.len());
-    let mut found = Vec::new();
-    for path in &files {
-        let Ok(text) = std::fs::read_to_string(path) else {
-            continue; // not text
-        };
-        for (n, line) in outside_citations(&text) {
-            let rel = path.strip_prefix(&root).unwrap_or(path);
-            found.push(format!("{}:{n}: {line}", rel.display()));
-        }
-    }
+    let found = matching_lines(&root, &files, outside_citations);
     assert!(
         found.is_empty(),
         "cite docs/model.md (and its section) instead of a path outside the repository:\n{}",
@@ -390,24 +401,17 @@ fn prints(text: &str) -> Vec<(usize, String)> {
 #[test]
 fn library_crates_never_print() {
     let root = repo();
-    let mut found = Vec::new();
-    let mut files = 0;
+    let mut files = Vec::new();
     for dir in LIBRARY_SOURCES {
-        let mut sources = Vec::new();
-        sources_under(&root.join(dir), &mut sources);
-        for path in sources
-            .iter()
-            .filter(|p| p.extension().is_some_and(|e| e == "rs"))
-        {
-            files += 1;
-            let text = std::fs::read_to_string(path).expect("source");
-            for (n, line) in prints(&text) {
-                let rel = path.strip_prefix(&root).unwrap_or(path);
-                found.push(format!("{}:{n}: {line}", rel.display()));
-            }
-        }
+        sources_under(&root.join(dir), &mut files);
     }
-    assert!(files > 40, "only {files} library sources found");
+    files.retain(|p| p.extension().is_some_and(|e| e == "rs"));
+    let found = matching_lines(&root, &files, prints);
+    assert!(
+        files.len() > 40,
+        "only {} library sources found",
+        files.len()
+    );
     assert!(
         found.is_empty(),
         "a library prints; report through the log facade (log::info!, log::warn!) and let \

@@ -368,6 +368,17 @@ fn hvi_study(args: &[&std::ffi::OsStr]) -> Output {
     bin().args(args).output().expect("runs")
 }
 
+/// A run of `out`'s store in progress in this (live) process, as the store names its working
+/// directory (`.tmp-DIGITS-PID-0`), holding `progress` as its progress.json; the directory.
+fn run_in_progress(out: &Path, digits: &str, progress: &str) -> PathBuf {
+    let work = out
+        .join("runs")
+        .join(format!(".tmp-{digits}-{}-0", std::process::id()));
+    std::fs::create_dir_all(&work).expect("work dir");
+    std::fs::write(work.join("progress.json"), progress).expect("progress");
+    work
+}
+
 #[test]
 fn status_shows_a_running_runs_progress() {
     let dir = scratch("status-progress");
@@ -385,17 +396,12 @@ fn status_shows_a_running_runs_progress() {
             .expect("json");
     let run_dir = doc["runs"][1]["dir"].as_str().expect("dir").to_string();
     let digits = run_dir.trim_start_matches("runs/");
-    // A run in progress in this (live) process, as the store names its working directory,
-    // with the progress file a store run keeps.
-    let work = out
-        .join("runs")
-        .join(format!(".tmp-{digits}-{}-0", std::process::id()));
-    std::fs::create_dir_all(&work).expect("work dir");
-    std::fs::write(
-        work.join("progress.json"),
+    // A run in progress in this (live) process, with the progress file a store run keeps.
+    run_in_progress(
+        &out,
+        digits,
         r#"{"step":500,"steps":1000,"time_s":1e-6,"end_time_s":2e-6,"wall_s":120.0}"#,
-    )
-    .expect("progress");
+    );
     let o = hvi_study(&[
         "status".as_ref(),
         study.as_ref(),
@@ -416,15 +422,11 @@ fn status_shows_a_running_runs_progress() {
         "{line}"
     );
     // A run beyond the plan (a calibration's search) in progress: listed with its progress.
-    let beyond = out
-        .join("runs")
-        .join(format!(".tmp-ffffffffffffffff-{}-0", std::process::id()));
-    std::fs::create_dir_all(&beyond).expect("work dir");
-    std::fs::write(
-        beyond.join("progress.json"),
+    let beyond = run_in_progress(
+        &out,
+        "ffffffffffffffff",
         r#"{"step":250,"steps":1000,"time_s":8e-6,"end_time_s":3.2e-5,"wall_s":30.0}"#,
-    )
-    .expect("progress");
+    );
     let o = hvi_study(&[
         "status".as_ref(),
         out.join("plan.json").as_os_str(),
