@@ -642,6 +642,12 @@ fn calibrate_scores_the_grid_refines_through_the_store_and_compares_with_the_pap
             );
         }
     }
+    // The map of R says which width it read (the scene's default, side-on).
+    let svg = std::fs::read_to_string(out.join("map_R.svg")).expect("map_R.svg");
+    assert!(
+        svg.contains("Lr read side-on (analysis.width = side)"),
+        "map_R.svg does not name its reading of the width"
+    );
 
     // Again: grid and refinement come from the store, the same result, no new run.
     let o = run();

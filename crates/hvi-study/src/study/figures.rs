@@ -10,6 +10,7 @@ use plotters::style::RGBColor;
 use super::calibrate::result::{CalibrationResult, Evaluation};
 use hvi_analysis::contour::{Field, Point};
 use hvi_analysis::score::{objective, Target};
+use hvi_engine::scene::Width;
 use hvi_engine::state::Body;
 use hvi_plot::contour::{contour_plot, ContourPlot, Marker};
 use hvi_plot::snapshots::{Tile, TileCloud};
@@ -258,13 +259,25 @@ fn length_ratio_map(f: &MapFrame) -> Result<ContourPlot> {
     Ok(ContourPlot {
         title: "Debris-cloud length ratio R = La/Lr (Fig. 9)".into(),
         subtitle: format!(
-            "red: the experiment's R = {}\n{}",
+            "red: the experiment's R = {}; {}\n{}",
             target.map_or("n/a".into(), |t| t.value.to_string()),
+            width_note(f.plan),
             f.tier
         ),
         highlight: target.map(|t| (t.value, format!("experiment R = {}", t.value))),
         ..f.plot(field, "R")
     })
+}
+
+/// How the plan's runs read the cloud's width Lr, for the caption of a picture of R: "Lr read
+/// side-on (analysis.width = side)", or both readings named where the runs differ.
+pub fn width_note(plan: &Plan) -> String {
+    let mut widths: Vec<Width> = plan.runs.iter().map(|r| r.scene.analysis.width).collect();
+    widths.dedup();
+    match widths.as_slice() {
+        [w] => format!("Lr read {} (analysis.width = {})", w.label(), w.name()),
+        _ => "Lr read side-on in some runs and cylindrically in others (analysis.width)".into(),
+    }
 }
 
 /// Fig. 10: va / v0 (no experimental value available: no red line, said so).
