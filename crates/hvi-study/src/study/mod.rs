@@ -3,6 +3,7 @@
 
 pub mod calibrate;
 pub mod collect;
+pub mod document;
 pub mod figures;
 pub mod options;
 pub mod reanalyse;

@@ -36,6 +36,7 @@ use super::config::{CalibrateConfig, Method};
 use super::problem::{fixed_overrides, refined_axes, Dim, Stage, PAPER_BEST};
 use super::result::{fmt_bounds, fmt_value, CalibrationResult, Edge, TargetsMet};
 use super::{calibrate_plan, ego, runner_of, CalibrateOptions, Coarse};
+use crate::study::document::Document;
 
 /// What a ladder takes beside the calibration's options.
 #[derive(Debug, Clone)]
@@ -312,17 +313,15 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
         &root.join("ladder.json"),
         serde_json::to_string_pretty(&result)?.as_bytes(),
     )?;
-    write_atomic_bytes(
-        &root.join("ladder.md"),
-        ladder_md(&result, &keys).as_bytes(),
-    )?;
+    let doc = report(&result, &keys);
+    write_atomic_bytes(&root.join("ladder.md"), doc.markdown().as_bytes())?;
     match draw(&root.join("ladder.png"), &result, &keys) {
         Ok(()) if progress => eprintln!("plot: {}", root.join("ladder.png").display()),
         Ok(()) => {}
         Err(e) => eprintln!("no ladder figure drawn: {e:#}"),
     }
     if progress {
-        eprint!("{}", ladder_text(&result));
+        eprint!("{}", doc.text());
     }
     println!("{}", root.join("ladder.json").display());
     Ok(result)
@@ -752,40 +751,110 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
     }
 }
 
-/// The console's report.
-fn ladder_text(r: &LadderResult) -> String {
-    let mut s = format!(
-        "resolution ladder of `{}` (tier `{}`, seeds {:?}): {}\n",
-        r.study, r.tier, r.seeds, r.verdict
+/// The ladder's report, composed once: the console prints its text, ladder.md is its
+/// Markdown.
+fn report(r: &LadderResult, dims: &[Dim]) -> Document {
+    let mut doc = Document {
+        title: format!("Resolution ladder of `{}`", r.study),
+        preamble: format!(
+            "Tier `{}` (its overrides other than the particle count at every level), seeds \
+             {:?}.\n\n![each parameter and J against N](ladder.png)",
+            r.tier, r.seeds
+        ),
+        verdict: r.verdict.clone(),
+        sections: Vec::new(),
+    };
+    let rows = r
+        .levels
+        .iter()
+        .map(|l| {
+            vec![
+                l.particles_run
+                    .map_or(fmt_value(l.particles), |p| format!("{p:.0}")),
+                fmt_bounds(&l.first_box),
+                l.steered_by.clone(),
+                answer_words(l),
+                format!("{:.4}", l.objective),
+                format!("{:.4}", l.paper_objective),
+                if l.converged {
+                    "yes".to_string()
+                } else if l.edges.is_empty() {
+                    "no".to_string()
+                } else {
+                    let edges: Vec<String> = l.edges.iter().map(Edge::describe).collect();
+                    format!("no: {}", edges.join("; "))
+                },
+                l.targets_met
+                    .as_ref()
+                    .map_or("n/a".to_string(), TargetsMet::describe),
+                l.runs.to_string(),
+                format!("{:.0}", l.run_core_seconds),
+            ]
+        })
+        .collect();
+    doc.section("The levels").table(
+        &[
+            "particles",
+            "first box",
+            "from",
+            "answer [interval]",
+            "J",
+            "paper's fit J",
+            "converged",
+            "where the runs meet every target",
+            "runs",
+            "core-s",
+        ],
+        rows,
     );
-    for l in &r.levels {
-        s.push_str(&format!(
-            "  {:>10} particles: {}  J = {:.4} (paper's fit {:.4}); {}; {} runs, {:.0} core-s\n",
-            fmt_value(l.particles),
-            answer_words(l),
-            l.objective,
-            l.paper_objective,
-            if l.converged {
-                "converged"
-            } else {
-                "not converged"
-            },
-            l.runs,
-            l.run_core_seconds
-        ));
-    }
     if let Some(c) = &r.check {
-        s.push_str(&format!(
-            "  check at {} particles: J = {:.4} at the last answer\n",
-            fmt_value(c.particles),
-            c.objective
-        ));
+        let f = |v: &Option<f64>| v.map_or("n/a".to_string(), |x| format!("{x:.4}"));
+        let rows = c
+            .observed
+            .iter()
+            .map(|(name, (at_check, at_level))| vec![name.clone(), f(at_check), f(at_level)])
+            .collect();
+        let params: Vec<String> = c
+            .params
+            .iter()
+            .map(|(k, v)| format!("{k} = {}", fmt_value(*v)))
+            .collect();
+        doc.section(format!("Check at {} particles", fmt_value(c.particles)))
+            .fact(
+                "check",
+                format!(
+                    "the last level's answer ({}) run at {} particles at the same seeds: J = {:.4}",
+                    params.join(", "),
+                    fmt_value(c.particles),
+                    c.objective
+                ),
+            )
+            .table(
+                &["target", "observed at the check", "at the last level"],
+                rows,
+            );
     }
-    s.push_str(&format!(
-        "  {} runs in all, {:.0} core-seconds; {:.0} s wall\n",
-        r.runs, r.run_core_seconds, r.wall_seconds
-    ));
-    s
+    let trend = doc.section("Trend between the last two levels");
+    for (k, v) in &r.trend_per_decade {
+        let log = dims.iter().any(|d| &d.0 == k && d.1);
+        trend.fact(
+            format!("trend of {k}"),
+            format!(
+                "{v:+.3} {} per decade of N",
+                if log { "decades" } else { "(its unit)" }
+            ),
+        );
+    }
+    doc.section("Cost")
+        .fact(
+            "runs",
+            format!(
+                "{} in all ({:.0} core-seconds of simulation); this invocation took {:.0} s",
+                r.runs, r.run_core_seconds, r.wall_seconds
+            ),
+        )
+        .note("Each level's calibration.md is in its directory (`n<N>/`).");
+    doc
 }
 
 /// A level's answer: `material.eps_j = 0.016 [0.01, 0.03], ...`.
@@ -803,76 +872,6 @@ fn answer_words(l: &LadderLevel) -> String {
         })
         .collect::<Vec<_>>()
         .join(", ")
-}
-
-/// ladder.md.
-fn ladder_md(r: &LadderResult, dims: &[Dim]) -> String {
-    let mut s = format!(
-        "# Resolution ladder: `{}`\n\nTier `{}` (its overrides other than the particle count at every level), seeds {:?}.\n\n**{}**\n\n",
-        r.study, r.tier, r.seeds, r.verdict
-    );
-    s.push_str("![each parameter and J against N](ladder.png)\n\n");
-    s.push_str("| particles | first box | from | answer [interval] | J | paper's fit J | converged | where the runs meet every target | runs | core-s |\n|---|---|---|---|---|---|---|---|---|---|\n");
-    for l in &r.levels {
-        s.push_str(&format!(
-            "| {} | {} | {} | {} | {:.4} | {:.4} | {} | {} | {} | {:.0} |\n",
-            l.particles_run
-                .map_or(fmt_value(l.particles), |p| format!("{p:.0}")),
-            fmt_bounds(&l.first_box),
-            l.steered_by,
-            answer_words(l),
-            l.objective,
-            l.paper_objective,
-            if l.converged {
-                "yes".to_string()
-            } else if l.edges.is_empty() {
-                "no".to_string()
-            } else {
-                format!(
-                    "no: {}",
-                    l.edges
-                        .iter()
-                        .map(Edge::describe)
-                        .collect::<Vec<_>>()
-                        .join("; ")
-                )
-            },
-            l.targets_met
-                .as_ref()
-                .map_or("n/a".to_string(), TargetsMet::describe),
-            l.runs,
-            l.run_core_seconds
-        ));
-    }
-    if let Some(c) = &r.check {
-        s.push_str(&format!(
-            "\n## Check at {} particles\n\nThe last level's answer ({}) run at the same seeds: J = {:.4}.\n\n| target | observed at the check | at the last level |\n|---|---|---|\n",
-            fmt_value(c.particles),
-            c.params
-                .iter()
-                .map(|(k, v)| format!("{k} = {}", fmt_value(*v)))
-                .collect::<Vec<_>>()
-                .join(", "),
-            c.objective
-        ));
-        for (name, (at_check, at_level)) in &c.observed {
-            let f = |v: &Option<f64>| v.map_or("n/a".to_string(), |x| format!("{x:.4}"));
-            s.push_str(&format!("| {name} | {} | {} |\n", f(at_check), f(at_level)));
-        }
-    }
-    s.push_str("\n## Trend between the last two levels\n\n");
-    for (k, v) in &r.trend_per_decade {
-        let log = dims.iter().any(|d| &d.0 == k && d.1);
-        s.push_str(&format!(
-            "- {k}: {v:+.3} {} per decade of N\n",
-            if log { "decades" } else { "(its unit)" }
-        ));
-    }
-    s.push_str(&format!(
-        "\n{} runs in all ({:.0} core-seconds of simulation); this invocation took {:.0} s. Each level's calibration.md is in its directory (`n<N>/`).\n",
-        r.runs, r.run_core_seconds, r.wall_seconds
-    ));
-    s
 }
 
 /// ladder.png.

@@ -28,7 +28,7 @@ use hvi_run::store::Record;
 
 pub use config::{CalibrateConfig, Method};
 pub use grid::score_table;
-pub use report::{report_md, report_text};
+pub use report::report;
 pub use result::{CalibrationResult, Evaluation, ParamRegion, Spread, Surface, TargetsMet};
 
 use super::options::StudyOptions;
@@ -271,7 +271,7 @@ pub(crate) fn calibrate_plan(
         );
     }
     if progress {
-        eprint!("{}", report_text(&result));
+        eprint!("{}", report(&result).text());
     }
     Ok(result)
 }

@@ -12,6 +12,7 @@ use hvi_run::store::Record;
 
 use super::problem::describe_eval;
 use super::result::{CalibrationResult, Evaluation, Surface};
+use crate::study::document::{Document, Section};
 
 /// The maps and the snapshot matrix; a figure that cannot be drawn is reported, not fatal.
 pub(super) fn draw_figures(
@@ -39,7 +40,7 @@ pub(super) fn draw_figures(
 }
 
 /// The verdict of a calibration in one line: converged or not, and why.
-pub(super) fn verdict_line(r: &CalibrationResult) -> String {
+fn verdict_line(r: &CalibrationResult) -> String {
     let state = match (r.method.as_str(), r.converged) {
         ("none", _) => "GRID ONLY",
         (_, true) => "CONVERGED",
@@ -48,219 +49,217 @@ pub(super) fn verdict_line(r: &CalibrationResult) -> String {
     format!("{state} ({}): {}", r.method, r.termination)
 }
 
-/// The confidence region as one line per parameter: `key in [lo, hi]` (with a note where it
-/// reaches the searched box's edge).
-pub(super) fn interval_lines(r: &CalibrationResult) -> Vec<String> {
-    let Some(region) = &r.region else {
-        return Vec::new();
+/// The calibration's report, composed once: the verdict, the calibrated point with its
+/// interval and the paper's, the boxes searched, every target, the gaps and the cost. The
+/// console prints its text, calibration.md is its Markdown.
+pub fn report(r: &CalibrationResult) -> Document {
+    let mut doc = Document {
+        title: format!(
+            "Calibration of `{}` at tier `{}` ({} particles)",
+            r.study,
+            r.tier,
+            r.particles.map_or("?".into(), |n| format!("{n}"))
+        ),
+        preamble: "Written by `hvi-study calibrate` from calibration.json (regenerate it with the \
+                   command; do not edit)."
+            .into(),
+        verdict: verdict_line(r),
+        sections: Vec::new(),
     };
-    region
-        .intervals
-        .iter()
-        .map(|(k, (lo, hi))| {
-            let edge = if region.at_boundary.get(k).copied().unwrap_or(false) {
-                " (reaches the searched box's edge: the interval may be wider)"
-            } else {
-                ""
-            };
-            format!(
-                "{k} in [{lo:.4e}, {hi:.4e}], best {:.4e}{edge}",
-                r.best.params.get(k).copied().unwrap_or(f64::NAN)
-            )
-        })
-        .collect()
-}
-
-/// The human-readable report: the verdict, best point with its interval, every term, the
-/// paper's point, the gaps, runs and wall time.
-pub fn report_text(r: &CalibrationResult) -> String {
-    let mut s = String::new();
-    s.push_str(&format!(
-        "calibration of `{}` at tier `{}` ({} particles): {}\n",
-        r.study,
-        r.tier,
-        r.particles.map_or("?".into(), |n| format!("{n}")),
-        verdict_line(r),
-    ));
-    for (k, b) in r.boxes.iter().enumerate() {
-        s.push_str(&format!(
-            "  box {k}:       {}: {}\n",
-            super::result::fmt_bounds(&b.bounds),
-            b.termination
-        ));
-    }
-    for e in &r.edges {
-        s.push_str(&format!(
-            "  edge:        {}{}\n",
-            e.describe(),
-            e.limit
-                .as_ref()
-                .map_or(String::new(), |l| format!(" ({l})"))
-        ));
-    }
-    if let Some(p) = &r.prior {
-        s.push_str(&format!("  modelled as: {}\n", p.describe()));
-    }
-    s.push_str(&format!("  best:        {}\n", describe_eval(&r.best)));
-    for line in interval_lines(r) {
-        s.push_str(&format!("  interval:    {line}\n"));
-    }
-    if let Some(m) = &r.targets_met {
-        s.push_str(&format!("  targets met: {}\n", m.describe()));
-    }
-    if let Some(noise) = r.noise {
-        s.push_str(&format!(
-            "  noise:       {noise:.4} in log10 J ({})\n",
-            r.noise_source
-                .as_deref()
-                .unwrap_or("a seed mean's standard error, or the floor")
-        ));
-    }
-    for sp in &r.best_spread {
-        s.push_str(&format!(
-            "  at the best point: {} = {:.4} +- {:.4} (sd over {} seed(s))\n",
-            sp.target, sp.mean, sp.sd, sp.seeds
-        ));
-    }
-    s.push_str(&format!("  best grid:   {}\n", describe_eval(&r.best_grid)));
-    s.push_str(&format!("  paper's fit: {}\n", describe_eval(&r.paper)));
-    for (k, v) in &r.ratio_to_paper {
-        s.push_str(&format!("  best / paper for {k}: {v:.3}\n"));
-    }
+    calibrated_point(doc.section("The calibrated point"), r);
+    boxes(doc.section("The boxes searched"), r);
+    targets(doc.section("Every target at the best point"), r);
+    let gaps = doc.section("Not scored");
     for g in &r.gaps {
-        s.push_str(&format!("  not scored (gap): {}: {}\n", g.name, g.source));
+        gaps.fact(
+            "not scored (gap)",
+            format!("{}: {} (a gap in experiments_data)", g.name, g.source),
+        );
     }
-    s.push_str(&format!(
-        "  runs: {} simulated now ({} in the search), wall time {:.1} s\n",
-        r.runs_made, r.refinement_runs, r.wall_seconds
-    ));
-    s
+    doc.section("Cost")
+        .fact(
+            "runs",
+            format!(
+                "{} simulated by this invocation ({} in the search after the grid); {} points \
+                 evaluated after the grid; wall time {:.1} s",
+                r.runs_made,
+                r.refinement_runs,
+                r.refinement.len(),
+                r.wall_seconds
+            ),
+        )
+        .note("Every evaluation is in evaluations.csv.");
+    doc
 }
 
-/// calibration.md: what a reader needs from calibration.json, in prose and tables.
-pub fn report_md(r: &CalibrationResult) -> String {
-    let mut s = format!(
-        "# Calibration of `{}` at tier `{}`\n\nWritten by `hvi-study calibrate` from calibration.json (regenerate it with the command; do not edit). {} particles.\n\n**{}**\n\n",
-        r.study,
-        r.tier,
-        r.particles.map_or("?".into(), |n| format!("{n}")),
-        verdict_line(r)
+/// The best point against the paper's fit, its confidence region, where the runs meet every
+/// target, the model's prior and the noise.
+fn calibrated_point(sec: &mut Section, r: &CalibrationResult) {
+    let num = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.4e}"));
+    let rows = r
+        .best
+        .params
+        .iter()
+        .map(|(k, v)| {
+            let interval = r.region.as_ref().and_then(|g| g.intervals.get(k));
+            let at_edge = r.region.as_ref().and_then(|g| g.at_boundary.get(k));
+            vec![
+                format!("`{k}`"),
+                format!("{v:.4e}"),
+                num(interval.map(|i| i.0)),
+                num(interval.map(|i| i.1)),
+                at_edge.map_or("n/a".into(), |&b| if b { "yes" } else { "no" }.into()),
+                num(r.paper.params.get(k).copied()),
+                r.ratio_to_paper
+                    .get(k)
+                    .map_or("n/a".to_string(), |q| format!("{q:.3}")),
+            ]
+        })
+        .collect();
+    sec.table(
+        &[
+            "parameter",
+            "best",
+            "interval (low)",
+            "interval (high)",
+            "interval at the box's edge",
+            "the paper's fit",
+            "best / paper",
+        ],
+        rows,
     );
-    s.push_str("## The calibrated point\n\n| parameter | best | interval (low) | interval (high) | the paper's fit | best / paper |\n|---|---|---|---|---|---|\n");
-    for (k, v) in &r.best.params {
-        let (lo, hi) = r
-            .region
-            .as_ref()
-            .and_then(|g| g.intervals.get(k))
-            .map_or(("n/a".to_string(), "n/a".to_string()), |(a, b)| {
-                (format!("{a:.4e}"), format!("{b:.4e}"))
-            });
-        s.push_str(&format!(
-            "| `{k}` | {v:.4e} | {lo} | {hi} | {} | {} |\n",
-            r.paper
-                .params
-                .get(k)
-                .map_or("n/a".to_string(), |p| format!("{p:.4e}")),
-            r.ratio_to_paper
-                .get(k)
-                .map_or("n/a".to_string(), |q| format!("{q:.3}"))
-        ));
-    }
     if let Some(g) = &r.region {
-        s.push_str(&format!(
-            "\nThe interval is the confidence region of the minimum: every point the surrogate predicts within {} noise standard errors of its lowest prediction (J < {:.4}); it covers {:.1} % of the searched box.{}\n",
+        sec.note(format!(
+            "The interval is the confidence region of the minimum: every point the surrogate \
+             predicts within {} noise standard errors of its lowest prediction (J < {:.4}); it \
+             covers {:.1} % of the searched box.{}",
             hvi_analysis::surrogate::REGION_NOISE_MULTIPLE,
             g.threshold,
             100.0 * g.share_of_box,
             if g.at_boundary.values().any(|&b| b) {
-                " It reaches the box's edge on at least one axis: the parameter may lie outside what was searched."
+                " It reaches the box's edge on at least one axis: the parameter may lie outside \
+                 what was searched."
             } else {
                 ""
             }
         ));
     }
+    sec.fact("best", describe_eval(&r.best));
     if let Some(m) = &r.targets_met {
-        s.push_str(&format!(
-            "\nWhere the runs meet every target (each term within its tolerance at the seed mean, no model): {}. The interval above is the model's, around one minimum; this span is how far along the valley the points looked at meet the targets.\n",
-            m.describe()
-        ));
+        sec.fact("targets met", m.describe()).note(
+            "Where the runs meet every target: each term within its tolerance at the seed mean, \
+             no model. The interval above is the model's, around one minimum; this span is how \
+             far along the valley the points looked at meet the targets.",
+        );
     }
-    if !r.boxes.is_empty() {
-        s.push_str("\n## The boxes searched\n\n| box | bounds | the search there | sides the answer touched |\n|---|---|---|---|\n");
-        for (k, b) in r.boxes.iter().enumerate() {
+    if let Some(p) = &r.prior {
+        sec.fact(
+            "modelled as",
+            format!(
+                "log10 J as {} (docs/calibration.md, \"The resolution ladder\")",
+                p.describe()
+            ),
+        );
+    }
+    if let Some(noise) = r.noise {
+        sec.fact(
+            "noise",
+            format!(
+                "{noise:.4} in log10 J ({})",
+                r.noise_source
+                    .as_deref()
+                    .unwrap_or("a seed mean's standard error, at least calibrate.noise_floor")
+            ),
+        );
+    }
+}
+
+/// Every box searched, the sides the answer touched, and the limit where one stopped it.
+fn boxes(sec: &mut Section, r: &CalibrationResult) {
+    if r.boxes.is_empty() {
+        return;
+    }
+    let rows = r
+        .boxes
+        .iter()
+        .enumerate()
+        .map(|(k, b)| {
             let edges = if b.edges.is_empty() {
                 "none: the answer is inside".to_string()
             } else {
                 b.edges
                     .iter()
                     .map(|e| {
+                        let limit = e.limit.as_ref();
                         format!(
                             "{}{}",
                             e.describe(),
-                            e.limit
-                                .as_ref()
-                                .map_or(String::new(), |l| format!(" ({l})"))
+                            limit.map_or(String::new(), |l| format!(" ({l})"))
                         )
                     })
                     .collect::<Vec<_>>()
                     .join("; ")
             };
-            s.push_str(&format!(
-                "| {k} | {} | {} | {edges} |\n",
+            vec![
+                format!("box {k}"),
                 super::result::fmt_bounds(&b.bounds),
-                b.termination
-            ));
-        }
-        if let Some(limit) = &r.limit {
-            s.push_str(&format!("\nNot an optimum inside the box: {limit}.\n"));
-        }
+                b.termination.clone(),
+                edges,
+            ]
+        })
+        .collect();
+    sec.table(
+        &[
+            "box",
+            "bounds",
+            "the search there",
+            "sides the answer touched",
+        ],
+        rows,
+    );
+    if let Some(limit) = &r.limit {
+        sec.fact("limit", format!("Not an optimum inside the box: {limit}"));
     }
-    s.push_str("\n## Every target at the best point\n\n| target | observed (seed mean) | sd over seeds | term | weight |\n|---|---|---|---|---|\n");
-    if let Some(score) = &r.best.score {
-        for t in &score.terms {
+}
+
+/// Every target's term at the best point with its seed spread, and J at the best point, the
+/// best grid point and the paper's fit (each over the same seeds).
+fn targets(sec: &mut Section, r: &CalibrationResult) {
+    let rows = r
+        .best
+        .score
+        .iter()
+        .flat_map(|score| &score.terms)
+        .map(|t| {
             let sp = r.best_spread.iter().find(|x| x.target == t.name);
-            s.push_str(&format!(
-                "| {} | {} | {} | {:.4} | {} |\n",
-                t.name,
+            vec![
+                t.name.clone(),
                 t.observed.map_or("n/a".into(), |v| format!("{v:.4}")),
                 sp.map_or("n/a".into(), |x| format!("{:.4} ({} seeds)", x.sd, x.seeds)),
-                t.term,
-                t.weight
-            ));
-        }
-    }
-    s.push_str(&format!(
-        "\nObjective J = {:.4} at the best point, {:.4} at the best grid point, {:.4} at the paper's fit.\n",
-        r.best.objective, r.best_grid.objective, r.paper.objective
-    ));
-    if let Some(p) = &r.prior {
-        s.push_str(&format!(
-            "The search modelled log10 J as {} (docs/calibration.md, \"The resolution ladder\").\n",
-            p.describe()
-        ));
-    }
-    if let Some(noise) = r.noise {
-        s.push_str(&format!(
-            "The noise the search worked with: {noise:.4} in log10 J ({}).\n",
-            r.noise_source
-                .as_deref()
-                .unwrap_or("a seed mean's standard error, at least calibrate.noise_floor")
-        ));
-    }
-    for g in &r.gaps {
-        s.push_str(&format!(
-            "\nNot scored (a gap in experiments_data): {}: {}\n",
-            g.name, g.source
-        ));
-    }
-    s.push_str(&format!(
-        "\n## Cost\n\n{} runs simulated by this invocation ({} in the search after the grid); {} points evaluated after the grid; wall time {:.1} s. Every evaluation is in evaluations.csv.\n",
-        r.runs_made,
-        r.refinement_runs,
-        r.refinement.len(),
-        r.wall_seconds
-    ));
-    s
+                format!("{:.4}", t.term),
+                t.weight.to_string(),
+            ]
+        })
+        .collect();
+    sec.table(
+        &[
+            "target",
+            "observed (seed mean)",
+            "sd over seeds",
+            "term",
+            "weight",
+        ],
+        rows,
+    )
+    .fact(
+        "objective",
+        format!(
+            "J = {:.4} at the best point, {:.4} at the best grid point, {:.4} at the paper's fit",
+            r.best.objective, r.best_grid.objective, r.paper.objective
+        ),
+    )
+    .fact("best grid", describe_eval(&r.best_grid))
+    .fact("paper's fit", describe_eval(&r.paper));
 }
 
 /// calibration.json and evaluations.csv (every evaluation: grid, refinement, paper).
@@ -269,7 +268,7 @@ pub(super) fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluatio
         &out.join("calibration.json"),
         serde_json::to_string_pretty(r)?.as_bytes(),
     )?;
-    write_atomic_bytes(&out.join("calibration.md"), report_md(r).as_bytes())?;
+    write_atomic_bytes(&out.join("calibration.md"), report(r).markdown().as_bytes())?;
     let keys: Vec<String> = {
         let mut k: Vec<String> = grid
             .iter()
