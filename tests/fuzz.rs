@@ -105,7 +105,7 @@ proptest! {
         let outcome = std::panic::catch_unwind(|| {
             // A small resolution keeps the layout cheap; it is a --set, so it is checked too.
             parse_scene(&text, &["resolution.particles=500".into()])
-                .and_then(|spec| spec.build().map(|_| ()).map_err(anyhow::Error::from))
+                .and_then(|spec| spec.build().map(|_| ()).map_err(hvi_run::error::RunError::from))
         });
         let outcome = match outcome {
             Ok(o) => o,

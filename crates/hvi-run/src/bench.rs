@@ -4,10 +4,10 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
 use hvi_engine::scene::SceneSpec;
 use serde::Serialize;
 
+use crate::error::{Result, ResultExt, RunError};
 use crate::output::write_csv_atomic;
 use crate::run::{run_scene, RunOptions};
 
@@ -43,7 +43,7 @@ pub struct BenchRow {
 /// Runs `spec` once per thread count; fails if the physics differs between thread counts.
 pub fn bench(spec: &SceneSpec, threads: &[usize], out: &Path) -> Result<(Vec<BenchRow>, String)> {
     if threads.is_empty() || threads.contains(&0) {
-        bail!("invalid value for `--threads`: {threads:?} (allowed: a list of integers >= 1, e.g. 1,2)");
+        return Err(RunError::Input(format!("invalid value for `--threads`: {threads:?} (allowed: a list of integers >= 1, e.g. 1,2)")));
     }
     let mut rows: Vec<BenchRow> = Vec::new();
     let mut reference: Option<(u64, u64)> = None;
@@ -64,11 +64,10 @@ pub fn bench(spec: &SceneSpec, threads: &[usize], out: &Path) -> Result<(Vec<Ben
         match reference {
             None => reference = Some(fingerprint),
             Some(r) if r != fingerprint => {
-                bail!(
+                return Err(RunError::Invariant(format!(
                     "results differ between thread counts: final energy {} vs bits {:x}",
-                    s.energy.total_final_j,
-                    r.0
-                )
+                    s.energy.total_final_j, r.0
+                )));
             }
             Some(_) => {}
         }

@@ -45,11 +45,11 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::Duration;
 
-use anyhow::{Context, Result};
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 
+use crate::error::{Result, ResultExt, RunError};
 use crate::files::write_atomic_bytes;
 pub use crate::files::CHECKPOINT_FILE;
 
@@ -207,7 +207,7 @@ pub fn read<T: DeserializeOwned>(path: &Path, key: &[u8; 32]) -> Result<Found<T>
     let bytes = match std::fs::read(path) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Found::Nothing),
-        Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
+        Err(e) => return Err(RunError::read(path, e)),
     };
     if bytes.len() < HEADER_BYTES + CHECKSUM_BYTES || bytes[..8] != MAGIC {
         return Ok(Found::Damaged(
@@ -253,7 +253,7 @@ pub fn remove(path: &Path) -> Result<()> {
     match std::fs::remove_file(path) {
         Ok(()) => Ok(()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(e).with_context(|| format!("cannot remove {}", path.display())),
+        Err(e) => Err(e).write_context(path, || format!("cannot remove {}", path.display())),
     }
 }
 

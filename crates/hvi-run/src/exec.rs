@@ -20,10 +20,10 @@ use std::io::IsTerminal;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 
+use crate::error::{Result, RunError};
 use crate::store::{Job, Record, RunStatus, Store};
 
 /// How to execute.
@@ -192,15 +192,22 @@ pub fn execute(
     // After a store error (a full disk, an unwritable directory) no further run starts: it
     // would fail the same way.
     let store_failed = std::sync::atomic::AtomicBool::new(false);
-    let run_one = |i: usize, per_run: usize| -> Result<Record> {
+    // `None`: a run not started because an earlier run hit a store error.
+    let run_one = |i: usize, per_run: usize| -> Option<Result<Record>> {
         // After Ctrl-C or SIGTERM no run starts, and a stopped run is no failure.
-        crate::interrupt::check()?;
+        if let Err(e) = crate::interrupt::check() {
+            return Some(Err(e));
+        }
         if store_failed.load(Ordering::Relaxed) {
-            return Err(anyhow::Error::new(NotStarted));
+            return None;
         }
         let r = store.execute(&jobs[i], per_run);
-        if r.as_ref().err().and_then(crate::interrupt::of).is_some() {
-            return r;
+        if r.as_ref()
+            .err()
+            .and_then(|e| crate::interrupt::of(e))
+            .is_some()
+        {
+            return Some(r);
         }
         if r.is_err() {
             store_failed.store(true, Ordering::Relaxed);
@@ -231,7 +238,7 @@ pub fn execute(
                 failed_now.load(Ordering::Relaxed)
             ));
         }
-        r
+        Some(r)
     };
     let results = run_phases(&phases, &run_one);
     if let Some(b) = &bar {
@@ -261,7 +268,7 @@ fn look_up(store: &Store, jobs: &[Job]) -> Result<(Vec<Option<Record>>, Vec<usiz
     let mut records: Vec<Option<Record>> = Vec::with_capacity(jobs.len());
     let mut pending: Vec<usize> = Vec::new();
     for (i, job) in jobs.iter().enumerate() {
-        match store.lookup(&job.fingerprint)? {
+        match store.record(&job.fingerprint)? {
             Some(r) if r.status == RunStatus::Completed => records.push(Some(r)),
             _ => {
                 records.push(None);
@@ -427,30 +434,19 @@ fn finished_line(
     }
 }
 
-/// A run not started because an earlier run hit a store error.
-#[derive(Debug)]
-struct NotStarted;
-
-impl std::fmt::Display for NotStarted {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "not started after an earlier run's store error")
-    }
-}
-
-impl std::error::Error for NotStarted {}
-
-/// Runs the phases in order and returns every run's result with its job index. Per phase, one
+/// Runs the phases in order and returns every run's result with its job index (`None`: not
+/// started after an earlier run's store error). Per phase, one
 /// plain OS thread per concurrent run, each taking the phase's next run; the run itself goes
 /// to its own rayon pool. (Outer rayon workers would, while waiting for a run's pool, steal
 /// further runs onto their stacks and start every run at once.)
 fn run_phases(
     phases: &[Phase],
-    run_one: &(dyn Fn(usize, usize) -> Result<Record> + Sync),
-) -> Vec<(usize, Result<Record>)> {
-    let mut results: Vec<(usize, Result<Record>)> = Vec::new();
+    run_one: &(dyn Fn(usize, usize) -> Option<Result<Record>> + Sync),
+) -> Vec<(usize, Option<Result<Record>>)> {
+    let mut results: Vec<(usize, Option<Result<Record>>)> = Vec::new();
     for phase in phases {
         let next = AtomicUsize::new(0);
-        let done_phase: Vec<(usize, Result<Record>)> = std::thread::scope(|scope| {
+        let done_phase: Vec<(usize, Option<Result<Record>>)> = std::thread::scope(|scope| {
             let workers: Vec<_> = (0..phase.at_once)
                 .map(|_| {
                     scope.spawn(|| {
@@ -484,15 +480,15 @@ fn gather_records(
     store: &Store,
     jobs: &[Job],
     mut records: Vec<Option<Record>>,
-    results: Vec<(usize, Result<Record>)>,
+    results: Vec<(usize, Option<Result<Record>>)>,
 ) -> Result<Vec<Record>> {
     let mut first_error = None;
     for (i, r) in results {
         match r {
-            Ok(rec) => records[i] = Some(rec),
+            Some(Ok(rec)) => records[i] = Some(rec),
             // Runs not started after another run's store error: that error is the one to say.
-            Err(e) if e.downcast_ref::<NotStarted>().is_some() => {}
-            Err(e) => {
+            None => {}
+            Some(Err(e)) => {
                 first_error.get_or_insert(e.context(format!("run {i}")));
             }
         }
@@ -502,13 +498,15 @@ fn gather_records(
     }
     for i in 0..jobs.len() {
         if records[i].is_none() {
-            records[i] = store.lookup(&jobs[i].fingerprint)?;
+            records[i] = store.record(&jobs[i].fingerprint)?;
         }
     }
     records
         .into_iter()
         .enumerate()
-        .map(|(i, r)| r.with_context(|| format!("run {i} has no record after execution")))
+        .map(|(i, r)| {
+            r.ok_or_else(|| RunError::Store(format!("run {i} has no record after execution")))
+        })
         .collect()
 }
 

@@ -1,13 +1,14 @@
-//! The ground floor of hvi-run, imported by the modules above it and importing none of them:
-//! atomic file writes, canonical JSON and the format and engine versions that fingerprints
-//! record, the host's name, and the names of a run's files that more than one module reads.
+//! The ground floor of hvi-run, imported by the modules above it and importing none of them
+//! but [`crate::error`]: atomic file writes, canonical JSON and the format and engine versions
+//! that fingerprints record, the host's name, and the names of a run's files that more than
+//! one module reads.
 
 use std::fs;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 use std::sync::OnceLock;
 
-use anyhow::{Context, Result};
+use crate::error::{Result, ResultExt, RunError};
 
 /// Version of the plan and run-record formats, and of what the fingerprint covers. Bump it
 /// when either changes meaning, so old results are not mistaken for new ones.
@@ -65,9 +66,26 @@ pub fn canonical_json(v: &serde_json::Value) -> String {
     s
 }
 
+/// [`write_atomic_with`] for a writer that returns an `anyhow::Result` (as the callers in
+/// hvi-study do, which return it as theirs): its error, said under "cannot write PATH", keeps
+/// its chain.
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    Ok(write_atomic_with(path, |w| {
+        write(w).map_err(RunError::library)
+    })?)
+}
+
 /// Writes a file atomically: into a temporary sibling, flushed and synced, then renamed over
-/// the target. A reader sees the old file or the new one, never a torn one.
-pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
+/// the target. A reader sees the old file or the new one, never a torn one. An I/O error is a
+/// [`RunError::Write`] of `path`, anything else `write` returns is said under "cannot write
+/// PATH".
+pub fn write_atomic_with(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> Result<()>,
+) -> Result<()> {
     let dir = path.parent().unwrap_or_else(|| Path::new("."));
     let name = path
         .file_name()
@@ -85,9 +103,11 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()
     if let Err(e) = written {
         // A full disk, say: no partial file stays, and the error names the file.
         let _ = fs::remove_file(&tmp);
-        return Err(e.context(format!("cannot write {}", path.display())));
+        return Err(e.writing(path, format!("cannot write {}", path.display())));
     }
-    fs::rename(&tmp, path).with_context(|| format!("cannot move {} into place", path.display()))?;
+    fs::rename(&tmp, path).write_context(path, || {
+        format!("cannot move {} into place", path.display())
+    })?;
     Ok(())
 }
 
@@ -109,8 +129,9 @@ pub fn remove_stale_partials(dir: &Path, only: Option<&str>) -> Result<usize> {
         };
         let ours = only.is_none_or(|o| o == target);
         if ours && pid.parse::<u32>().is_ok() && !name.ends_with(&own) && e.path().is_file() {
-            fs::remove_file(e.path())
-                .with_context(|| format!("cannot remove {}", e.path().display()))?;
+            let path = e.path();
+            fs::remove_file(&path)
+                .write_context(&path, || format!("cannot remove {}", path.display()))?;
             n += 1;
         }
     }
@@ -119,7 +140,7 @@ pub fn remove_stale_partials(dir: &Path, only: Option<&str>) -> Result<usize> {
 
 /// Writes bytes atomically.
 pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomic(path, |w| {
+    write_atomic_with(path, |w| {
         w.write_all(bytes)?;
         Ok(())
     })

@@ -7,6 +7,8 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 
+pub use crate::error::Interrupted;
+
 /// The signal received (0: none).
 static RECEIVED: OnceLock<Arc<AtomicUsize>> = OnceLock::new();
 
@@ -40,43 +42,23 @@ pub fn requested() -> Option<i32> {
     (n != 0).then_some(n as i32)
 }
 
-/// The error a run or a study returns when a signal stopped it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Interrupted(pub i32);
-
-impl Interrupted {
-    /// The signal's name.
-    pub fn name(&self) -> &'static str {
-        match self.0 {
-            SIGINT => "SIGINT (Ctrl-C)",
-            SIGTERM => "SIGTERM",
-            _ => "a signal",
-        }
-    }
-    /// The exit code: 128 + the signal's number.
-    pub fn exit_code(&self) -> u8 {
-        (128 + self.0).clamp(0, 255) as u8
-    }
-}
-
-impl std::fmt::Display for Interrupted {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "interrupted by {}", self.name())
-    }
-}
-
-impl std::error::Error for Interrupted {}
-
 /// `Err(Interrupted)` once a signal asked the work to stop.
-pub fn check() -> anyhow::Result<()> {
+pub fn check() -> crate::error::Result<()> {
     match requested() {
         Some(sig) => Err(Interrupted(sig).into()),
         None => Ok(()),
     }
 }
 
-/// The interruption in an error's chain, if it is one.
-pub fn of(e: &anyhow::Error) -> Option<Interrupted> {
-    e.chain()
-        .find_map(|c| c.downcast_ref::<Interrupted>().copied())
+/// The interruption in an error's chain, if it is one (a [`crate::error::RunError`]'s, or an
+/// `anyhow::Error`'s: pass `&*e`).
+pub fn of(e: &(dyn std::error::Error + 'static)) -> Option<Interrupted> {
+    std::iter::successors(Some(e), |&e| e.source()).find_map(|c| {
+        c.downcast_ref::<Interrupted>()
+            .copied()
+            .or_else(|| match crate::error::as_run_error(c) {
+                Some(crate::error::RunError::Interrupted(i)) => Some(*i),
+                _ => None,
+            })
+    })
 }

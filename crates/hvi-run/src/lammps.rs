@@ -20,10 +20,10 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
 use hvi_engine::scene::SceneSpec;
 use hvi_engine::sim::Simulation;
 
+use crate::error::{Result, ResultExt, RunError};
 use crate::files::write_atomic_bytes;
 use crate::output::write_lammps_data;
 
@@ -47,14 +47,18 @@ pub const TABLE_KEYWORD: &str = "HVI_BOND";
 /// within kappa dr^2 / 8 per bond.
 pub fn bond_table(r_eq: f64, kappa: f64, rcut: f64, sigma: f64, n: usize) -> Result<String> {
     if !(sigma > 0.0 && r_eq > 0.0 && kappa > 0.0) || n < 3 {
-        bail!("a bond table needs sigma, r_eq, kappa > 0 and at least 3 points");
+        return Err(RunError::Input(
+            "a bond table needs sigma, r_eq, kappa > 0 and at least 3 points".into(),
+        ));
     }
     let (lo, hi) = (
         TABLE_RANGE_OVER_SIGMA.0 * sigma,
         TABLE_RANGE_OVER_SIGMA.1 * sigma,
     );
     if !(lo < r_eq && r_eq < rcut && rcut < hi) {
-        bail!("a bond table needs lo < r_eq < rcut < hi, got {lo:e} {r_eq:e} {rcut:e} {hi:e} m");
+        return Err(RunError::Input(format!(
+            "a bond table needs lo < r_eq < rcut < hi, got {lo:e} {r_eq:e} {rcut:e} {hi:e} m"
+        )));
     }
     let dr = (hi - lo) / (n - 1) as f64;
     let i_eq = ((r_eq - lo) / dr).round() as usize;
@@ -89,7 +93,9 @@ pub fn bond_table(r_eq: f64, kappa: f64, rcut: f64, sigma: f64, n: usize) -> Res
         let _ = writeln!(s, "{} {r:.17e} {e:.17e} {f:.17e}", i + 1);
     }
     if r_eq + (n - 1 - i_eq) as f64 * dr <= rcut {
-        bail!("the bond table does not reach beyond rcut");
+        return Err(RunError::Input(
+            "the bond table does not reach beyond rcut".into(),
+        ));
     }
     Ok(s)
 }
@@ -97,11 +103,12 @@ pub fn bond_table(r_eq: f64, kappa: f64, rcut: f64, sigma: f64, n: usize) -> Res
 /// Writes `data.lmp`, `bond.table`, `model.lmp` and `in.lmp` into `dir` (created when
 /// missing) for `sim` at t = 0 of the scene `spec`.
 pub fn write_lammps_input(dir: &Path, sim: &Simulation, spec: &SceneSpec) -> Result<()> {
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create the LAMMPS directory {}", dir.display()))?;
+    std::fs::create_dir_all(dir).write_context(dir, || {
+        format!("cannot create the LAMMPS directory {}", dir.display())
+    })?;
     let dir = dir
         .canonicalize()
-        .with_context(|| format!("cannot resolve {}", dir.display()))?;
+        .read_context(dir, || format!("cannot resolve {}", dir.display()))?;
     let d = &sim.derived;
     write_lammps_data(&dir.join("data.lmp"), sim)?;
     write_atomic_bytes(

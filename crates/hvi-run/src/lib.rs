@@ -5,7 +5,11 @@
 //! re-analysis ([`state`]), study files and their validated plans ([`spec`], [`plan`]), the
 //! run store that keeps each result once ([`store`]), checkpoints of runs in progress
 //! ([`checkpoint`]), parallel execution ([`exec`]) or as Slurm batches ([`runner`]), results tables ([`table`]), Slurm job
-//! arrays ([`slurm`]) and the engine benchmark ([`mod@bench`]).
+//! arrays ([`slurm`]) and the engine benchmark ([`mod@bench`]). Every function returns
+//! [`error::Result`]: its [`error::RunError`] says what went wrong. Three keep an `anyhow::Result` for hvi-study's callers
+//! that collect or return it as one: [`store::Store::lookup`], [`study::job_of`] and
+//! [`files::write_atomic`] (their typed forms: [`store::Store::record`], [`study::job`],
+//! [`files::write_atomic_with`]).
 //!
 //! ```
 //! use hvi_run::run::{run_scene, RunOptions};
@@ -37,6 +41,7 @@
 
 pub mod bench;
 pub mod checkpoint;
+pub mod error;
 pub mod exec;
 pub mod files;
 pub mod interrupt;

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
-use anyhow::{Context, Result};
+use crate::error::{Result, ResultExt};
 
 /// The study locks this process holds (kept until it exits).
 static HELD: Mutex<Vec<(PathBuf, File)>> = Mutex::new(Vec::new());
@@ -44,7 +44,9 @@ fn open(path: &Path) -> Result<File> {
         .read(true)
         .write(true)
         .open(path)
-        .with_context(|| format!("cannot open the lock file {}", path.display()))
+        .write_context(path, || {
+            format!("cannot open the lock file {}", path.display())
+        })
 }
 
 /// Who holds a lock, as its holder wrote it ("pid 123 on host, hvi-study sweep").

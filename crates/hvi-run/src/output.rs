@@ -4,9 +4,10 @@ use std::fs;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
-use anyhow::{Context, Result};
-
-pub use crate::files::{remove_stale_partials, write_atomic, write_atomic_bytes};
+use crate::error::{Result, ResultExt, RunError};
+pub use crate::files::{
+    remove_stale_partials, write_atomic, write_atomic_bytes, write_atomic_with,
+};
 use hvi_engine::sim::Simulation;
 use hvi_engine::state::{Body, Particles};
 
@@ -15,7 +16,7 @@ pub fn write_csv_atomic<T: serde::Serialize>(
     path: &Path,
     rows: impl IntoIterator<Item = T>,
 ) -> Result<()> {
-    write_atomic(path, |w| {
+    write_atomic_with(path, |w| {
         let mut csv = csv::Writer::from_writer(w);
         for r in rows {
             csv.serialize(r)?;
@@ -27,9 +28,11 @@ pub fn write_csv_atomic<T: serde::Serialize>(
 
 /// Reads a target file (`experiments_data/*.toml`, parsed by [`hvi_analysis::score::Targets`]).
 pub fn load_targets(path: &Path) -> Result<hvi_analysis::score::Targets> {
-    let text = fs::read_to_string(path)
-        .with_context(|| format!("cannot read target file {}", path.display()))?;
+    let text = fs::read_to_string(path).read_context(path, || {
+        format!("cannot read target file {}", path.display())
+    })?;
     hvi_analysis::score::Targets::parse(&text, path)
+        .map_err(RunError::library)
         .with_context(|| format!("in target file {}", path.display()))
 }
 
@@ -124,7 +127,7 @@ impl Trajectory {
         let w = match format.extxyz() {
             true => Some(BufWriter::new(
                 fs::File::create(&partial)
-                    .with_context(|| format!("cannot create {}", partial.display()))?,
+                    .write_context(&partial, || format!("cannot create {}", partial.display()))?,
             )),
             false => None,
         };
@@ -132,7 +135,7 @@ impl Trajectory {
             true => {
                 let vtk_dir = dir.join(VTK_DIR);
                 fs::create_dir_all(&vtk_dir)
-                    .with_context(|| format!("cannot create {}", vtk_dir.display()))?;
+                    .write_context(&vtk_dir, || format!("cannot create {}", vtk_dir.display()))?;
                 Some(Vec::new())
             }
             false => None,
@@ -164,7 +167,9 @@ impl Trajectory {
             .collect();
         if let Some(w) = self.w.as_mut() {
             write_xyz_frame(w, sim, p, step, self.frames, &order, &fragment, &broken)
-                .with_context(|| format!("cannot write {}", self.partial.display()))?;
+                .write_context(&self.partial, || {
+                    format!("cannot write {}", self.partial.display())
+                })?;
         }
         if let Some(vtk) = self.vtk.as_mut() {
             let name = format!("{VTK_DIR}/frame_{:05}.vtu", self.frames);
@@ -186,8 +191,9 @@ impl Trajectory {
     pub fn save_state(&mut self) -> Result<TrajectoryState> {
         let extxyz_bytes = match self.w.as_mut() {
             Some(w) => {
-                w.flush()
-                    .with_context(|| format!("cannot write {}", self.partial.display()))?;
+                w.flush().write_context(&self.partial, || {
+                    format!("cannot write {}", self.partial.display())
+                })?;
                 Some(w.get_ref().metadata()?.len())
             }
             None => None,
@@ -212,20 +218,20 @@ impl Trajectory {
                 // A finished run's trajectory, extended to a later end: continued in a copy, so
                 // that the finished file stays whole until the extension finishes.
                 if !partial.exists() && path.is_file() {
-                    fs::copy(&path, &partial).with_context(|| {
+                    fs::copy(&path, &partial).write_context(&partial, || {
                         format!("cannot copy {} to continue it", path.display())
                     })?;
                 }
                 let f = fs::OpenOptions::new()
                     .write(true)
                     .open(&partial)
-                    .with_context(|| format!("cannot reopen {}", partial.display()))?;
+                    .write_context(&partial, || format!("cannot reopen {}", partial.display()))?;
                 let have = f.metadata()?.len();
                 if have < bytes {
-                    anyhow::bail!(
+                    return Err(RunError::parse(format!(
                         "{} holds {have} bytes, fewer than the {bytes} of the checkpoint",
                         partial.display()
-                    );
+                    )));
                 }
                 f.set_len(bytes)?;
                 let mut w = BufWriter::new(f);
@@ -236,7 +242,10 @@ impl Trajectory {
         };
         if let Some(vtk) = &s.vtk {
             if let Some((_, missing)) = vtk.iter().find(|(_, f)| !dir.join(f).is_file()) {
-                anyhow::bail!("the VTK frame {} is missing", dir.join(missing).display());
+                return Err(RunError::parse(format!(
+                    "the VTK frame {} is missing",
+                    dir.join(missing).display()
+                )));
             }
         }
         Ok(Trajectory {
@@ -256,11 +265,12 @@ impl Trajectory {
         if let Some(mut w) = self.w {
             w.flush()?;
             w.get_ref().sync_all()?;
-            fs::rename(&self.partial, &self.path)
-                .with_context(|| format!("cannot move {} into place", self.path.display()))?;
+            fs::rename(&self.partial, &self.path).write_context(&self.path, || {
+                format!("cannot move {} into place", self.path.display())
+            })?;
         }
         if let Some(vtk) = &self.vtk {
-            write_atomic(&self.dir.join(PVD_FILE), |w| {
+            write_atomic_with(&self.dir.join(PVD_FILE), |w| {
                 writeln!(w, "<?xml version=\"1.0\"?>")?;
                 writeln!(
                     w,
@@ -389,7 +399,9 @@ fn vtu_frame(
         }),
     };
     let mut bytes = Vec::new();
-    vtk.write_xml(&mut bytes).context("VTK frame")?;
+    vtk.write_xml(&mut bytes)
+        .map_err(|e| RunError::Library(Box::new(e)))
+        .context("VTK frame")?;
     Ok(bytes)
 }
 
@@ -414,7 +426,7 @@ pub fn write_lammps_data(path: &Path, sim: &Simulation) -> Result<()> {
         hi = hi.max(*x);
     }
     let margin = 2.0 * d.r_eq_m;
-    write_atomic(path, |w| {
+    write_atomic_with(path, |w| {
         writeln!(
             w,
             "LAMMPS data file written by hvi-study {}: sigma = {:.9e} m, eps = {:.9e} J, kappa = {:.9e} N/m, rcut = {:.9e} m, dt = {:.9e} s",
@@ -527,10 +539,10 @@ pub fn clear_run_dir(dir: &Path, keep: &[&std::ffi::OsStr]) -> Result<Vec<String
         return Ok(Vec::new());
     }
     if !dir.is_dir() {
-        anyhow::bail!(
+        return Err(RunError::Input(format!(
             "invalid value for `--out`: {} is a file (allowed: a directory)",
             dir.display()
-        );
+        )));
     }
     for (marker, what) in [
         ("plan.json", "a study directory (it has plan.json)"),
@@ -538,19 +550,19 @@ pub fn clear_run_dir(dir: &Path, keep: &[&std::ffi::OsStr]) -> Result<Vec<String
         ("record.json", "a run of a study store (it has record.json)"),
     ] {
         if dir.join(marker).exists() {
-            anyhow::bail!(
+            return Err(RunError::Input(format!(
                 "refusing to run into --out {}: it is {what}, and a single run's files would \
                  mix with it; choose a new or empty directory",
                 dir.display()
-            );
+            )));
         }
     }
     let mut ours = Vec::new();
     let mut foreign = Vec::new();
-    let entries =
-        std::fs::read_dir(dir).with_context(|| format!("cannot read --out {}", dir.display()))?;
+    let entries = std::fs::read_dir(dir)
+        .read_context(dir, || format!("cannot read --out {}", dir.display()))?;
     for e in entries {
-        let e = e.with_context(|| format!("cannot read --out {}", dir.display()))?;
+        let e = e.read_context(dir, || format!("cannot read --out {}", dir.display()))?;
         let name = e.file_name();
         if keep.contains(&name.as_os_str()) {
             continue;
@@ -565,7 +577,7 @@ pub fn clear_run_dir(dir: &Path, keep: &[&std::ffi::OsStr]) -> Result<Vec<String
     }
     if !foreign.is_empty() {
         foreign.sort();
-        anyhow::bail!(
+        return Err(RunError::Input(format!(
             "refusing to run into --out {}: it holds {} that a run does not write ({}{}); choose \
              a new or empty directory, or remove them",
             dir.display(),
@@ -581,7 +593,7 @@ pub fn clear_run_dir(dir: &Path, keep: &[&std::ffi::OsStr]) -> Result<Vec<String
                 .collect::<Vec<_>>()
                 .join(", "),
             if foreign.len() > 3 { ", ..." } else { "" }
-        );
+        )));
     }
     ours.sort();
     for name in &ours {
@@ -591,7 +603,7 @@ pub fn clear_run_dir(dir: &Path, keep: &[&std::ffi::OsStr]) -> Result<Vec<String
         } else {
             std::fs::remove_file(&path)
         };
-        removed.with_context(|| {
+        removed.write_context(&path, || {
             format!(
                 "cannot remove the earlier run's {}",
                 dir.join(name).display()

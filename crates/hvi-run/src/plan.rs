@@ -8,12 +8,12 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, bail, Context, Result};
 use hvi_engine::scene::SceneSpec;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+use crate::error::{Result, ResultExt, RunError};
 use crate::files::write_atomic_bytes;
 use crate::scene_file::parse_scene;
 use crate::spec::{json_to_override, override_key, Axis, Study, Tier};
@@ -164,16 +164,22 @@ fn common_overrides(study: &Study, tier: &Tier, req: &PlanRequest) -> Result<Vec
     for s in &req.set {
         let k = override_key(s);
         if study.axes.iter().any(|a| a.key == k) {
-            bail!("--set `{s}`: `{k}` is an axis of this study (allowed: keys that are not axes)");
+            return Err(RunError::Input(format!(
+                "--set `{s}`: `{k}` is an axis of this study (allowed: keys that are not axes)"
+            )));
         }
         common.push(s.clone());
     }
     if let Some(n) = req.particles {
         if !(n.is_finite() && n >= 8.0) {
-            bail!("invalid value for `--particles`: {n} (allowed: a number >= 8)");
+            return Err(RunError::Input(format!(
+                "invalid value for `--particles`: {n} (allowed: a number >= 8)"
+            )));
         }
         if study.axes.iter().any(|a| a.key == "resolution.particles") {
-            bail!("--particles: `resolution.particles` is an axis of this study");
+            return Err(RunError::Input(
+                "--particles: `resolution.particles` is an axis of this study".into(),
+            ));
         }
         common.push(format!("resolution.particles={n}"));
     }
@@ -227,13 +233,13 @@ fn checked_scenes(study: &Study, tier: &Tier, drafts: &[Draft]) -> Result<Vec<Sc
         }
     }
     if n_bad > 0 {
-        bail!(
+        return Err(RunError::Input(format!(
             "study `{}` at tier `{}`: {n_bad} of {} runs have invalid scenes; nothing was run:\n  {}",
             study.name,
             tier.name,
             drafts.len(),
             errors.join("\n  ")
-        );
+        )));
     }
     checked.into_iter().collect()
 }
@@ -246,8 +252,9 @@ impl Plan {
     /// Writes `plan.json` into `dir` atomically. Refuses a directory that holds another
     /// study's or tier's plan, so results of different studies never mix.
     pub fn write(&self, dir: &Path) -> Result<PathBuf> {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create study directory {}", dir.display()))?;
+        std::fs::create_dir_all(dir).write_context(dir, || {
+            format!("cannot create study directory {}", dir.display())
+        })?;
         // One planning process per study directory: a second waits (crate::lock).
         crate::lock::hold_study(dir)?;
         let path = dir.join("plan.json");
@@ -264,20 +271,20 @@ impl Plan {
                 .ok()
                 .and_then(|t| serde_json::from_str(&t).ok())
                 .ok_or_else(|| {
-                    anyhow!(
+                    RunError::Store(format!(
                         "{} holds something that is not a plan; move it away or use another --out",
                         path.display()
-                    )
+                    ))
                 })?;
             if old.study != self.study || old.tier != self.tier {
-                bail!(
+                return Err(RunError::Store(format!(
                     "{} holds study `{}` at tier `{}`, not `{}` at `{}`: use another --out",
                     dir.display(),
                     old.study,
                     old.tier,
                     self.study,
                     self.tier
-                );
+                )));
             }
         }
         write_atomic_bytes(&path, serde_json::to_string_pretty(self)?.as_bytes())?;
@@ -288,27 +295,29 @@ impl Plan {
     /// edited by hand, or written by another version, is refused).
     pub fn load(path: &Path) -> Result<Plan> {
         let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read plan {}", path.display()))?;
-        let plan: Plan = serde_json::from_str(&text)
-            .with_context(|| format!("{} is not a plan.json", path.display()))?;
+            .read_context(path, || format!("cannot read plan {}", path.display()))?;
+        let plan: Plan = serde_json::from_str(&text).map_err(|e| RunError::Parse {
+            message: format!("{} is not a plan.json", path.display()),
+            source: Some(Box::new(e)),
+        })?;
         if plan.format != STUDY_FORMAT_VERSION {
-            bail!(
+            return Err(RunError::parse(format!(
                 "{}: plan format {} (this hvi-study reads {STUDY_FORMAT_VERSION}); plan the study again",
                 path.display(),
                 plan.format
-            );
+            )));
         }
         for r in &plan.runs {
             let fp = fingerprint(&r.scene, &plan.tier)?;
             if fp != r.fingerprint {
-                bail!(
+                return Err(RunError::Store(format!(
                     "{}: run {} has fingerprint {} but its scene hashes to {fp} (edited plan, or \
                      another engine version {}); plan the study again",
                     path.display(),
                     r.index,
                     r.fingerprint,
                     plan.engine_version
-                );
+                )));
             }
         }
         Ok(plan)
@@ -317,11 +326,11 @@ impl Plan {
     /// The run at `index`, or an error naming the valid range.
     pub fn run(&self, index: usize) -> Result<&PlannedRun> {
         self.runs.get(index).ok_or_else(|| {
-            anyhow!(
+            RunError::Input(format!(
                 "invalid run index {index}: this plan has {} runs (allowed: 0..={})",
                 self.runs.len(),
                 self.runs.len().saturating_sub(1)
-            )
+            ))
         })
     }
 }

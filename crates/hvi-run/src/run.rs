@@ -9,7 +9,6 @@ use std::io::{IsTerminal, Write as _};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result};
 use hvi_engine::cloud::{
     size_distribution, step_at_tau, CloudObserver, CloudReport, CloudResult, ObserverState,
     TrackRow,
@@ -21,6 +20,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{self, CheckpointOptions, Every, Found};
+use crate::error::{Result, ResultExt, RunError};
 use crate::output::{
     write_atomic_bytes, write_csv_atomic, write_lammps_data, DumpFormat, Trajectory,
     TrajectoryState,
@@ -503,7 +503,7 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         checkpoint::remove(path)?;
     }
     if let Some(e) = run.failure {
-        return Err(anyhow::Error::new(e).context(format!(
+        return Err(RunError::from(e).context(format!(
             "run stopped early; what it had is in {}",
             Path::new(&opts.out_dir).display()
         )));
@@ -521,8 +521,9 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
 /// Creates the output directory and builds the scene's simulation; with progress on, prints
 /// the derived numbers and the thread count.
 fn set_up(spec: &SceneSpec, opts: &RunOptions) -> Result<(Simulation, Counts)> {
-    std::fs::create_dir_all(&opts.out_dir)
-        .with_context(|| format!("cannot create output directory {}", opts.out_dir.display()))?;
+    std::fs::create_dir_all(&opts.out_dir).write_context(&opts.out_dir, || {
+        format!("cannot create output directory {}", opts.out_dir.display())
+    })?;
     let setup = spec.build()?;
     let n = setup.particles.len();
     let n_imp = setup
@@ -839,36 +840,48 @@ impl Gathered {
     /// files untouched then).
     fn extend(&mut self, sim: &mut Simulation, opts: &RunOptions, end_time_s: f64) -> Result<()> {
         let Some(c) = self.continuation.as_ref() else {
-            anyhow::bail!("extending a run needs the path of its continuation state");
+            return Err(RunError::Input(
+                "extending a run needs the path of its continuation state".into(),
+            ));
         };
         let (path, before) = (c.path.clone(), c.before);
         let fresh = "run it from t = 0 instead (`hvi-study run --fresh`)";
         let (step, saved) = match checkpoint::read::<Saved>(&path, &c.key)? {
             Found::Resume { step, payload } => (step, payload),
-            Found::Nothing => anyhow::bail!(
-                "{} is missing: there is no state to extend the run from; {fresh}",
-                path.display()
-            ),
-            Found::OtherRun => anyhow::bail!(
-                "{} is another run's (another scene apart from run.end_time_s, another \
+            Found::Nothing => {
+                return Err(RunError::Store(format!(
+                    "{} is missing: there is no state to extend the run from; {fresh}",
+                    path.display()
+                )))
+            }
+            Found::OtherRun => {
+                return Err(RunError::Store(format!(
+                    "{} is another run's (another scene apart from run.end_time_s, another \
                  hvi-study version or other output flags); {fresh}",
-                path.display()
-            ),
+                    path.display()
+                )))
+            }
             Found::Damaged(why) => {
-                anyhow::bail!("{} is damaged ({why}); {fresh}", path.display())
+                return Err(RunError::parse(format!(
+                    "{} is damaged ({why}); {fresh}",
+                    path.display()
+                )))
             }
         };
         if step >= before {
-            anyhow::bail!(
+            return Err(RunError::Store(format!(
                 "{} holds the state at base step {step}, at or past base step {before}, the \
                  first sample this run takes because of its end time (a front time follows \
                  the end of a run shorter than 32 us): the runs part before it, so this one \
                  cannot continue it bit-identically; {fresh}",
                 path.display()
-            );
+            )));
         }
         if let Some(why) = self.take_up(sim, opts, step, saved)? {
-            anyhow::bail!("{}: {why}; {fresh}", path.display());
+            return Err(RunError::parse(format!(
+                "{}: {why}; {fresh}",
+                path.display()
+            )));
         }
         if opts.progress {
             log::info!(
@@ -1359,9 +1372,11 @@ fn render_pictures(
         &info,
         cloud.map(|c| &c.report.measurement),
     )
+    .map_err(RunError::library)
     .context("rendering cloud_side.png")?;
     if !frames.is_empty() {
         render::series(&dir.join("cloud_series.png"), frames, &info)
+            .map_err(RunError::library)
             .context("rendering cloud_series.png")?;
     }
     if let Some(c) = cloud {
@@ -1371,6 +1386,7 @@ fn render_pictures(
             &c.report.measurement,
             &info,
         )
+        .map_err(RunError::library)
         .context("rendering fragments.png")?;
         if let (Some(image), Some(sil)) = (&c.shadowgraph, &c.report.silhouette) {
             render::shadowgraph(
@@ -1381,6 +1397,7 @@ fn render_pictures(
                 c.report.measurement.tau_s,
                 c.report.front_velocity_ratio,
             )
+            .map_err(RunError::library)
             .context("rendering shadowgraph.png")?;
         }
     }
@@ -1392,6 +1409,7 @@ fn render_pictures(
             cloud.and_then(|c| c.report.front_velocity_ratio),
             &info,
         )
+        .map_err(RunError::library)
         .context("rendering cloud_track.png")?;
     }
     let took = t.elapsed();

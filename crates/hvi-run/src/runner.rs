@@ -13,8 +13,7 @@ use std::collections::{BTreeMap, HashSet};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Result};
-
+use crate::error::{Result, RunError};
 use crate::exec::{execute, ExecOptions, ExecReport};
 use crate::plan::{run_dir_name, Plan, PlannedRun, ENGINE_VERSION, STUDY_FORMAT_VERSION};
 use crate::slurm::{submit_batch, QueueView, SlurmOptions, TaskState};
@@ -52,10 +51,10 @@ impl SlurmBatches {
     pub fn new(options: SlurmOptions, poll_s: f64, progress: bool) -> Result<SlurmBatches> {
         options.validate()?;
         if options.dry_run {
-            bail!("`--dry-run` does not combine with `--slurm` here: a batch is submitted when the search reaches it (`hvi-study submit --dry-run` prints a study's job script)");
+            return Err(RunError::Input("`--dry-run` does not combine with `--slurm` here: a batch is submitted when the search reaches it (`hvi-study submit --dry-run` prints a study's job script)".into()));
         }
         if !(MIN_POLL_S..=MAX_POLL_S).contains(&poll_s) || !poll_s.is_finite() {
-            bail!("invalid value for `--poll`: {poll_s} (allowed: {MIN_POLL_S} to {MAX_POLL_S} seconds)");
+            return Err(RunError::Input(format!("invalid value for `--poll`: {poll_s} (allowed: {MIN_POLL_S} to {MAX_POLL_S} seconds)")));
         }
         Ok(SlurmBatches {
             options,
@@ -110,7 +109,7 @@ impl SlurmBatches {
         // name it).
         let mut done_before = HashSet::new();
         for r in &plan.runs {
-            if matches!(store.lookup(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
+            if matches!(store.record(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
             {
                 done_before.insert(r.fingerprint.as_str());
             }
@@ -133,7 +132,7 @@ impl SlurmBatches {
         let mut records = Vec::with_capacity(jobs.len());
         let mut failed = 0;
         for j in jobs {
-            let rec = match store.lookup(&j.fingerprint)? {
+            let rec = match store.record(&j.fingerprint)? {
                 Some(r) => r,
                 None => no_result(j, &queue),
             };
@@ -167,11 +166,11 @@ impl SlurmBatches {
             crate::interrupt::check()?;
             let queue = QueueView::of(out)?;
             if !queue.known && !queue.submissions.is_empty() {
-                bail!(
+                return Err(RunError::External(format!(
                     "cannot follow the Slurm jobs of {}: {}; the submitted runs go on, and the same command picks up their results",
                     out.display(),
                     queue.note.as_deref().unwrap_or("squeue gave no answer")
-                );
+                )));
             }
             let (mut running, mut queued, mut done) = (0, 0, 0);
             for r in &plan.runs {
@@ -179,7 +178,7 @@ impl SlurmBatches {
                     Some(TaskState::Running) => running += 1,
                     Some(TaskState::Queued) => queued += 1,
                     None => {
-                        if store.lookup(&r.fingerprint)?.is_some() {
+                        if store.record(&r.fingerprint)?.is_some() {
                             done += 1;
                         }
                     }
@@ -339,7 +338,7 @@ mod tests {
             [0, 1, 2]
         );
         // run-unit builds the same job back from the batch plan.
-        let back = crate::study::job_of(&p, 1).expect("job");
+        let back = crate::study::job(&p, 1).expect("job");
         assert_eq!(back.fingerprint, "b");
         assert_eq!(back.params.get("run.seed"), Some(&serde_json::json!(2)));
     }

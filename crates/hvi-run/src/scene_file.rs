@@ -4,9 +4,10 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, bail, Context, Result};
 use hvi_engine::scene::keys::{find, KEYS};
 use hvi_engine::scene::SceneSpec;
+
+use crate::error::{Result, ResultExt, RunError};
 
 /// The sections a scene file may have.
 pub const SECTIONS: [&str; 5] = ["scene", "resolution", "material", "run", "analysis"];
@@ -47,18 +48,27 @@ fn unknown_key(name: &str) -> String {
 
 /// Checks one `--set` and splits it into (section, field, value).
 fn split_set(set: &str) -> Result<(&str, &str, &str)> {
-    let (key, value) = set
-        .split_once('=')
-        .ok_or_else(|| anyhow!("--set `{set}`: expected KEY=VALUE, e.g. scene.v0_m_s=6500"))?;
+    let (key, value) = set.split_once('=').ok_or_else(|| {
+        RunError::Input(format!(
+            "--set `{set}`: expected KEY=VALUE, e.g. scene.v0_m_s=6500"
+        ))
+    })?;
     let key = key.trim();
     let (section, field) = key.split_once('.').ok_or_else(|| {
-        anyhow!("--set `{set}`: key `{key}` must be section.name with section one of {SECTIONS:?}")
+        RunError::Input(format!(
+            "--set `{set}`: key `{key}` must be section.name with section one of {SECTIONS:?}"
+        ))
     })?;
     if !SECTIONS.contains(&section) {
-        bail!("--set `{set}`: unknown section `{section}` (allowed: {SECTIONS:?})");
+        return Err(RunError::Input(format!(
+            "--set `{set}`: unknown section `{section}` (allowed: {SECTIONS:?})"
+        )));
     }
     if find(key).is_none() {
-        bail!("--set `{set}`: {}", unknown_key(key));
+        return Err(RunError::Input(format!(
+            "--set `{set}`: {}",
+            unknown_key(key)
+        )));
     }
     Ok((section, field, value))
 }
@@ -72,7 +82,9 @@ pub fn apply_overrides(doc: &mut toml::Table, sets: &[String]) -> Result<()> {
             .entry(section.to_string())
             .or_insert_with(|| toml::Value::Table(toml::Table::new()))
             .as_table_mut()
-            .ok_or_else(|| anyhow!("`{section}` in the scene file is not a table"))?;
+            .ok_or_else(|| {
+                RunError::Input(format!("`{section}` in the scene file is not a table"))
+            })?;
         table.insert(field.to_string(), parse_value(value));
     }
     Ok(())
@@ -85,23 +97,28 @@ fn check_document(doc: &toml::Table) -> Result<()> {
         .iter()
         .any(|k| doc.contains_key(*k))
     {
-        bail!(
+        return Err(RunError::Input(
             "this is a study file (it has [study], [[axes]] or [tiers]), not a scene: run it \
              with `hvi-study sweep FILE` (or `calibrate`, `validity-map`), or give `run` its \
              scene (the study's `scene = ...`)"
-        );
+                .into(),
+        ));
     }
     for (section, value) in doc {
         if !SECTIONS.contains(&section.as_str()) {
-            bail!("unknown section `[{section}]` (allowed: {SECTIONS:?})");
+            return Err(RunError::Input(format!(
+                "unknown section `[{section}]` (allowed: {SECTIONS:?})"
+            )));
         }
         let Some(table) = value.as_table() else {
-            bail!("`{section}` must be a table `[{section}]`");
+            return Err(RunError::Input(format!(
+                "`{section}` must be a table `[{section}]`"
+            )));
         };
         for field in table.keys() {
             let key = format!("{section}.{field}");
             if find(&key).is_none() {
-                bail!("{}", unknown_key(&key));
+                return Err(RunError::Input(unknown_key(&key)));
             }
         }
     }
@@ -117,9 +134,9 @@ fn deserialise(doc: toml::Table) -> Result<SceneSpec> {
         let inner = e.into_inner();
         let msg = inner.message().trim().to_string();
         if path.is_empty() || path == "." {
-            anyhow!("scene: {msg}")
+            RunError::Input(format!("scene: {msg}"))
         } else {
-            anyhow!("scene key `{path}`: {msg}")
+            RunError::Input(format!("scene key `{path}`: {msg}"))
         }
     })
 }
@@ -128,7 +145,10 @@ fn deserialise(doc: toml::Table) -> Result<SceneSpec> {
 /// a did-you-mean; a value that does not parse is blamed on the `--set` that gave it, naming
 /// its key, or on the file.
 pub fn parse_scene(text: &str, sets: &[String]) -> Result<SceneSpec> {
-    let doc: toml::Table = toml::from_str(text).context("scene file is not valid TOML")?;
+    let doc: toml::Table = toml::from_str(text).map_err(|e| RunError::Parse {
+        message: "scene file is not valid TOML".into(),
+        source: Some(Box::new(e)),
+    })?;
     check_document(&doc)?;
     let mut full = doc.clone();
     apply_overrides(&mut full, sets)?;
@@ -151,7 +171,9 @@ pub fn parse_scene(text: &str, sets: &[String]) -> Result<SceneSpec> {
                 let msg = msg.strip_prefix("scene key `").map_or(msg.as_str(), |m| {
                     m.split_once("`: ").map_or(m, |(_, rest)| rest)
                 });
-                bail!("--set `{set}`: key `{key}`: {msg}{what}");
+                return Err(RunError::Input(format!(
+                    "--set `{set}`: key `{key}`: {msg}{what}"
+                )));
             }
         }
     }
@@ -160,8 +182,9 @@ pub fn parse_scene(text: &str, sets: &[String]) -> Result<SceneSpec> {
 
 /// Reads and parses a scene file with overrides.
 pub fn load_scene(path: &Path, sets: &[String]) -> Result<SceneSpec> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read scene file {}", path.display()))?;
+    let text = std::fs::read_to_string(path).read_context(path, || {
+        format!("cannot read scene file {}", path.display())
+    })?;
     // An error of a --set names the --set; any other is the file's.
     parse_scene(&text, sets).map_err(|e| {
         if e.to_string().starts_with("--set ") {

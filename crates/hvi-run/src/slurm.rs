@@ -27,9 +27,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::error::{Result, ResultExt, RunError};
 use crate::files::write_atomic_bytes;
 use crate::plan::describe_values;
 use crate::plan::Plan;
@@ -216,10 +216,11 @@ pub fn submissions(study_dir: &Path) -> Result<Vec<Submission>> {
         if !path.exists() {
             continue;
         }
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("cannot read {}", path.display()))?;
-        let s: Submission = serde_json::from_str(&text)
-            .with_context(|| format!("{} is not a submission record", path.display()))?;
+        let text = std::fs::read_to_string(&path).map_err(|e| RunError::read(&path, e))?;
+        let s: Submission = serde_json::from_str(&text).map_err(|e| RunError::Parse {
+            message: format!("{} is not a submission record", path.display()),
+            source: Some(Box::new(e)),
+        })?;
         v.push(s);
     }
     v.sort_by_key(|s| (s.submitted_unix_s, s.script.clone()));
@@ -240,7 +241,7 @@ fn slurm_command(
     match cmd.output() {
         Ok(o) => Ok(Some(o)),
         Err(e) if e.kind() == ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(anyhow!("cannot run {program}: {e}")),
+        Err(e) => Err(RunError::External(format!("cannot run {program}: {e}"))),
     }
 }
 
@@ -265,7 +266,11 @@ pub fn squeue(job_ids: &[&str]) -> Result<Option<HashMap<(String, usize), TaskSt
             .rev()
             .find(|l| !l.trim().is_empty())
             .unwrap_or("");
-        bail!("squeue failed ({}): {}", out.status, why.trim());
+        return Err(RunError::External(format!(
+            "squeue failed ({}): {}",
+            out.status,
+            why.trim()
+        )));
     }
     Ok(Some(parse_squeue(&String::from_utf8_lossy(&out.stdout))))
 }
@@ -438,9 +443,8 @@ exec {exe} run-unit {plan} "$index" --study-dir {dir} --threads "${{SLURM_CPUS_P
 pub fn absolute(p: &Path) -> Result<PathBuf> {
     match std::fs::canonicalize(p) {
         Ok(a) => Ok(a),
-        Err(_) => {
-            std::path::absolute(p).with_context(|| format!("cannot make {} absolute", p.display()))
-        }
+        Err(_) => std::path::absolute(p)
+            .read_context(p, || format!("cannot make {} absolute", p.display())),
     }
 }
 
@@ -449,10 +453,14 @@ impl SlurmOptions {
     pub fn validate(&self) -> Result<()> {
         let args = self;
         if args.cpus_per_task == 0 {
-            bail!("invalid value for `--cpus-per-task`: 0 (allowed: an integer >= 1)");
+            return Err(RunError::Input(
+                "invalid value for `--cpus-per-task`: 0 (allowed: an integer >= 1)".into(),
+            ));
         }
         if args.array_limit == Some(0) {
-            bail!("invalid value for `--array-limit`: 0 (allowed: an integer >= 1)");
+            return Err(RunError::Input(
+                "invalid value for `--array-limit`: 0 (allowed: an integer >= 1)".into(),
+            ));
         }
         if let Some(p) = &args.partition {
             if p.is_empty()
@@ -460,26 +468,26 @@ impl SlurmOptions {
                     .chars()
                     .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | ','))
             {
-                bail!(
+                return Err(RunError::Input(format!(
                     "invalid value for `--partition`: `{p}` (allowed: partition names of letters, \
                  digits, `_`, `-`, `.`, comma-separated)"
-                );
+                )));
             }
         }
         if let Some(t) = &args.time {
             if !valid_time(t) {
-                bail!(
+                return Err(RunError::Input(format!(
                 "invalid value for `--time`: `{t}` (allowed: Slurm's MM, MM:SS, HH:MM:SS, D-HH, \
                  D-HH:MM, D-HH:MM:SS or UNLIMITED)"
-            );
+            )));
             }
         }
         for o in &args.sbatch_options {
             if !o.starts_with('-') || o.contains(['\n', '\r']) {
-                bail!(
+                return Err(RunError::Input(format!(
                 "invalid value for `--sbatch-option`: `{o}` (allowed: one sbatch option such as \
                  --account=NAME, on one line)"
-            );
+            )));
             }
         }
         Ok(())
@@ -506,14 +514,21 @@ fn submission_dir(study_dir: &Path, create: bool) -> Result<PathBuf> {
     if !create {
         return Ok(root.join(format!("submission-{n:03}")));
     }
-    std::fs::create_dir_all(&root).with_context(|| format!("cannot create {}", root.display()))?;
+    std::fs::create_dir_all(&root)
+        .write_context(&root, || format!("cannot create {}", root.display()))?;
     loop {
         let dir = root.join(format!("submission-{n:03}"));
         match std::fs::create_dir(&dir) {
             Ok(()) => return Ok(dir),
             // Another submit took this number meanwhile.
             Err(e) if e.kind() == ErrorKind::AlreadyExists => n += 1,
-            Err(e) => return Err(anyhow!("cannot create {}: {e}", dir.display())),
+            Err(e) => {
+                return Err(RunError::Write {
+                    message: format!("cannot create {}", dir.display()),
+                    path: dir,
+                    source: e,
+                })
+            }
         }
     }
 }
@@ -524,15 +539,20 @@ pub fn sbatch(script: &Path) -> Result<String> {
     let script_arg = script.display().to_string();
     let out =
         slurm_command("sbatch", &["--parsable", &script_arg], Some(dir))?.ok_or_else(|| {
-            anyhow!(
-            "sbatch not found: `submit --slurm` needs Slurm's client commands on PATH (run it on \
-             the cluster's login node; `--dry-run` prints the job script without them)"
-        )
+            RunError::External(
+                "sbatch not found: `submit --slurm` needs Slurm's client commands on PATH (run it \
+                 on the cluster's login node; `--dry-run` prints the job script without them)"
+                    .into(),
+            )
         })?;
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     if !out.status.success() {
-        bail!("sbatch failed ({}): {}", out.status, stderr.trim());
+        return Err(RunError::External(format!(
+            "sbatch failed ({}): {}",
+            out.status,
+            stderr.trim()
+        )));
     }
     // --parsable: `jobid` or `jobid;cluster`.
     let id = stdout
@@ -545,7 +565,7 @@ pub fn sbatch(script: &Path) -> Result<String> {
         .trim()
         .to_string();
     if id.is_empty() || !id.bytes().all(|b| b.is_ascii_digit()) {
-        bail!(
+        return Err(RunError::External(format!(
             "sbatch printed `{}` instead of a job id{}",
             stdout.trim(),
             if stderr.trim().is_empty() {
@@ -553,7 +573,7 @@ pub fn sbatch(script: &Path) -> Result<String> {
             } else {
                 format!(" ({})", stderr.trim())
             }
-        );
+        )));
     }
     Ok(id)
 }
@@ -581,7 +601,7 @@ fn pending(plan: &Plan, out: &Path) -> Result<Pending> {
     let (mut done, mut failed, mut todo) = (0, 0, Vec::new());
     for r in &plan.runs {
         let rec = match &store {
-            Some(s) => s.lookup(&r.fingerprint)?,
+            Some(s) => s.record(&r.fingerprint)?,
             None => None,
         };
         match rec.map(|r| r.status) {

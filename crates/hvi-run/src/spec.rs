@@ -28,11 +28,11 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 pub use hvi_analysis::number::round_sig;
 
+use crate::error::{Result, ResultExt, RunError};
 use crate::scene_file::SECTIONS;
 
 /// The tier a study runs at when none is named.
@@ -171,10 +171,14 @@ pub fn override_key(set: &str) -> &str {
 /// Checks that `key` is `section.name` with a known section.
 fn check_key(key: &str, what: &str) -> Result<()> {
     let Some((section, field)) = key.split_once('.') else {
-        bail!("{what}: key `{key}` must be section.name with section one of {SECTIONS:?}");
+        return Err(RunError::Input(format!(
+            "{what}: key `{key}` must be section.name with section one of {SECTIONS:?}"
+        )));
     };
     if !SECTIONS.contains(&section) || field.is_empty() || field.contains('.') {
-        bail!("{what}: key `{key}` must be section.name with section one of {SECTIONS:?}");
+        return Err(RunError::Input(format!(
+            "{what}: key `{key}` must be section.name with section one of {SECTIONS:?}"
+        )));
     }
     Ok(())
 }
@@ -187,27 +191,32 @@ pub fn toml_to_json(v: &toml::Value) -> Result<serde_json::Value> {
 /// A JSON axis value as the right-hand side of a `--set` override (TOML syntax).
 pub fn json_to_override(v: &serde_json::Value) -> Result<String> {
     let t: toml::Value = serde_json::from_value(v.clone())
-        .map_err(|e| anyhow!("axis value {v} cannot be written as TOML: {e}"))?;
+        .map_err(|e| RunError::Input(format!("axis value {v} cannot be written as TOML: {e}")))?;
     Ok(t.to_string())
 }
 
 fn expand_range(key: &str, r: &RangeFile) -> Result<Vec<serde_json::Value>> {
     let what = format!("axis `{key}`: range");
     if !(r.from.is_finite() && r.to.is_finite()) {
-        bail!("{what}: from and to must be finite numbers");
+        return Err(RunError::Input(format!(
+            "{what}: from and to must be finite numbers"
+        )));
     }
     if r.count == 0 {
-        bail!("{what}: count = 0 (allowed: an integer >= 1)");
+        return Err(RunError::Input(format!(
+            "{what}: count = 0 (allowed: an integer >= 1)"
+        )));
     }
     if r.count == 1 && r.from != r.to {
-        bail!("{what}: count = 1 needs from = to");
+        return Err(RunError::Input(format!(
+            "{what}: count = 1 needs from = to"
+        )));
     }
     if r.scale == Scale::Log && (r.from <= 0.0 || r.to <= 0.0) {
-        bail!(
+        return Err(RunError::Input(format!(
             "{what}: scale = \"log\" needs from > 0 and to > 0 (got {} and {})",
-            r.from,
-            r.to
-        );
+            r.from, r.to
+        )));
     }
     let n = r.count;
     let values = (0..n)
@@ -237,14 +246,17 @@ fn expand_range(key: &str, r: &RangeFile) -> Result<Vec<serde_json::Value>> {
 
 /// The study file's TOML in its shape; a shape error names the key.
 fn study_file(text: &str) -> Result<StudyFile> {
-    let doc: toml::Value = toml::from_str(text).context("study file is not valid TOML")?;
+    let doc: toml::Value = toml::from_str(text).map_err(|e| RunError::Parse {
+        message: "study file is not valid TOML".into(),
+        source: Some(Box::new(e)),
+    })?;
     serde_path_to_error::deserialize(doc).map_err(|e| {
         let p = e.path().to_string();
         let msg = e.into_inner().message().trim().to_string();
         if p.is_empty() || p == "." {
-            anyhow!("study: {msg}")
+            RunError::Input(format!("study: {msg}"))
         } else {
-            anyhow!("study key `{p}`: {msg}")
+            RunError::Input(format!("study key `{p}`: {msg}"))
         }
     })
 }
@@ -256,9 +268,9 @@ fn check_name(name: &str) -> Result<()> {
             .chars()
             .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
     {
-        bail!(
+        return Err(RunError::Input(format!(
             "study key `study.name`: {name:?} (allowed: letters, digits, '-' and '_'; it names a directory)"
-        );
+        )));
     }
     Ok(())
 }
@@ -270,7 +282,9 @@ fn parse_axes(files: &[AxisFile]) -> Result<Vec<Axis>> {
         let key = a.key.trim().to_string();
         check_key(&key, &format!("study key `axes[{i}].key`"))?;
         if axes.iter().any(|b| b.key == key) {
-            bail!("axis `{key}` appears twice (allowed: each key in one axis)");
+            return Err(RunError::Input(format!(
+                "axis `{key}` appears twice (allowed: each key in one axis)"
+            )));
         }
         let values = axis_values(&key, a)?;
         axes.push(Axis {
@@ -287,7 +301,9 @@ fn axis_values(key: &str, a: &AxisFile) -> Result<Vec<serde_json::Value>> {
     let values = match (&a.values, &a.range) {
         (Some(v), None) => {
             if v.is_empty() {
-                bail!("axis `{key}`: values = [] (allowed: at least one value)");
+                return Err(RunError::Input(format!(
+                    "axis `{key}`: values = [] (allowed: at least one value)"
+                )));
             }
             v.iter()
                 .map(toml_to_json)
@@ -296,17 +312,27 @@ fn axis_values(key: &str, a: &AxisFile) -> Result<Vec<serde_json::Value>> {
         }
         (None, Some(r)) => expand_range(key, r)?,
         (Some(_), Some(_)) => {
-            bail!("axis `{key}`: give either values or range, not both")
+            return Err(RunError::Input(format!(
+                "axis `{key}`: give either values or range, not both"
+            )))
         }
-        (None, None) => bail!("axis `{key}`: give values = [...] or range = {{...}}"),
+        (None, None) => {
+            return Err(RunError::Input(format!(
+                "axis `{key}`: give values = [...] or range = {{...}}"
+            )))
+        }
     };
     for (j, v) in values.iter().enumerate() {
         if values[..j].contains(v) {
-            bail!("axis `{key}`: value {v} appears twice");
+            return Err(RunError::Input(format!(
+                "axis `{key}`: value {v} appears twice"
+            )));
         }
         if let Some(x) = v.as_f64() {
             if !x.is_finite() {
-                bail!("axis `{key}`: value {v} is not finite");
+                return Err(RunError::Input(format!(
+                    "axis `{key}`: value {v} is not finite"
+                )));
             }
         }
     }
@@ -324,9 +350,9 @@ fn parse_tiers(
             let k = override_key(s);
             check_key(k, &format!("study key `tiers.{name}.set`"))?;
             if axes.iter().any(|a| a.key == k) {
-                bail!(
+                return Err(RunError::Input(format!(
                     "key `{k}` is both an axis and in `tiers.{name}.set` (allowed: one of the two)"
-                );
+                )));
             }
         }
         tiers.insert(
@@ -339,7 +365,9 @@ fn parse_tiers(
         );
     }
     if tiers.is_empty() {
-        bail!("study has no `[tiers]`: add at least `[tiers.{DEFAULT_TIER}]` with its resolution");
+        return Err(RunError::Input(format!(
+            "study has no `[tiers]`: add at least `[tiers.{DEFAULT_TIER}]` with its resolution"
+        )));
     }
     Ok(tiers)
 }
@@ -356,7 +384,7 @@ impl Study {
         }
         let base_dir = path.parent().unwrap_or_else(|| Path::new("."));
         let scene_path = base_dir.join(&h.scene);
-        let scene_text = std::fs::read_to_string(&scene_path).with_context(|| {
+        let scene_text = std::fs::read_to_string(&scene_path).read_context(&scene_path, || {
             format!(
                 "study key `study.scene`: cannot read scene file {}",
                 scene_path.display()
@@ -366,16 +394,18 @@ impl Study {
         for s in &h.set {
             let k = override_key(s);
             if axes.iter().any(|a| a.key == k) {
-                bail!("key `{k}` is both an axis and in `study.set` (allowed: one of the two)");
+                return Err(RunError::Input(format!(
+                    "key `{k}` is both an axis and in `study.set` (allowed: one of the two)"
+                )));
             }
         }
         let tiers = parse_tiers(&file.tiers, &axes)?;
         let default_tier = h.default_tier.unwrap_or_else(|| DEFAULT_TIER.to_string());
         if !tiers.contains_key(&default_tier) {
-            bail!(
+            return Err(RunError::Input(format!(
                 "study key `study.default_tier`: `{default_tier}` is not a tier (tiers: {:?})",
                 tiers.keys().collect::<Vec<_>>()
-            );
+            )));
         }
         Ok(Study {
             name: h.name,
@@ -394,8 +424,9 @@ impl Study {
 
     /// Reads and parses a study file.
     pub fn load(path: &Path) -> Result<Study> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read study file {}", path.display()))?;
+        let text = std::fs::read_to_string(path).read_context(path, || {
+            format!("cannot read study file {}", path.display())
+        })?;
         Study::parse(&text, path).with_context(|| format!("in study file {}", path.display()))
     }
 
@@ -403,10 +434,10 @@ impl Study {
     pub fn tier(&self, name: Option<&str>) -> Result<&Tier> {
         let name = name.unwrap_or(&self.default_tier);
         self.tiers.get(name).ok_or_else(|| {
-            anyhow!(
+            RunError::Input(format!(
                 "invalid value for `--tier`: `{name}` (this study's tiers: {:?})",
                 self.tiers.keys().collect::<Vec<_>>()
-            )
+            ))
         })
     }
 

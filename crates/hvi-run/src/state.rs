@@ -52,12 +52,12 @@
 use std::fmt;
 use std::path::Path;
 
-use anyhow::{anyhow, bail, Context, Result};
 use glam::DVec3;
 use hvi_engine::cloud::{CloudState, KeptStates};
 use hvi_engine::state::Body;
 use sha2::{Digest, Sha256};
 
+use crate::error::{Result, ResultExt, RunError};
 use crate::files::write_atomic_bytes;
 
 /// The state file's name in a run's directory.
@@ -118,10 +118,12 @@ fn masses_by_body(s: &CloudState) -> Result<[f64; 2]> {
         match m[b as usize] {
             None => m[b as usize] = Some(mass),
             Some(x) if x.to_bits() == mass.to_bits() => {}
-            Some(x) => bail!(
-                "the {b:?}'s particles differ in mass ({x:e} and {mass:e} kg): state format \
+            Some(x) => {
+                return Err(RunError::Invariant(format!(
+                    "the {b:?}'s particles differ in mass ({x:e} and {mass:e} kg): state format \
                  {FORMAT_VERSION} keeps one mass per body"
-            ),
+                )))
+            }
         }
     }
     Ok(m.map(|x| x.unwrap_or(0.0)))
@@ -142,12 +144,14 @@ pub fn encode(kept: &KeptStates) -> Result<Vec<u8>> {
     let masses = masses_by_body(end)?;
     for (kind, s) in &frames {
         if s.len() != n || masses_by_body(s)? != masses {
-            bail!("the state at {kind} is of other particles than the one at the analysis time");
+            return Err(RunError::Invariant(format!(
+                "the state at {kind} is of other particles than the one at the analysis time"
+            )));
         }
     }
     let total = file_bytes(n as u64, frames.len() as u64)
         .and_then(|b| usize::try_from(b).ok())
-        .ok_or_else(|| anyhow!("{n} particles are too many for a state file"))?;
+        .ok_or_else(|| RunError::Input(format!("{n} particles are too many for a state file")))?;
     let mut b = Vec::with_capacity(total);
     b.extend_from_slice(&MAGIC);
     b.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -235,40 +239,52 @@ impl<'a> Cursor<'a> {
 pub fn decode(bytes: &[u8]) -> Result<KeptStates> {
     let magic = bytes.len().min(MAGIC.len());
     if bytes[..magic] != MAGIC[..magic] {
-        bail!("not an hvi state file (no `HVISTATE` at its start)");
+        return Err(RunError::parse(
+            "not an hvi state file (no `HVISTATE` at its start)",
+        ));
     }
     if bytes.len() < 16 {
-        bail!("truncated: {} bytes, shorter than the header", bytes.len());
+        return Err(RunError::parse(format!(
+            "truncated: {} bytes, shorter than the header",
+            bytes.len()
+        )));
     }
     let mut c = Cursor { bytes, at: 8 };
     let version = c.u32();
     if version != FORMAT_VERSION {
-        bail!(
+        return Err(RunError::parse(format!(
             "state format version {version}; this hvi-study reads version {FORMAT_VERSION}: \
              rerun the run with it"
-        );
+        )));
     }
     let frames = c.u32();
     if bytes.len() < HEADER_BYTES {
-        bail!("truncated: {} bytes, shorter than the header", bytes.len());
+        return Err(RunError::parse(format!(
+            "truncated: {} bytes, shorter than the header",
+            bytes.len()
+        )));
     }
     if !(1..=3).contains(&frames) {
-        bail!("corrupt: {frames} frames (a state file has 1 to 3)");
+        return Err(RunError::parse(format!(
+            "corrupt: {frames} frames (a state file has 1 to 3)"
+        )));
     }
     let n64 = c.u64();
     let expected = file_bytes(n64, u64::from(frames))
         .filter(|_| n64 <= u64::from(u32::MAX))
-        .ok_or_else(|| anyhow!("corrupt: {n64} particles"))?;
+        .ok_or_else(|| RunError::parse(format!("corrupt: {n64} particles")))?;
     if bytes.len() as u64 != expected {
-        bail!(
+        return Err(RunError::parse(format!(
             "truncated or corrupt: {} bytes, but {frames} frames of {n64} particles take \
              {expected}",
             bytes.len()
-        );
+        )));
     }
     let (body_bytes, checksum) = bytes.split_at(bytes.len() - CHECKSUM_BYTES);
     if Sha256::digest(body_bytes).as_slice() != checksum {
-        bail!("corrupt: its SHA-256 does not match its contents");
+        return Err(RunError::parse(
+            "corrupt: its SHA-256 does not match its contents",
+        ));
     }
     let n = n64 as usize;
     let plate_rear_z_m = c.f64();
@@ -292,7 +308,9 @@ pub fn decode(bytes: &[u8]) -> Result<KeptStates> {
             .map(|x| u32::from_le_bytes([x[0], x[1], x[2], x[3]]))
             .collect();
         if let Some(l) = labels.iter().find(|&&l| l as usize >= n) {
-            bail!("corrupt: fragment label {l} of {n} particles");
+            return Err(RunError::parse(format!(
+                "corrupt: fragment label {l} of {n} particles"
+            )));
         }
         let flags = c.take(n);
         let body: Vec<Body> = flags
@@ -326,11 +344,15 @@ pub fn decode(bytes: &[u8]) -> Result<KeptStates> {
             (k, 1 | 2) if k > 0 && front[kind as usize - 1].is_none() => {
                 &mut front[kind as usize - 1]
             }
-            _ => bail!("corrupt: frame {k} is of kind {kind}"),
+            _ => {
+                return Err(RunError::parse(format!(
+                    "corrupt: frame {k} is of kind {kind}"
+                )))
+            }
         };
         *slot = Some(state);
     }
-    let end = end.ok_or_else(|| anyhow!("corrupt: no frame at the analysis time"))?;
+    let end = end.ok_or_else(|| RunError::parse("corrupt: no frame at the analysis time"))?;
     Ok(KeptStates { end, front })
 }
 
@@ -345,7 +367,7 @@ pub fn read_state(path: &Path) -> Result<Option<KeptStates>> {
     let bytes = match std::fs::read(path) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
+        Err(e) => return Err(RunError::read(path, e)),
     };
     decode(&bytes)
         .map(Some)

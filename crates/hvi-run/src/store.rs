@@ -31,13 +31,13 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
-use anyhow::{anyhow, bail, Context, Result};
 use hvi_analysis::observable::Observables;
 use hvi_engine::scene::SceneSpec;
 use serde::{Deserialize, Serialize};
 
 use sha2::{Digest, Sha256};
 
+use crate::error::{Result, ResultExt, RunError};
 pub use crate::files::host_name;
 use crate::files::{
     canonical_json, write_atomic_bytes, DIR_DIGITS, ENGINE_VERSION, STUDY_FORMAT_VERSION,
@@ -218,8 +218,9 @@ impl Store {
     /// Opens (creates) `study_dir/runs` and removes what killed processes left there.
     pub fn open(study_dir: &Path) -> Result<Store> {
         let runs = study_dir.join("runs");
-        fs::create_dir_all(&runs)
-            .with_context(|| format!("cannot create run store {}", runs.display()))?;
+        fs::create_dir_all(&runs).write_context(&runs, || {
+            format!("cannot create run store {}", runs.display())
+        })?;
         let store = Store {
             runs,
             repair: true,
@@ -245,10 +246,10 @@ impl Store {
     pub fn existing(study_dir: &Path) -> Result<Store> {
         let runs = study_dir.join("runs");
         if !runs.is_dir() {
-            bail!(
+            return Err(RunError::Store(format!(
                 "{} has no run store (no runs/ directory)",
                 study_dir.display()
-            );
+            )));
         }
         Ok(Store {
             runs,
@@ -263,9 +264,9 @@ impl Store {
     /// `record.json`), by name; runs in progress are left out.
     pub fn run_dirs(&self) -> Result<Vec<PathBuf>> {
         let mut v = Vec::new();
-        for entry in fs::read_dir(&self.runs)
-            .with_context(|| format!("cannot list {}", self.runs.display()))?
-        {
+        for entry in fs::read_dir(&self.runs).read_context(&self.runs, || {
+            format!("cannot list {}", self.runs.display())
+        })? {
             let path = entry?.path();
             let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
             let digits = name
@@ -284,8 +285,9 @@ impl Store {
         let mut n = 0;
         for t in self.in_progress()? {
             if t.alive == Some(false) {
-                fs::remove_dir_all(&t.path)
-                    .with_context(|| format!("cannot remove stale {}", t.path.display()))?;
+                fs::remove_dir_all(&t.path).write_context(&t.path, || {
+                    format!("cannot remove stale {}", t.path.display())
+                })?;
                 n += 1;
             }
         }
@@ -345,7 +347,7 @@ impl Store {
     /// reported on stderr) and counts as not run, so it runs again; a store opened read-only
     /// ([`Store::existing`]) reports it as an error instead. A record with another fingerprint
     /// or format is an error: results of different inputs are never mixed.
-    pub fn lookup(&self, fingerprint: &str) -> Result<Option<Record>> {
+    pub fn record(&self, fingerprint: &str) -> Result<Option<Record>> {
         let dir = self.dir(fingerprint);
         let path = dir.join("record.json");
         if !path.exists() {
@@ -354,8 +356,7 @@ impl Store {
             }
             return Ok(None);
         }
-        let text =
-            fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
+        let text = fs::read_to_string(&path).map_err(|e| RunError::read(&path, e))?;
         let rec: Record = match serde_json::from_str(&text) {
             Ok(r) => r,
             Err(e) => {
@@ -363,19 +364,19 @@ impl Store {
             }
         };
         if rec.fingerprint != fingerprint {
-            bail!(
+            return Err(RunError::Store(format!(
                 "refusing to mix results: {} holds fingerprint {} but this run's is {fingerprint}; \
                  move the directory away",
                 dir.display(),
                 rec.fingerprint
-            );
+            )));
         }
         if rec.format != STUDY_FORMAT_VERSION {
-            bail!(
+            return Err(RunError::parse(format!(
                 "{}: record format {} (this hvi-study writes {STUDY_FORMAT_VERSION})",
                 path.display(),
                 rec.format
-            );
+            )));
         }
         if let Some(sum) = &rec.checksum {
             if *sum != stored_digest(&text)? {
@@ -388,14 +389,21 @@ impl Store {
         Ok(Some(rec))
     }
 
+    /// [`Store::record`] as an `anyhow::Result`, for the callers in hvi-study that collect
+    /// it into one (`hvi-study collect`); the error's chain, and so its message and exit code,
+    /// are [`Store::record`]'s.
+    pub fn lookup(&self, fingerprint: &str) -> anyhow::Result<Option<Record>> {
+        Ok(self.record(fingerprint)?)
+    }
+
     /// A damaged run directory: moved aside (repairing store) or an error (read-only store).
     fn damaged(&self, dir: &Path, why: &str) -> Result<Option<Record>> {
         if !self.repair {
-            bail!(
+            return Err(RunError::Store(format!(
                 "damaged run {}: {why}; the next sweep of the study moves it aside and runs it \
                  again",
                 dir.display()
-            );
+            )));
         }
         let digits = dir
             .file_name()
@@ -409,7 +417,7 @@ impl Store {
             std::process::id(),
             TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
         ));
-        fs::rename(dir, &aside).with_context(|| {
+        fs::rename(dir, &aside).write_context(&aside, || {
             format!(
                 "damaged run {} ({why}): cannot move it aside",
                 dir.display()
@@ -443,7 +451,7 @@ impl Store {
     /// it again ([`Store::done_elsewhere`] counts those).
     pub fn execute(&self, job: &Job, threads: usize) -> Result<Record> {
         let _claim = crate::lock::lock_run(&self.dir(&job.fingerprint))?;
-        if let Some(rec) = self.lookup(&job.fingerprint)? {
+        if let Some(rec) = self.record(&job.fingerprint)? {
             if rec.status == RunStatus::Completed {
                 self.elsewhere.fetch_add(1, Ordering::Relaxed);
                 return Ok(rec);
@@ -520,7 +528,8 @@ impl Store {
     /// Runs `job` in the temporary directory `tmp` and moves it into place with its record.
     fn execute_in(&self, job: &Job, threads: usize, tmp: &Path) -> Result<Record> {
         let tmp = tmp.to_path_buf();
-        fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
+        fs::create_dir_all(&tmp)
+            .write_context(&tmp, || format!("cannot create {}", tmp.display()))?;
         let t0 = Instant::now();
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads.max(1))
@@ -626,7 +635,7 @@ impl Store {
     fn install(&self, tmp: &Path, fingerprint: &str) -> Result<()> {
         let dest = self.dir(fingerprint);
         if dest.exists() {
-            match self.lookup(fingerprint) {
+            match self.record(fingerprint) {
                 // Another process finished the same run first: keep its result.
                 Ok(Some(r)) if r.status == RunStatus::Completed => {
                     fs::remove_dir_all(tmp)?;
@@ -643,14 +652,16 @@ impl Store {
                 host_name()
             ));
             fs::rename(&dest, &old)
-                .with_context(|| format!("cannot move {} aside", dest.display()))?;
-            fs::rename(tmp, &dest)
-                .with_context(|| format!("cannot move {} into place", dest.display()))?;
+                .write_context(&old, || format!("cannot move {} aside", dest.display()))?;
+            fs::rename(tmp, &dest).write_context(&dest, || {
+                format!("cannot move {} into place", dest.display())
+            })?;
             sync_dir(&self.runs);
             fs::remove_dir_all(&old)?;
         } else {
-            fs::rename(tmp, &dest)
-                .map_err(|e| anyhow!("cannot move {} to {}: {e}", tmp.display(), dest.display()))?;
+            fs::rename(tmp, &dest).write_context(&dest, || {
+                format!("cannot move {} to {}", tmp.display(), dest.display())
+            })?;
             sync_dir(&self.runs);
         }
         Ok(())

@@ -6,15 +6,21 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use crate::error::Result;
 
 use crate::exec::{ExecOptions, ExecReport};
 use crate::plan::{describe_values, Plan};
 use crate::store::{Job, Record, Store};
 use crate::table::{results_table, Table};
 
+/// [`job`] as an `anyhow::Result`, for the callers in hvi-study that collect it into one; the
+/// error is [`job`]'s.
+pub fn job_of(plan: &Plan, index: usize) -> anyhow::Result<Job> {
+    Ok(job(plan, index)?)
+}
+
 /// A plan's run as a job for the store.
-pub fn job_of(plan: &Plan, index: usize) -> Result<Job> {
+pub fn job(plan: &Plan, index: usize) -> Result<Job> {
     let run = plan.run(index)?;
     let params = plan
         .axes
@@ -38,7 +44,7 @@ pub fn job_of(plan: &Plan, index: usize) -> Result<Job> {
 pub fn execute_plan(plan: &Plan, dir: &Path, opts: &ExecOptions) -> Result<(Table, ExecReport)> {
     let store = Store::open(dir)?.with_checkpoint_every(opts.checkpoint_every);
     let jobs: Vec<Job> = (0..plan.runs.len())
-        .map(|i| job_of(plan, i))
+        .map(|i| job(plan, i))
         .collect::<Result<_>>()?;
     let describe = |i: usize| describe_values(&plan.axes, &plan.runs[i].values);
     let report = crate::exec::execute(&store, &jobs, &describe, opts)?;

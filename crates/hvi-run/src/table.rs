@@ -4,10 +4,10 @@
 
 use std::path::Path;
 
-use anyhow::Result;
+use crate::error::Result;
 use serde_json::Value;
 
-use crate::files::write_atomic;
+use crate::files::write_atomic_with;
 use crate::plan::Plan;
 use crate::spec::Axis;
 use crate::store::{Record, RunStatus};
@@ -39,7 +39,7 @@ impl Table {
 
     /// Writes `<stem>.csv` and `<stem>.json` into `dir`, atomically.
     pub fn write(&self, dir: &Path, stem: &str) -> Result<()> {
-        write_atomic(&dir.join(format!("{stem}.csv")), |w| {
+        write_atomic_with(&dir.join(format!("{stem}.csv")), |w| {
             let mut csv = csv::Writer::from_writer(w);
             csv.write_record(&self.columns)?;
             for row in &self.rows {
@@ -48,7 +48,7 @@ impl Table {
             csv.flush()?;
             Ok(())
         })?;
-        write_atomic(&dir.join(format!("{stem}.json")), |w| {
+        write_atomic_with(&dir.join(format!("{stem}.json")), |w| {
             writeln!(w, "[")?;
             for (i, row) in self.rows.iter().enumerate() {
                 let fields: Vec<String> = self

@@ -85,7 +85,11 @@ fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
 /// After Ctrl-C or SIGTERM stopped a study command: its tables from the runs that finished
 /// (as `collect --as KIND` writes them), then the interruption again.
 fn tables_if_interrupted(study: &StudyArgs, kind: CollectAs, r: Result<()>) -> Result<()> {
-    if r.as_ref().err().and_then(hvi_run::interrupt::of).is_some() {
+    if r.as_ref()
+        .err()
+        .and_then(|e| hvi_run::interrupt::of(&**e))
+        .is_some()
+    {
         let args = CollectArgs {
             store: study.to_store(),
             kind: Some(kind),

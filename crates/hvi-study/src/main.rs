@@ -46,8 +46,8 @@ fn main() -> ExitCode {
     }
     match hvi_study::commands::dispatch(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) if hvi_run::interrupt::of(&e).is_some() => {
-            let stop = hvi_run::interrupt::of(&e).expect("checked");
+        Err(e) if hvi_run::interrupt::of(&*e).is_some() => {
+            let stop = hvi_run::interrupt::of(&*e).expect("checked");
             eprintln!(
                 "{stop}: the runs in progress stopped at a checkpoint (unless \
                  --checkpoint-every off) and left no partial result; finished runs are kept: run \

@@ -178,7 +178,8 @@ pub fn write_report(res: &FidelityResult, out: &Path) -> Result<()> {
     };
     let text = serde_json::to_string_pretty(&json).context("fidelity.json")?;
     write_atomic_bytes(&out.join("fidelity.json"), text.as_bytes())?;
-    write_atomic_bytes(&out.join("report.md"), markdown(res).as_bytes())
+    write_atomic_bytes(&out.join("report.md"), markdown(res).as_bytes())?;
+    Ok(())
 }
 
 /// The maps' markers: the paper's fit, and on the R map the paper's peak.

@@ -255,7 +255,7 @@ fn calibration_targets(plans: &Plans) -> Result<Targets> {
     let study = Study::load(&plans.calibration_study)?;
     let cfg = crate::study::calibrate::CalibrateConfig::of(&study)?;
     let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-    hvi_run::output::load_targets(&base.join(&cfg.targets))
+    Ok(hvi_run::output::load_targets(&base.join(&cfg.targets))?)
 }
 
 /// experiments_data's note on Fig. 13's experimental points, if it records one.

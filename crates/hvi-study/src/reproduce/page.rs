@@ -33,7 +33,8 @@ const PAD: (f64, f64) = (64.0, 8.0);
 /// Writes `index.html` into `dir` for `rep` (the run just finished) and the history it was
 /// appended to (its last record of `rep`'s tier is this run).
 pub fn write_page(dir: &Path, rep: &Reproduction, history: &History) -> Result<()> {
-    write_atomic_bytes(&dir.join(PAGE_FILE), page(rep, history).as_bytes())
+    write_atomic_bytes(&dir.join(PAGE_FILE), page(rep, history).as_bytes())?;
+    Ok(())
 }
 
 /// HTML-escaped text.

@@ -280,7 +280,7 @@ pub fn estimate(plans: &Plans, tier: &str, cfg: &EstimateConfig) -> Result<Estim
             .runs
             .par_iter()
             .map(|r| hvi_run::exec::run_cost(&r.scene))
-            .collect::<Result<_>>()?;
+            .collect::<hvi_run::error::Result<_>>()?;
         let particle_steps: f64 = costs.iter().map(|c| c.1).sum();
         rows.push(EstimateRow {
             stage: stage.into(),

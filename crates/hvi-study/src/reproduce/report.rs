@@ -501,7 +501,8 @@ impl Reproduction {
         write_atomic_bytes(
             &dir.join("reproduce.json"),
             serde_json::to_string_pretty(self)?.as_bytes(),
-        )
+        )?;
+        Ok(())
     }
 
     /// Reads a `reproduce.json`.

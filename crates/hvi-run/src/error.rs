@@ -1,0 +1,390 @@
+//! hvi-run's one error type, [`RunError`].
+//!
+//! The ground floor with [`crate::files`]: it imports no module of the crate (the
+//! [`Interrupted`] error lives here, and [`crate::interrupt`] re-exports it).
+//!
+//! An error is a chain, as `anyhow`'s are: a [`RunError::Context`] says what was being done
+//! and its `source()` is the error below it; a read or write error's source is the system's
+//! reason. `{}` prints an error's own message, `{:#}` the whole chain joined by `: ` (as
+//! `anyhow` prints it, and as `anyhow` prints an `anyhow::Error` made from a `RunError`):
+//! `run 3: cannot write runs/.tmp-…/record.json: No space left on device (os error 28)`.
+
+use std::error::Error as StdError;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// A library error with its own chain (`anyhow::Error` converts into it with `.into()`).
+pub type BoxError = Box<dyn StdError + Send + Sync + 'static>;
+
+/// Everything that can go wrong in hvi-run, each naming what to fix.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// A scene value outside its range, or a run the engine stopped (the engine's error).
+    #[error(transparent)]
+    Engine(#[from] hvi_engine::error::EngineError),
+    /// Wrong input: a scene or study file's key, an option, a value; the message names the
+    /// field and what is allowed.
+    #[error("{0}")]
+    Input(String),
+    /// An input file or directory that cannot be read (missing, no permission).
+    #[error(fmt = fmt_io)]
+    Read {
+        /// The file or directory.
+        path: PathBuf,
+        /// What could not be done, naming the path ("cannot read scene file …").
+        message: String,
+        /// The system's reason.
+        #[source]
+        source: std::io::Error,
+    },
+    /// An output that cannot be written (a full disk, an unwritable directory).
+    #[error(fmt = fmt_io)]
+    Write {
+        /// The file or directory.
+        path: PathBuf,
+        /// What could not be done, naming the path ("cannot write …", "cannot create …").
+        message: String,
+        /// The system's reason.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file whose content is malformed (a plan, a run record, a submission record, a state
+    /// file, a checkpoint): the message says what is wrong and, where it is known here, the
+    /// file (otherwise a [`RunError::Context`] around it names it).
+    #[error(fmt = fmt_parse)]
+    Parse {
+        /// What is wrong.
+        message: String,
+        /// The parser's own error, if it has one.
+        #[source]
+        source: Option<BoxError>,
+    },
+    /// The store refuses (another study's plan, another fingerprint, a damaged run in a store
+    /// opened for reading, ...).
+    #[error("{0}")]
+    Store(String),
+    /// Results that break what hvi-run checks of them (physics that differs between thread
+    /// counts).
+    #[error("{0}")]
+    Invariant(String),
+    /// The scheduler (Slurm) or an external program refused or failed.
+    #[error("{0}")]
+    External(String),
+    /// A signal asked the work to stop.
+    #[error(transparent)]
+    Interrupted(#[from] Interrupted),
+    /// A system error where a [`RunError::Context`] around it, or the caller, names the file
+    /// (inside [`crate::files::write_atomic_with`], a directory listing).
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// An error of a library hvi-run calls, with its own chain: a picture hvi-plot could not
+    /// draw or save, a target file hvi-analysis refused, JSON or TOML that does not parse, a
+    /// thread pool that does not start.
+    #[error(transparent)]
+    Library(BoxError),
+    /// A lower error with what was being done when it happened.
+    #[error(fmt = fmt_context)]
+    Context {
+        /// What was being done.
+        context: String,
+        /// The error.
+        #[source]
+        source: Box<RunError>,
+    },
+}
+
+/// Result type of hvi-run.
+pub type Result<T> = std::result::Result<T, RunError>;
+
+/// `message`, and under `{:#}` the chain below it (`: cause` for each, as `anyhow` prints it).
+fn fmt_chain(
+    message: &str,
+    source: Option<&(dyn StdError + 'static)>,
+    f: &mut fmt::Formatter<'_>,
+) -> fmt::Result {
+    f.write_str(message)?;
+    if f.alternate() {
+        let mut next = source;
+        while let Some(e) = next {
+            write!(f, ": {e}")?;
+            next = e.source();
+        }
+    }
+    Ok(())
+}
+
+fn fmt_io(
+    _path: &Path,
+    message: &str,
+    source: &std::io::Error,
+    f: &mut fmt::Formatter<'_>,
+) -> fmt::Result {
+    fmt_chain(message, Some(source), f)
+}
+
+fn fmt_parse(message: &str, source: &Option<BoxError>, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+    fmt_chain(
+        message,
+        source.as_deref().map(|s| s as &(dyn StdError + 'static)),
+        f,
+    )
+}
+
+fn fmt_context(context: &str, source: &RunError, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+    fmt_chain(context, Some(source), f)
+}
+
+impl RunError {
+    /// [`RunError::Read`] with the message "cannot read PATH".
+    pub fn read(path: &Path, source: std::io::Error) -> RunError {
+        RunError::Read {
+            message: format!("cannot read {}", path.display()),
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    /// [`RunError::Write`] with the message "cannot write PATH".
+    pub fn write(path: &Path, source: std::io::Error) -> RunError {
+        RunError::Write {
+            message: format!("cannot write {}", path.display()),
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    /// [`RunError::Parse`] without a parser's error.
+    pub fn parse(message: impl Into<String>) -> RunError {
+        RunError::Parse {
+            message: message.into(),
+            source: None,
+        }
+    }
+
+    /// A library's error (an `anyhow::Error` of hvi-plot or hvi-analysis, say) as
+    /// [`RunError::Library`]; a `RunError` boxed as one comes back as itself.
+    pub fn library(e: impl Into<BoxError>) -> RunError {
+        match e.into().downcast::<RunError>() {
+            Ok(r) => *r,
+            Err(e) => RunError::Library(e),
+        }
+    }
+
+    /// This error, an I/O error, as a [`RunError::Read`] of `path` with `message` (naming the
+    /// path); another with `message` said above it.
+    pub fn reading(self, path: &Path, message: impl Into<String>) -> RunError {
+        match self {
+            RunError::Io(source) => RunError::Read {
+                path: path.to_path_buf(),
+                message: message.into(),
+                source,
+            },
+            other => other.context(message),
+        }
+    }
+
+    /// This error, an I/O error, as a [`RunError::Write`] of `path` with `message` (naming the
+    /// path); another with `message` said above it.
+    pub fn writing(self, path: &Path, message: impl Into<String>) -> RunError {
+        match self {
+            RunError::Io(source) => RunError::Write {
+                path: path.to_path_buf(),
+                message: message.into(),
+                source,
+            },
+            other => other.context(message),
+        }
+    }
+
+    /// This error with `context` said above it.
+    pub fn context(self, context: impl Into<String>) -> RunError {
+        RunError::Context {
+            context: context.into(),
+            source: Box::new(self),
+        }
+    }
+
+    /// The errors of this chain that are `RunError`s, this one first.
+    pub fn chain(&self) -> impl Iterator<Item = &RunError> {
+        run_errors(self)
+    }
+}
+
+/// JSON that does not parse or serialise; an I/O error under it stays one ([`RunError::Io`]).
+impl From<serde_json::Error> for RunError {
+    fn from(e: serde_json::Error) -> RunError {
+        if e.is_io() {
+            RunError::Io(e.into())
+        } else {
+            RunError::Library(Box::new(e))
+        }
+    }
+}
+
+/// A CSV writer's or reader's error; an I/O error under it stays one ([`RunError::Io`]).
+impl From<csv::Error> for RunError {
+    fn from(e: csv::Error) -> RunError {
+        if !e.is_io_error() {
+            return RunError::Library(Box::new(e));
+        }
+        match e.into_kind() {
+            csv::ErrorKind::Io(io) => RunError::Io(io),
+            other => RunError::Library(format!("{other:?}").into()),
+        }
+    }
+}
+
+/// TOML that does not parse.
+impl From<toml::de::Error> for RunError {
+    fn from(e: toml::de::Error) -> RunError {
+        RunError::Library(Box::new(e))
+    }
+}
+
+/// A value that cannot be written as TOML.
+impl From<toml::ser::Error> for RunError {
+    fn from(e: toml::ser::Error) -> RunError {
+        RunError::Library(Box::new(e))
+    }
+}
+
+/// A checkpoint payload that does not encode or decode.
+impl From<postcard::Error> for RunError {
+    fn from(e: postcard::Error) -> RunError {
+        RunError::Library(Box::new(e))
+    }
+}
+
+/// A worker pool that does not start.
+impl From<rayon::ThreadPoolBuildError> for RunError {
+    fn from(e: rayon::ThreadPoolBuildError) -> RunError {
+        RunError::Library(Box::new(e))
+    }
+}
+
+/// `.context(...)` and `.with_context(|| ...)` on results whose error becomes a [`RunError`],
+/// as `anyhow::Context` gives them (the context is said above the error:
+/// [`RunError::Context`]), and `.read_context` / `.write_context`, which make an I/O error a
+/// [`RunError::Read`] or [`RunError::Write`] of a path.
+pub trait ResultExt<T> {
+    /// The error with `context` above it.
+    fn context(self, context: impl Into<String>) -> Result<T>;
+    /// The error with the context `f` makes above it (made only on an error).
+    fn with_context<C: Into<String>>(self, f: impl FnOnce() -> C) -> Result<T>;
+    /// An I/O error as a [`RunError::Read`] of `path` with the `message` that names it
+    /// ("cannot read …"); another error with that message above it ([`RunError::reading`]).
+    fn read_context(self, path: &Path, message: impl FnOnce() -> String) -> Result<T>;
+    /// An I/O error as a [`RunError::Write`] of `path` with the `message` that names it
+    /// ("cannot create …"); another error with that message above it ([`RunError::writing`]).
+    fn write_context(self, path: &Path, message: impl FnOnce() -> String) -> Result<T>;
+}
+
+impl<T, E: Into<RunError>> ResultExt<T> for std::result::Result<T, E> {
+    fn context(self, context: impl Into<String>) -> Result<T> {
+        self.map_err(|e| e.into().context(context))
+    }
+
+    fn with_context<C: Into<String>>(self, f: impl FnOnce() -> C) -> Result<T> {
+        self.map_err(|e| e.into().context(f()))
+    }
+
+    fn read_context(self, path: &Path, message: impl FnOnce() -> String) -> Result<T> {
+        self.map_err(|e| e.into().reading(path, message()))
+    }
+
+    fn write_context(self, path: &Path, message: impl FnOnce() -> String) -> Result<T> {
+        self.map_err(|e| e.into().writing(path, message()))
+    }
+}
+
+/// The error a run or a study returns when a signal stopped it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Interrupted(pub i32);
+
+impl Interrupted {
+    /// The signal's name.
+    pub fn name(&self) -> &'static str {
+        match self.0 {
+            2 => "SIGINT (Ctrl-C)", // crate::interrupt::SIGINT
+            15 => "SIGTERM",        // crate::interrupt::SIGTERM
+            _ => "a signal",
+        }
+    }
+    /// The exit code: 128 + the signal's number.
+    pub fn exit_code(&self) -> u8 {
+        (128 + self.0).clamp(0, 255) as u8
+    }
+}
+
+impl fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "interrupted by {}", self.name())
+    }
+}
+
+impl StdError for Interrupted {}
+
+/// The `RunError`s in an error's chain (walking `source()`), outermost first: the error
+/// itself if it is one, and every one below it (also where a [`RunError::Context`] holds it
+/// boxed, and under an `anyhow::Error`'s contexts).
+pub fn run_errors<'a>(e: &'a (dyn StdError + 'static)) -> impl Iterator<Item = &'a RunError> {
+    std::iter::successors(Some(e), |&e| e.source()).filter_map(as_run_error)
+}
+
+/// `e` as a `RunError`, if it is one (also boxed, as a [`RunError::Context`]'s `source()`
+/// gives the error below it).
+pub fn as_run_error<'a>(e: &'a (dyn StdError + 'static)) -> Option<&'a RunError> {
+    e.downcast_ref::<RunError>()
+        .or_else(|| e.downcast_ref::<Box<RunError>>().map(|b| &**b))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::ErrorKind;
+
+    fn full_disk() -> std::io::Error {
+        std::io::Error::new(ErrorKind::StorageFull, "No space left on device")
+    }
+
+    #[test]
+    fn a_chain_prints_as_anyhow_printed_it() {
+        let e = RunError::write(Path::new("x/record.json"), full_disk())
+            .context("run 3")
+            .context("sweep");
+        let want = "sweep: run 3: cannot write x/record.json: No space left on device";
+        assert_eq!(format!("{e:#}"), want);
+        assert_eq!(format!("{e}"), "sweep");
+        // The same through anyhow, its own contexts above it.
+        let any = anyhow::Error::from(e);
+        assert_eq!(format!("{any:#}"), want);
+        assert_eq!(
+            format!("{:#}", any.context("study")),
+            format!("study: {want}")
+        );
+        // Exactly what anyhow printed for the same chain built with anyhow.
+        let old = anyhow::Error::from(full_disk())
+            .context("cannot write x/record.json")
+            .context("run 3")
+            .context("sweep");
+        assert_eq!(format!("{old:#}"), want);
+        // A parse error with its parser's error, a library's chain.
+        let json = || serde_json::from_str::<u32>("{").expect_err("not a number");
+        let p = RunError::Parse {
+            message: "p.json is not a plan.json".into(),
+            source: Some(Box::new(json())),
+        };
+        let old = anyhow::Error::from(json()).context("p.json is not a plan.json");
+        assert_eq!(format!("{p:#}"), format!("{old:#}"));
+        assert!(format!("{p:#}").contains("expected u32"), "{p:#}");
+        let lib = RunError::library(anyhow::anyhow!("PNG data").context("cannot draw"))
+            .context("rendering fragments.png");
+        assert_eq!(
+            format!("{:#}", anyhow::Error::from(lib)),
+            "rendering fragments.png: cannot draw: PNG data"
+        );
+        // A RunError that went through a box comes back as itself.
+        let back = RunError::library(RunError::External("sbatch failed".into()));
+        assert!(matches!(back, RunError::External(_)));
+    }
+}
