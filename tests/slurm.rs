@@ -726,7 +726,12 @@ fn sbatch_missing_or_failing_is_a_clear_error_and_a_job_id_is_recorded() {
     let empty = dir.join("empty-bin");
     std::fs::create_dir_all(&empty).expect("dir");
     let o = hvi(&submit, &[("PATH", &empty)]);
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(
+        o.status.code(),
+        Some(69),
+        "a missing sbatch exits 69 (EX_UNAVAILABLE): {}",
+        stderr(&o)
+    );
     assert!(stderr(&o).contains("sbatch not found"), "{}", stderr(&o));
     assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
 
@@ -737,7 +742,12 @@ fn sbatch_missing_or_failing_is_a_clear_error_and_a_job_id_is_recorded() {
         None,
     );
     let o = hvi(&submit, &[("PATH", &bin)]);
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(
+        o.status.code(),
+        Some(69),
+        "sbatch refusing the job exits 69 (EX_UNAVAILABLE): {}",
+        stderr(&o)
+    );
     assert!(
         stderr(&o).contains("sbatch failed")
             && stderr(&o).contains("Invalid partition name specified"),

@@ -1293,7 +1293,12 @@ fn a_full_disk_gives_an_error_naming_the_file_and_leaves_a_consistent_store() {
         .arg(&moved)
         .status();
     let _ = std::process::Command::new("umount").arg(&disk).status();
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(
+        o.status.code(),
+        Some(74),
+        "an output that cannot be written exits 74 (EX_IOERR): {}",
+        stderr(&o)
+    );
     let err = stderr(&o);
     assert!(err.contains("No space left on device"), "{err}");
     assert!(

@@ -1,4 +1,5 @@
-//! hvi-run's one error type, [`RunError`].
+//! hvi-run's one error type, [`RunError`], and the exit code a failed command ends with
+//! ([`exit_code`]).
 //!
 //! The ground floor with [`crate::files`]: it imports no module of the crate (the
 //! [`Interrupted`] error lives here, and [`crate::interrupt`] re-exports it).
@@ -37,7 +38,7 @@ pub enum RunError {
         #[source]
         source: std::io::Error,
     },
-    /// An output that cannot be written (a full disk, an unwritable directory).
+    /// An output that cannot be written (a full disk, an unwritable directory): exit code 74.
     #[error(fmt = fmt_io)]
     Write {
         /// The file or directory.
@@ -67,10 +68,10 @@ pub enum RunError {
     /// counts).
     #[error("{0}")]
     Invariant(String),
-    /// The scheduler (Slurm) or an external program refused or failed.
+    /// The scheduler (Slurm) or an external program refused or failed: exit code 69.
     #[error("{0}")]
     External(String),
-    /// A signal asked the work to stop.
+    /// A signal asked the work to stop: exit code 128 + the signal's number.
     #[error(transparent)]
     Interrupted(#[from] Interrupted),
     /// A system error where a [`RunError::Context`] around it, or the caller, names the file
@@ -338,6 +339,47 @@ pub fn as_run_error<'a>(e: &'a (dyn StdError + 'static)) -> Option<&'a RunError>
         .or_else(|| e.downcast_ref::<Box<RunError>>().map(|b| &**b))
 }
 
+/// Exit code of a bad input or any other error: 2.
+pub const EXIT_ERROR: u8 = 2;
+/// Exit code of a scheduler or external program that refused or failed (EX_UNAVAILABLE): 69.
+pub const EXIT_UNAVAILABLE: u8 = 69;
+/// Exit code of an output that cannot be written (EX_IOERR): 74.
+pub const EXIT_IO: u8 = 74;
+
+/// The exit code a command that failed with `e` ends with, from the first cause in its chain
+/// that decides one: a signal 128 + its number ([`Interrupted::exit_code`]), an output that
+/// cannot be written ([`RunError::Write`], or an I/O error that only a write gives: a full
+/// disk, a read-only filesystem) [`EXIT_IO`], the scheduler or an external program
+/// ([`RunError::External`]) [`EXIT_UNAVAILABLE`], anything else (a bad input, a refusal)
+/// [`EXIT_ERROR`]. docs/running.md lists them.
+pub fn exit_code(e: &(dyn StdError + 'static)) -> u8 {
+    for cause in std::iter::successors(Some(e), |&e| e.source()) {
+        if let Some(stop) = cause.downcast_ref::<Interrupted>() {
+            return stop.exit_code();
+        }
+        let run = as_run_error(cause);
+        match run {
+            Some(RunError::Interrupted(stop)) => return stop.exit_code(),
+            Some(RunError::Write { .. }) => return EXIT_IO,
+            Some(RunError::External(_)) => return EXIT_UNAVAILABLE,
+            _ => {}
+        }
+        let io = match run {
+            Some(RunError::Io(io)) => Some(io),
+            _ => cause.downcast_ref::<std::io::Error>(),
+        };
+        if io.is_some_and(|io| {
+            matches!(
+                io.kind(),
+                std::io::ErrorKind::StorageFull | std::io::ErrorKind::ReadOnlyFilesystem
+            )
+        }) {
+            return EXIT_IO;
+        }
+    }
+    EXIT_ERROR
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -386,5 +428,44 @@ mod tests {
         // A RunError that went through a box comes back as itself.
         let back = RunError::library(RunError::External("sbatch failed".into()));
         assert!(matches!(back, RunError::External(_)));
+    }
+
+    #[test]
+    fn the_exit_code_is_found_below_contexts() {
+        let write = RunError::write(Path::new("out/runs/a/record.json"), full_disk())
+            .context("run 3")
+            .context("execution");
+        assert_eq!(exit_code(&write), EXIT_IO);
+        let any = anyhow::Error::from(write).context("sweep");
+        assert_eq!(exit_code(&*any), EXIT_IO);
+        // A full disk under a bare I/O error, an anyhow chain, or a library's error.
+        let io = RunError::Io(full_disk()).context("cannot move x into place");
+        assert_eq!(exit_code(&io), EXIT_IO);
+        let lib = RunError::library(anyhow::Error::from(full_disk()).context("cannot write p"));
+        assert_eq!(exit_code(&lib.context("rendering p")), EXIT_IO);
+        // A file that cannot be read is an input error, even with PermissionDenied.
+        let read = RunError::read(
+            Path::new("s.toml"),
+            std::io::Error::from(ErrorKind::PermissionDenied),
+        );
+        assert_eq!(exit_code(&read), EXIT_ERROR);
+        let slurm = RunError::External("sbatch failed (exit status: 1): no".into())
+            .context("nothing submitted");
+        assert_eq!(
+            exit_code(&*anyhow::Error::from(slurm).context("submit")),
+            69
+        );
+        let stop = RunError::from(Interrupted(15)).context("run 2");
+        assert_eq!(exit_code(&stop), 143);
+        assert_eq!(exit_code(&*anyhow::Error::from(Interrupted(2))), 130);
+        assert_eq!(exit_code(&RunError::Input("bad --poll".into())), EXIT_ERROR);
+        assert_eq!(exit_code(&*anyhow::anyhow!("hvi-study's own")), EXIT_ERROR);
+        // The RunErrors of a chain, through the boxes.
+        let kinds: Vec<bool> = RunError::External("x".into())
+            .context("a")
+            .chain()
+            .map(|e| matches!(e, RunError::External(_)))
+            .collect();
+        assert_eq!(kinds, [false, true]);
     }
 }
