@@ -18,8 +18,8 @@ use serde_json::Value;
 
 use super::figures::{field_of, map_axes};
 use super::figures::{plan_tiles, shown_axis};
+use super::options::StudyOptions;
 use super::sweep::print_failures;
-use crate::cli::ValidityArgs;
 use hvi_analysis::contour::{Field, Point};
 use hvi_analysis::observable::Observable;
 use hvi_plot::contour::{contour_plot, ContourPlot};
@@ -114,8 +114,17 @@ pub struct ValidityMap {
     pub plot: PathBuf,
 }
 
+/// What `validity-map` runs: the study and the cut-off.
+#[derive(Debug, Clone)]
+pub struct ValidityOptions {
+    /// The study, tier, output and threads.
+    pub study: StudyOptions,
+    /// The cut-off of the observable (None: the study's, else the paper's F = 0.3).
+    pub cutoff: Option<f64>,
+}
+
 /// `hvi-study validity-map`.
-pub fn validity_map(args: &ValidityArgs) -> Result<ValidityMap> {
+pub fn validity_map(args: &ValidityOptions) -> Result<ValidityMap> {
     let (study, plan, out) = args.study.plan()?;
     let cfg = ValidityConfig::of(&study)?;
     let cutoff = cfg.cutoff(args.cutoff)?;
