@@ -239,6 +239,29 @@ fn no_module_imports_one_that_imports_it_back() {
     assert_eq!(checked, 5, "the workspace's five crates");
 }
 
+/// The workflows (study, reproduce, fidelity, accuracy) take plain option structs, so that a
+/// library caller runs them without clap: only the command line (`cli`) and the dispatch
+/// from it (`commands`) know the clap structs.
+#[test]
+fn only_the_command_line_knows_the_clap_structs() {
+    let graph = graph_of(&repo().join("crates/hvi-study/src"));
+    let cli = vec!["cli".to_string()];
+    assert!(graph.contains_key(&cli), "no `cli` module read");
+    let users: Vec<String> = graph
+        .iter()
+        .filter(|(m, deps)| {
+            deps.contains(&cli)
+                && !matches!(m.first().map(String::as_str), Some("cli" | "commands"))
+        })
+        .map(|(m, _)| show(std::slice::from_ref(m)))
+        .collect();
+    assert!(
+        users.is_empty(),
+        "workflow modules that import the clap structs of `cli` (give them an options struct \
+         that `cli` builds): {users:?}"
+    );
+}
+
 #[test]
 fn a_circle_is_found_through_use_lines_inline_paths_and_parents() {
     let dir = common::scratch("hvi-architecture", "circle");

@@ -873,6 +873,40 @@ fn an_optimum_outside_the_first_box_extends_it_and_ends_inside() {
     );
 }
 
+/// The map of R after the box moved shows every box searched (the new grid points' seed
+/// means), not only the study's grid, and says so.
+#[test]
+fn the_map_of_r_covers_every_box_searched() {
+    let dir = scratch("calibrate-extend-map");
+    let study = edge_study(&dir, "max_extensions = 1\nmax_batches = 1\n");
+    let text = std::fs::read_to_string(&study).expect("study");
+    let two_axes = text
+        .replace(
+            "\n\n[tiers.quick]",
+            "\n\n[[axes]]\nkey = \"material.kappa_n_m\"\nvalues = [2.28e6, 4.56e6]\n\n[tiers.quick]",
+        )
+        .replace("\"material.kappa_n_m=4.56e6\", ", "")
+        .replace("max_batches = 3\n", "");
+    std::fs::write(&study, two_axes).expect("study");
+    let out = dir.join("out");
+    let o = calibrate(&study, &out);
+    assert_ok(&o);
+    let c = calibration_json(&out);
+    let boxes = c["boxes"].as_array().expect("boxes");
+    assert!(boxes.len() >= 2, "the box moved: {boxes:?}");
+    let svg = std::fs::read_to_string(out.join("map_R.svg")).expect("map_R.svg");
+    assert!(
+        svg.contains("over every box searched, seed means at seeds 1, 2"),
+        "{}",
+        stderr(&o)
+    );
+    // The eps axis reaches the extension's decade (1e-3 J), below the grid's 0.01 J.
+    assert!(
+        svg.lines().any(|l| l.trim() == "1e-3"),
+        "no 1e-3 tick on the map of R"
+    );
+}
+
 #[test]
 fn an_optimum_on_the_edge_is_never_converged() {
     let dir = scratch("calibrate-edge");

@@ -8,7 +8,7 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 use std::sync::OnceLock;
 
-use crate::error::{Result, ResultExt, RunError};
+use crate::error::{Result, ResultExt};
 
 /// Version of the plan and run-record formats, and of what the fingerprint covers. Bump it
 /// when either changes meaning, so old results are not mistaken for new ones.
@@ -66,18 +66,6 @@ pub fn canonical_json(v: &serde_json::Value) -> String {
     s
 }
 
-/// [`write_atomic_with`] for a writer that returns an `anyhow::Result` (as the callers in
-/// hvi-study do, which return it as theirs): its error, said under "cannot write PATH", keeps
-/// its chain.
-pub fn write_atomic(
-    path: &Path,
-    write: impl FnOnce(&mut dyn Write) -> anyhow::Result<()>,
-) -> anyhow::Result<()> {
-    Ok(write_atomic_with(path, |w| {
-        write(w).map_err(RunError::library)
-    })?)
-}
-
 /// Writes a file atomically: into a temporary sibling, flushed and synced, then renamed over
 /// the target. A reader sees the old file or the new one, never a torn one. An I/O error is a
 /// [`RunError::Write`] of `path`, anything else `write` returns is said under "cannot write
@@ -111,7 +99,7 @@ pub fn write_atomic_with(
     Ok(())
 }
 
-/// Removes the temporary files [`write_atomic`] left in `dir` when a process was killed during
+/// Removes the temporary files [`write_atomic_with`] left in `dir` when a process was killed during
 /// a write (`.<name>.tmp.<pid>` of another process than this one), where the caller knows no
 /// other process writes (a resumed run's own directory, a checkpoint under its run lock).
 /// `only` restricts it to the temporaries of one file name. Returns how many.

@@ -7,10 +7,7 @@
 //! ([`checkpoint`]), parallel execution ([`exec`]) or as Slurm batches ([`runner`]), results tables ([`table`]), Slurm job
 //! arrays ([`slurm`]) and the engine benchmark ([`mod@bench`]). Every function returns
 //! [`error::Result`]: its [`error::RunError`] says what went wrong, and [`error::exit_code`]
-//! the exit code a command ends with. Three keep an `anyhow::Result` for hvi-study's callers
-//! that collect or return it as one: [`store::Store::lookup`], [`study::job_of`] and
-//! [`files::write_atomic`] (their typed forms: [`store::Store::record`], [`study::job`],
-//! [`files::write_atomic_with`]).
+//! the exit code a command ends with.
 //!
 //! ```
 //! use hvi_run::run::{run_scene, RunOptions};

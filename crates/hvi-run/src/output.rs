@@ -5,9 +5,7 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use crate::error::{Result, ResultExt, RunError};
-pub use crate::files::{
-    remove_stale_partials, write_atomic, write_atomic_bytes, write_atomic_with,
-};
+pub use crate::files::{remove_stale_partials, write_atomic_bytes, write_atomic_with};
 use hvi_engine::sim::Simulation;
 use hvi_engine::state::{Body, Particles};
 

@@ -389,13 +389,6 @@ impl Store {
         Ok(Some(rec))
     }
 
-    /// [`Store::record`] as an `anyhow::Result`, for the callers in hvi-study that collect
-    /// it into one (`hvi-study collect`); the error's chain, and so its message and exit code,
-    /// are [`Store::record`]'s.
-    pub fn lookup(&self, fingerprint: &str) -> anyhow::Result<Option<Record>> {
-        Ok(self.record(fingerprint)?)
-    }
-
     /// A damaged run directory: moved aside (repairing store) or an error (read-only store).
     fn damaged(&self, dir: &Path, why: &str) -> Result<Option<Record>> {
         if !self.repair {

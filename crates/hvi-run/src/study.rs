@@ -13,12 +13,6 @@ use crate::plan::{describe_values, Plan};
 use crate::store::{Job, Record, Store};
 use crate::table::{results_table, Table};
 
-/// [`job`] as an `anyhow::Result`, for the callers in hvi-study that collect it into one; the
-/// error is [`job`]'s.
-pub fn job_of(plan: &Plan, index: usize) -> anyhow::Result<Job> {
-    Ok(job(plan, index)?)
-}
-
 /// A plan's run as a job for the store.
 pub fn job(plan: &Plan, index: usize) -> Result<Job> {
     let run = plan.run(index)?;

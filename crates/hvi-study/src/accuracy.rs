@@ -345,7 +345,7 @@ struct Measured {
 
 fn measured(store: &Store, fp: &str, cached: bool) -> Result<Measured> {
     let rec = store
-        .lookup(fp)?
+        .record(fp)?
         .ok_or_else(|| anyhow!("run {} vanished from the store", &fp[..16]))?;
     let summary = read_summary(&store.dir(fp));
     let s = summary.as_ref();
@@ -578,7 +578,7 @@ fn execute_runs(
             v.name.clone()
         };
         let progress = format!("accuracy [{}/{}] {label}", k + 1, planned.len());
-        let prior = store.lookup(&run.job.fingerprint)?;
+        let prior = store.record(&run.job.fingerprint)?;
         let cached = matches!(&prior, Some(r) if r.status == RunStatus::Completed);
         if !cached {
             eprintln!("{progress} ({}) ...", v.sets.join(" "));

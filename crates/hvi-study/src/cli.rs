@@ -4,17 +4,23 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::{Args, Parser, Subcommand};
 use hvi_run::checkpoint::Every;
 use hvi_run::exec::ExecOptions;
 use hvi_run::plan::Plan;
 use hvi_run::slurm::SlurmOptions;
 use hvi_run::spec::Study;
 
+use crate::fidelity::FidelityOptions;
+use crate::reproduce::ReproduceOptions;
 use crate::study::calibrate::config::Method;
 use crate::study::calibrate::ladder::LadderOptions;
 use crate::study::calibrate::CalibrateOptions;
+use crate::study::collect::{CollectAs, CollectOptions, StatusOptions};
 use crate::study::options::StudyOptions;
+use crate::study::reanalyse::ReanalyseOptions;
+use crate::study::stability::StabilityOptions;
+use crate::study::validity::ValidityOptions;
 
 /// Hypervelocity impact with the discrete element method (Watson & Steinhauser 2017).
 #[derive(Parser, Debug)]
@@ -313,6 +319,16 @@ pub struct ValidityArgs {
     pub cutoff: Option<f64>,
 }
 
+impl ValidityArgs {
+    /// The plain options these flags give.
+    pub fn options(&self) -> ValidityOptions {
+        ValidityOptions {
+            study: self.study.options(),
+            cutoff: self.cutoff,
+        }
+    }
+}
+
 /// Which study store `status` and `collect` read: the study's selection, as the study ran it
 /// (no threads or jobs: they run nothing).
 #[derive(Args, Debug, Clone)]
@@ -326,25 +342,16 @@ pub struct StoreArgs {
 }
 
 impl StudyArgs {
-    /// The store these flags select, for `status` and `collect`.
-    pub fn to_store(&self) -> StoreArgs {
-        StoreArgs {
-            selection: self.selection.clone(),
-            quiet: true,
-        }
+    /// The store these flags select, for `status` and `collect` (quiet: the caller speaks).
+    pub fn store_options(&self) -> StudyOptions {
+        self.selection.options(None, None, Every::Off, true)
     }
 }
 
 impl StoreArgs {
-    /// The same selection as the study flags a running command takes.
-    pub fn to_study(&self) -> StudyArgs {
-        StudyArgs {
-            selection: self.selection.clone(),
-            threads: None,
-            jobs: None,
-            checkpoint_every: Every::default(),
-            quiet: self.quiet,
-        }
+    /// The plain options of the store these flags select (nothing runs: no threads).
+    pub fn options(&self) -> StudyOptions {
+        self.selection.options(None, None, Every::Off, self.quiet)
     }
 }
 
@@ -358,18 +365,6 @@ pub struct StatusArgs {
     /// One line per run: its state, where it runs, its directory.
     #[arg(long, short)]
     pub verbose: bool,
-}
-
-/// Which command's outputs `collect` writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum CollectAs {
-    /// results.csv / results.json, as `sweep`.
-    Sweep,
-    /// The results with the objective and each target's score, as the grid stage of
-    /// `calibrate` (the refinement needs new runs: `hvi-study calibrate` does it).
-    Calibrate,
-    /// The results with `valid`, the map, its boundary and the snapshots, as `validity-map`.
-    ValidityMap,
 }
 
 /// `hvi-study collect` arguments.
@@ -386,6 +381,27 @@ pub struct CollectArgs {
     /// The validity cut-off (with `--as validity-map`; default: the study's, else 0.3).
     #[arg(long)]
     pub cutoff: Option<f64>,
+}
+
+impl StatusArgs {
+    /// The plain options these flags give.
+    pub fn options(&self) -> StatusOptions {
+        StatusOptions {
+            study: self.store.options(),
+            verbose: self.verbose,
+        }
+    }
+}
+
+impl CollectArgs {
+    /// The plain options these flags give.
+    pub fn options(&self) -> CollectOptions {
+        CollectOptions {
+            study: self.store.options(),
+            kind: self.kind,
+            cutoff: self.cutoff,
+        }
+    }
 }
 
 /// `hvi-study reanalyse` arguments.
@@ -427,6 +443,20 @@ pub struct StabilityArgs {
     /// No progress output.
     #[arg(long)]
     pub quiet: bool,
+}
+
+impl StabilityArgs {
+    /// The plain options these flags give.
+    pub fn options(&self) -> StabilityOptions {
+        StabilityOptions {
+            studies: self.studies.clone(),
+            tier: self.tier.clone(),
+            out: self.out.clone(),
+            store: self.store.clone(),
+            threads: self.threads,
+            quiet: self.quiet,
+        }
+    }
 }
 
 /// `hvi-study reproduce` arguments.
@@ -501,6 +531,54 @@ pub struct FidelityArgs {
     /// No progress output.
     #[arg(long)]
     pub quiet: bool,
+}
+
+impl ReanalyseArgs {
+    /// The plain options these flags give.
+    pub fn options(&self) -> ReanalyseOptions {
+        ReanalyseOptions {
+            study_dir: self.study_dir.clone(),
+            sets: self.sets.clone(),
+            table: self.table.clone(),
+            quiet: self.quiet,
+        }
+    }
+}
+
+impl ReproduceArgs {
+    /// The plain options these flags give.
+    pub fn options(&self) -> ReproduceOptions {
+        ReproduceOptions {
+            tier: self.tier.clone(),
+            out: self.out.clone(),
+            runs: self.runs.clone(),
+            previous: self.previous.clone(),
+            fail_on_change: self.fail_on_change,
+            history: self.history.clone(),
+            config: self.config.clone(),
+            threads: self.threads,
+            jobs: self.jobs,
+            dry_run: self.dry_run,
+            quiet: self.quiet,
+        }
+    }
+}
+
+impl FidelityArgs {
+    /// The plain options these flags give.
+    pub fn options(&self) -> FidelityOptions {
+        FidelityOptions {
+            config: self.config.clone(),
+            tier: self.tier.clone(),
+            seeds: self.seeds.clone(),
+            out: self.out.clone(),
+            runs: self.runs.clone(),
+            threads: self.threads,
+            jobs: self.jobs,
+            dry_run: self.dry_run,
+            quiet: self.quiet,
+        }
+    }
 }
 
 /// `hvi-study submit` arguments.

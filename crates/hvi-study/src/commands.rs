@@ -10,9 +10,9 @@ use hvi_run::run::{run_scene, RunOptions};
 use hvi_run::scene_file::load_scene;
 
 use crate::cli::{
-    AccuracyArgs, BenchArgs, CollectArgs, CollectAs, Command, KeysArgs, RunArgs, RunUnitArgs,
-    StudyArgs, SubmitArgs,
+    AccuracyArgs, BenchArgs, Command, KeysArgs, RunArgs, RunUnitArgs, StudyArgs, SubmitArgs,
 };
+use crate::study::collect::{CollectAs, CollectOptions};
 
 /// Runs one subcommand.
 pub fn dispatch(command: Command) -> Result<()> {
@@ -30,15 +30,17 @@ pub fn dispatch(command: Command) -> Result<()> {
         Command::Man(args) => man(&args),
         Command::Bench(args) => bench(args),
         Command::Accuracy(args) => accuracy(args),
-        Command::Stability(args) => crate::study::stability::stability(&args).map(|cells| {
-            let stopped = cells.iter().filter(|c| c.status != "stable").count();
-            println!(
-                "{} cells, {} stopped; report: {}",
-                cells.len(),
-                stopped,
-                args.out.join("stability.md").display()
-            );
-        }),
+        Command::Stability(args) => {
+            crate::study::stability::stability(&args.options()).map(|cells| {
+                let stopped = cells.iter().filter(|c| c.status != "stable").count();
+                println!(
+                    "{} cells, {} stopped; report: {}",
+                    cells.len(),
+                    stopped,
+                    args.out.join("stability.md").display()
+                );
+            })
+        }
         Command::Plan(args) => crate::study::sweep::plan(&args.options()),
         Command::Sweep(args) => {
             let r = crate::study::sweep::sweep(&args.options());
@@ -58,15 +60,15 @@ pub fn dispatch(command: Command) -> Result<()> {
             tables_if_interrupted(&args.study, CollectAs::Calibrate, r)
         }
         Command::ValidityMap(args) => {
-            let r = crate::study::validity::validity_map(&args).map(|_| ());
+            let r = crate::study::validity::validity_map(&args.options()).map(|_| ());
             tables_if_interrupted(&args.study, CollectAs::ValidityMap, r)
         }
         Command::Submit(args) => submit(&args),
-        Command::Status(args) => crate::study::collect::status(&args),
-        Command::Collect(args) => crate::study::collect::collect(&args),
-        Command::Reanalyse(args) => crate::study::reanalyse::reanalyse(&args),
-        Command::Fidelity(args) => crate::fidelity::fidelity(&args).map(|_| ()),
-        Command::Reproduce(args) => crate::reproduce::reproduce(&args).map(|_| ()),
+        Command::Status(args) => crate::study::collect::status(&args.options()),
+        Command::Collect(args) => crate::study::collect::collect(&args.options()),
+        Command::Reanalyse(args) => crate::study::reanalyse::reanalyse(&args.options()),
+        Command::Fidelity(args) => crate::fidelity::fidelity(&args.options()).map(|_| ()),
+        Command::Reproduce(args) => crate::reproduce::reproduce(&args.options()).map(|_| ()),
         Command::RunUnit(args) => run_unit(&args),
     }
 }
@@ -90,12 +92,12 @@ fn tables_if_interrupted(study: &StudyArgs, kind: CollectAs, r: Result<()>) -> R
         .and_then(|e| hvi_run::interrupt::of(&**e))
         .is_some()
     {
-        let args = CollectArgs {
-            store: study.to_store(),
+        let opts = CollectOptions {
+            study: study.store_options(),
             kind: Some(kind),
             cutoff: None,
         };
-        match crate::study::collect::collect(&args) {
+        match crate::study::collect::collect(&opts) {
             Ok(()) => eprintln!("the tables of the runs that finished are written"),
             Err(e) => eprintln!("the tables could not be written: {e:#}"),
         }

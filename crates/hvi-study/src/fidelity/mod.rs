@@ -24,7 +24,6 @@ use hvi_run::spec::{Axis, Study};
 use hvi_run::store::{Record, RunStatus};
 use hvi_run::study::execute_plan;
 
-use crate::cli::FidelityArgs;
 use crate::reproduce::report::Verdict;
 use crate::reproduce::stages::{
     completed_runs, fig10_checks, fig10_figure, fig9_checks, fig9_figure,
@@ -124,9 +123,32 @@ fn plans(
         .collect()
 }
 
+/// What `fidelity` runs and where it writes.
+#[derive(Debug, Clone)]
+pub struct FidelityOptions {
+    /// The readings config.
+    pub config: PathBuf,
+    /// The calibration study's tier (None: the config's `fidelity.tier`).
+    pub tier: Option<String>,
+    /// Thermal seeds (empty: the config's `fidelity.seeds`).
+    pub seeds: Vec<u64>,
+    /// The report directory (a new or empty directory, or an earlier report).
+    pub out: PathBuf,
+    /// Where the runs are kept: one study store per reading, `<runs>/<tier>/<reading>/`.
+    pub runs: PathBuf,
+    /// Worker threads in all (None: every core).
+    pub threads: Option<usize>,
+    /// Runs at once (None: as many as threads).
+    pub jobs: Option<usize>,
+    /// Validate every reading and run, print how many runs it takes; run nothing.
+    pub dry_run: bool,
+    /// No progress output.
+    pub quiet: bool,
+}
+
 /// `hvi-study fidelity`: plans, runs (or takes from the store), measures, judges and writes
 /// the report. With `--dry-run` it plans and prints what it would run.
-pub fn fidelity(args: &FidelityArgs) -> Result<Option<FidelityResult>> {
+pub fn fidelity(args: &FidelityOptions) -> Result<Option<FidelityResult>> {
     let t0 = Instant::now();
     let config = FidelityConfig::load(&args.config)?;
     let tier = args.tier.clone().unwrap_or_else(|| config.tier.clone());

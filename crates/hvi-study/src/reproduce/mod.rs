@@ -28,7 +28,6 @@ pub mod stages;
 
 pub use plans::{build_plans, estimate, Plans};
 
-use crate::cli::ReproduceArgs;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -42,8 +41,35 @@ use hvi_run::spec::Study;
 use report::{fmt_duration, Estimate, Figure, Machine, Reproduction, StageTiming, Verdict};
 use stages::Ctx;
 
+/// What `reproduce` runs and where it writes.
+#[derive(Debug, Clone)]
+pub struct ReproduceOptions {
+    /// The tier, as named in the config (`quick` or `paper`).
+    pub tier: String,
+    /// The report directory (None: `reports/<tier>`).
+    pub out: Option<PathBuf>,
+    /// Where the runs are kept, one study store per stage (None: `runs/reproduce/<tier>`).
+    pub runs: Option<PathBuf>,
+    /// A previous report directory: list what changed since its reproduce.json.
+    pub previous: Option<PathBuf>,
+    /// With `previous`: fail when a verdict or deciding number changed.
+    pub fail_on_change: bool,
+    /// The history file each run appends its record to (None: `<out>/history.jsonl`).
+    pub history: Option<PathBuf>,
+    /// The reproduction's config.
+    pub config: PathBuf,
+    /// Worker threads in all (None: every core).
+    pub threads: Option<usize>,
+    /// Runs at once (None: as many as threads).
+    pub jobs: Option<usize>,
+    /// Validate every run and print the expected wall time; run nothing.
+    pub dry_run: bool,
+    /// No progress output.
+    pub quiet: bool,
+}
+
 /// `hvi-study reproduce`.
-pub fn reproduce(args: &ReproduceArgs) -> Result<Reproduction> {
+pub fn reproduce(args: &ReproduceOptions) -> Result<Reproduction> {
     let t0 = Instant::now();
     // Before anything is written: a report written into the repository is not a change.
     let commit = history::current_commit();
@@ -88,14 +114,14 @@ pub fn reproduce(args: &ReproduceArgs) -> Result<Reproduction> {
 }
 
 /// A progress line on stderr (none with `--quiet`).
-fn say(args: &ReproduceArgs, line: String) {
+fn say(args: &ReproduceOptions, line: String) {
     if !args.quiet {
         eprintln!("[reproduce] {line}");
     }
 }
 
 /// `--threads` and `--jobs` are counts: at least 1 when given.
-fn check_counts(args: &ReproduceArgs) -> Result<()> {
+fn check_counts(args: &ReproduceOptions) -> Result<()> {
     if args.threads == Some(0) {
         bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
     }
@@ -106,7 +132,7 @@ fn check_counts(args: &ReproduceArgs) -> Result<()> {
 }
 
 /// `--out` (default `reports/<tier>`) and `--runs` (default `runs/reproduce/<tier>`).
-fn report_and_runs_dirs(args: &ReproduceArgs) -> (PathBuf, PathBuf) {
+fn report_and_runs_dirs(args: &ReproduceOptions) -> (PathBuf, PathBuf) {
     let out = args
         .out
         .clone()
@@ -119,7 +145,7 @@ fn report_and_runs_dirs(args: &ReproduceArgs) -> (PathBuf, PathBuf) {
 }
 
 /// The report of `--previous DIR`, when given.
-fn load_previous(args: &ReproduceArgs) -> Result<Option<Reproduction>> {
+fn load_previous(args: &ReproduceOptions) -> Result<Option<Reproduction>> {
     args.previous
         .as_ref()
         .map(|d| {
@@ -130,7 +156,7 @@ fn load_previous(args: &ReproduceArgs) -> Result<Option<Reproduction>> {
 }
 
 /// This tier's estimate and, when `[estimate]` names another tier, that tier's (planned only).
-fn estimates(args: &ReproduceArgs, config: &Config, plans: &Plans) -> Result<Vec<Estimate>> {
+fn estimates(args: &ReproduceOptions, config: &Config, plans: &Plans) -> Result<Vec<Estimate>> {
     let mut estimates = Vec::new();
     if let Some(e) = &config.estimate {
         estimates.push(estimate(plans, &args.tier, e)?);
@@ -145,7 +171,7 @@ fn estimates(args: &ReproduceArgs, config: &Config, plans: &Plans) -> Result<Vec
 
 /// `--dry-run`: prints the estimates and returns a report with every figure pending.
 fn dry_run(
-    args: &ReproduceArgs,
+    args: &ReproduceOptions,
     tier: &TierConfig,
     estimates: Vec<Estimate>,
     n_runs: usize,
@@ -164,7 +190,11 @@ fn dry_run(
 }
 
 /// A report of this tier with every figure pending, no stage run and no notes.
-fn new_report(args: &ReproduceArgs, tier: &TierConfig, estimates: Vec<Estimate>) -> Reproduction {
+fn new_report(
+    args: &ReproduceOptions,
+    tier: &TierConfig,
+    estimates: Vec<Estimate>,
+) -> Reproduction {
     Reproduction {
         tier: args.tier.clone(),
         tier_description: tier.description.clone(),
@@ -267,7 +297,7 @@ fn fig13_gap(targets: &Targets) -> Option<String> {
         .map(|g| format!("{}: {}", g.source, g.note))
 }
 
-fn stage_context(args: &ReproduceArgs, out: &Path, runs: &Path) -> Ctx {
+fn stage_context(args: &ReproduceOptions, out: &Path, runs: &Path) -> Ctx {
     Ctx {
         out: out.to_path_buf(),
         runs: runs.to_path_buf(),
@@ -377,7 +407,7 @@ fn run_stage(stage: Stage, s: &StageInputs) -> Result<(Vec<Figure>, StageTiming)
 /// Runs every stage in order, rewriting the report after each; a failed stage fails its
 /// figures and the others go on. Returns the failures.
 fn run_stages(
-    args: &ReproduceArgs,
+    args: &ReproduceOptions,
     inputs: &StageInputs,
     rep: &mut Reproduction,
     out: &Path,
@@ -436,7 +466,7 @@ fn fail_figures(rep: &mut Reproduction, ids: &[&str], e: &anyhow::Error) {
 /// Completes the report (the changes since `--previous`), writes it, and fails when a stage
 /// failed or, with `--fail-on-change`, when a verdict or deciding number changed.
 fn finish(
-    args: &ReproduceArgs,
+    args: &ReproduceOptions,
     mut rep: Reproduction,
     previous: Option<&Reproduction>,
     out: &Path,

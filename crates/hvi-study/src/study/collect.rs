@@ -9,9 +9,9 @@ use anyhow::{bail, Result};
 use serde_json::Value;
 
 use super::calibrate::{score_table, CalibrateConfig};
+use super::options::StudyOptions;
 use super::sweep::print_failures;
 use super::validity::{validity_outputs, ValidityConfig};
-use crate::cli::{CollectArgs, CollectAs, StatusArgs, StudyArgs};
 use hvi_analysis::observable::Observables;
 use hvi_run::plan::{describe_values, Plan, DIR_DIGITS};
 use hvi_run::slurm::{QueueView, TaskState};
@@ -23,8 +23,8 @@ use hvi_run::table::{results_table, Table};
 /// study file planned like every other command (which writes plan.json when `write`; a
 /// command that only looks, `status`, writes nothing: the directory may hold another plan,
 /// a ladder level's or a running calibration's).
-pub fn open_plan(args: &StudyArgs, write: bool) -> Result<(Plan, PathBuf)> {
-    let p = &args.selection.study;
+pub fn open_plan(args: &StudyOptions, write: bool) -> Result<(Plan, PathBuf)> {
+    let p = &args.study;
     let plan_path = if p.is_dir() {
         Some(p.join("plan.json"))
     } else if p.extension().is_some_and(|e| e == "json") {
@@ -40,7 +40,7 @@ pub fn open_plan(args: &StudyArgs, write: bool) -> Result<(Plan, PathBuf)> {
         };
         return Ok((plan, out));
     };
-    let s = &args.selection;
+    let s = args;
     if s.tier.is_some() || s.particles.is_some() || !s.sets.is_empty() || s.out.is_some() {
         bail!(
             "{} is a study directory's plan: --tier, --particles, --set and --out apply to a \
@@ -147,7 +147,7 @@ pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
         .collect();
     let mut runs = Vec::with_capacity(plan.runs.len());
     for run in &plan.runs {
-        let record = store.lookup(&run.fingerprint)?;
+        let record = store.record(&run.fingerprint)?;
         let digits = &run.fingerprint[..DIR_DIGITS.min(run.fingerprint.len())];
         let marker = markers
             .iter()
@@ -228,10 +228,43 @@ impl Survey {
     }
 }
 
+/// What `status` looks at: the study's store and how much it says.
+#[derive(Debug, Clone)]
+pub struct StatusOptions {
+    /// The study (a study file with its selection, or a study directory or its plan.json).
+    pub study: StudyOptions,
+    /// One line per run: its state, where it runs, its directory.
+    pub verbose: bool,
+}
+
+/// Which command's outputs `collect` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum CollectAs {
+    /// results.csv / results.json, as `sweep`.
+    Sweep,
+    /// The results with the objective and each target's score, as the grid stage of
+    /// `calibrate` (the refinement needs new runs: `hvi-study calibrate` does it).
+    Calibrate,
+    /// The results with `valid`, the map, its boundary and the snapshots, as `validity-map`.
+    ValidityMap,
+}
+
+/// What `collect` writes, and from which store.
+#[derive(Debug, Clone)]
+pub struct CollectOptions {
+    /// The study (a study file with its selection, or a study directory or its plan.json).
+    pub study: StudyOptions,
+    /// Write what this command writes (None: `calibrate` for a study with `[calibrate]`,
+    /// `validity-map` for one with `[validity]`, else `sweep`).
+    pub kind: Option<CollectAs>,
+    /// The validity cut-off (with `CollectAs::ValidityMap`; None: the study's, else 0.3).
+    pub cutoff: Option<f64>,
+}
+
 /// `hvi-study status`: counts on the first line (`... N runs: D done, F failed, R running, P
 /// pending (Q queued in Slurm)`), then the Slurm jobs, then with --verbose one line per run.
-pub fn status(args: &StatusArgs) -> Result<()> {
-    let (plan, dir) = open_plan(&args.store.to_study(), false)?;
+pub fn status(args: &StatusOptions) -> Result<()> {
+    let (plan, dir) = open_plan(&args.study, false)?;
     let survey = survey(&plan, &dir)?;
     let (done, failed, running, pending, queued) = survey.counts();
     let mut s = format!(
@@ -336,14 +369,14 @@ fn missing_record(plan: &Plan, i: usize) -> Record {
 /// nothing. Runs without a result are rows with status `missing` (and gaps in the figures),
 /// listed on stderr; the command still writes everything and exits 0, so a partial study can
 /// be looked at while the rest runs.
-pub fn collect(args: &CollectArgs) -> Result<()> {
-    let (plan, dir) = open_plan(&args.store.to_study(), true)?;
+pub fn collect(args: &CollectOptions) -> Result<()> {
+    let (plan, dir) = open_plan(&args.study, true)?;
     let store = Store::open(&dir)?;
     let records: Vec<Option<Record>> = plan
         .runs
         .iter()
-        .map(|r| store.lookup(&r.fingerprint))
-        .collect::<Result<_>>()?;
+        .map(|r| store.record(&r.fingerprint))
+        .collect::<hvi_run::error::Result<_>>()?;
     let kind = match args.kind {
         Some(k) => k,
         None => match Study::load(&plan.study_file) {
@@ -364,7 +397,7 @@ pub fn collect(args: &CollectArgs) -> Result<()> {
         .map(|(i, r)| r.clone().unwrap_or_else(|| missing_record(&plan, i)))
         .collect();
     let table = results_table(&plan, &records);
-    let quiet = args.store.quiet;
+    let quiet = args.study.quiet;
     let done = records.iter().flatten().cloned().collect::<Vec<_>>();
     print_failures(&done);
     match kind {

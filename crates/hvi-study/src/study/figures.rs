@@ -252,14 +252,90 @@ fn markers(result: &CalibrationResult, at: impl Fn(&Evaluation) -> Option<Point>
     markers
 }
 
-/// Fig. 9: R, the experiment's value in red.
+/// A scored observable's seed means over every box the calibration searched, when it moved
+/// the box: the `grid-seeds` and `extend-*` evaluations (the grid and each extension's new
+/// grid points, all at the search's seeds), at the best grid point's values of any other
+/// axis. None when the box never moved or the term is not scored.
+fn searched_lattice_field(f: &MapFrame, term: &str) -> Result<Option<(Field, Vec<u64>)>> {
+    if f.result.boxes.len() < 2 {
+        return Ok(None);
+    }
+    let (kx, ky) = (&f.plan.axes[f.axes.0].key, &f.plan.axes[f.axes.1].key);
+    let slice = &f.result.best_grid.params;
+    let on_slice = |e: &Evaluation| {
+        e.params
+            .iter()
+            .all(|(k, v)| k == kx || k == ky || slice.get(k).is_none_or(|s| s == v))
+    };
+    let points: Vec<(f64, f64, f64)> = f
+        .result
+        .refinement
+        .iter()
+        .filter(|e| e.stage == "grid-seeds" || e.stage.starts_with("extend-"))
+        .filter(|e| on_slice(e))
+        .filter_map(|e| {
+            let observed = e.score.as_ref()?.terms.iter().find(|t| t.name == term)?;
+            Some((*e.params.get(kx)?, *e.params.get(ky)?, observed.observed?))
+        })
+        .collect();
+    let Some(seeds) = f
+        .result
+        .refinement
+        .iter()
+        .find(|e| e.stage == "grid-seeds")
+        .map(|e| e.seeds.clone())
+    else {
+        return Ok(None);
+    };
+    let axis = |pick: fn(&(f64, f64, f64)) -> f64| {
+        let mut v: Vec<f64> = points.iter().map(pick).collect();
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+        v
+    };
+    let (xs, ys) = (axis(|p| p.0), axis(|p| p.1));
+    let mut z = vec![vec![f64::NAN; xs.len()]; ys.len()];
+    for &(x, y, v) in &points {
+        let (c, r) = (
+            xs.iter().position(|&u| u == x),
+            ys.iter().position(|&u| u == y),
+        );
+        if let (Some(c), Some(r)) = (c, r) {
+            z[r][c] = v;
+        }
+    }
+    Ok(Field::new(xs, ys, z).map(|field| (field, seeds)))
+}
+
+/// Fig. 9: R, the experiment's value in red. Over every box searched (seed means) when the
+/// calibration moved its box, else over the study's grid.
 fn length_ratio_map(f: &MapFrame) -> Result<ContourPlot> {
     let target = f.target_of(Observable::LengthRatio);
-    let field = f.field(|r| r.observables.get(Observable::LengthRatio))?;
+    let extended = match target {
+        Some(t) => searched_lattice_field(f, &t.name)?,
+        None => None,
+    };
+    let (field, over) = match extended {
+        Some((field, seeds)) => (
+            field,
+            format!(
+                "over every box searched, seed means at seeds {}",
+                seeds
+                    .iter()
+                    .map(|s| s.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        ),
+        None => (
+            f.field(|r| r.observables.get(Observable::LengthRatio))?,
+            "over the study's grid".to_string(),
+        ),
+    };
     Ok(ContourPlot {
         title: "Debris-cloud length ratio R = La/Lr (Fig. 9)".into(),
         subtitle: format!(
-            "red: the experiment's R = {}; {}\n{}",
+            "red: the experiment's R = {}; {}; {over}\n{}",
             target.map_or("n/a".into(), |t| t.value.to_string()),
             width_note(f.plan),
             f.tier

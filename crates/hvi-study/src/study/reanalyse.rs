@@ -16,8 +16,6 @@ use hvi_run::store::{read_summary, Record, RunStatus, Store};
 use hvi_run::table::{num, result_columns, ResultRow, Table};
 use serde_json::Value;
 
-use crate::cli::ReanalyseArgs;
-
 /// The `[analysis]` keys a re-analysis may change; the others (the front times, the track,
 /// the pictures) are fixed by what the run kept.
 pub const CHANGEABLE_KEYS: [&str; 7] = [
@@ -268,7 +266,7 @@ pub fn reanalyse_study(study_dir: &Path, changes: &AnalysisChanges) -> Result<St
             values: run.values.clone(),
             fingerprint: run.fingerprint.clone(),
             dir: run.dir.clone(),
-            record: store.lookup(&run.fingerprint)?,
+            record: store.record(&run.fingerprint)?,
             outcome: Outcome::Missing,
         });
     }
@@ -286,7 +284,7 @@ pub fn reanalyse_study(study_dir: &Path, changes: &AnalysisChanges) -> Result<St
             .with_context(|| format!("cannot read {}", path.display()))?;
         let rec: Record = serde_json::from_str(&text)
             .with_context(|| format!("{} is not a run record", path.display()))?;
-        let record = store.lookup(&rec.fingerprint)?;
+        let record = store.record(&rec.fingerprint)?;
         runs.push(RunEntry {
             index: None,
             values: plan
@@ -429,10 +427,23 @@ impl StudyReanalysis {
     }
 }
 
+/// What `reanalyse` measures again and where the table goes.
+#[derive(Debug, Clone)]
+pub struct ReanalyseOptions {
+    /// The study directory (the --out of a sweep: plan.json and runs/), or its plan.json.
+    pub study_dir: PathBuf,
+    /// Another analysis setting, `analysis.KEY=VALUE` (empty: each run's own).
+    pub sets: Vec<String>,
+    /// The table's name in the study directory: NAME.csv and NAME.json.
+    pub table: String,
+    /// No progress output (runs that cannot be measured are still listed).
+    pub quiet: bool,
+}
+
 /// `hvi-study reanalyse`: writes `<table>.csv` / `<table>.json` into the study directory and
 /// prints the CSV's path. Runs without state are listed on stderr and skipped; when a state
 /// file cannot be read the table is still written and the command then fails, naming it.
-pub fn reanalyse(args: &ReanalyseArgs) -> Result<()> {
+pub fn reanalyse(args: &ReanalyseOptions) -> Result<()> {
     let stem = args.table.as_str();
     if stem.is_empty() || stem.contains(['/', '\\']) || stem.starts_with('.') || stem == "results" {
         bail!(

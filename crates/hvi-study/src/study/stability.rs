@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
-use crate::cli::{StabilityArgs, StudyArgs, StudySelection};
+use super::options::StudyOptions;
 use hvi_engine::sim::LEDGER_DRIFT_BOUND;
 use hvi_plot::stability_map::{stability_map, MapCell, StabilityMap};
 use hvi_run::output::{write_atomic_bytes, write_csv_atomic};
@@ -82,8 +82,25 @@ fn value_text(v: &serde_json::Value) -> String {
     }
 }
 
+/// What `stability` runs and where it writes.
+#[derive(Debug, Clone)]
+pub struct StabilityOptions {
+    /// Slice study files (empty: every studies/stability/*.toml).
+    pub studies: Vec<PathBuf>,
+    /// Tier of every slice (None: each study's default tier).
+    pub tier: Option<String>,
+    /// Report directory.
+    pub out: PathBuf,
+    /// Run stores, one directory per slice under this.
+    pub store: PathBuf,
+    /// Worker threads in all (None: every core).
+    pub threads: Option<usize>,
+    /// No progress output.
+    pub quiet: bool,
+}
+
 /// Runs every slice and writes the maps, the table and the summary. Returns the cells.
-pub fn stability(args: &StabilityArgs) -> Result<Vec<Cell>> {
+pub fn stability(args: &StabilityOptions) -> Result<Vec<Cell>> {
     let slices = if args.studies.is_empty() {
         default_slices()?
     } else {
@@ -126,22 +143,16 @@ struct Slice {
 }
 
 /// Plans and runs one slice (a two-axis study) through its store under `args.store`.
-fn run_slice(args: &StabilityArgs, file: &Path) -> Result<Slice> {
+fn run_slice(args: &StabilityOptions, file: &Path) -> Result<Slice> {
     let stem = file
         .file_stem()
         .map_or("slice".into(), |s| s.to_string_lossy().into_owned());
-    let study_args = StudyArgs {
-        selection: StudySelection {
-            study: file.to_path_buf(),
-            tier: args.tier.clone(),
-            particles: None,
-            sets: Vec::new(),
-            out: Some(args.store.join(&stem)),
-        },
+    let study_args = StudyOptions {
+        tier: args.tier.clone(),
+        out: Some(args.store.join(&stem)),
         threads: args.threads,
-        jobs: None,
-        checkpoint_every: hvi_run::checkpoint::Every::default(),
         quiet: args.quiet,
+        ..StudyOptions::new(file)
     };
     let (study, plan, out) = study_args.plan()?;
     if plan.axes.len() != 2 {

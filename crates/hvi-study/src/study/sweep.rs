@@ -6,7 +6,7 @@ use anyhow::Result;
 
 use hvi_run::plan::Plan;
 use hvi_run::store::{RunStatus, Store};
-use hvi_run::study::{execute_plan, job_of};
+use hvi_run::study::{execute_plan, job};
 
 /// `hvi-study plan`: validates a study and writes its plan.json without running anything.
 pub fn plan(args: &StudyOptions) -> Result<()> {
@@ -14,7 +14,7 @@ pub fn plan(args: &StudyOptions) -> Result<()> {
     let store = Store::open(&out)?;
     let mut done = 0;
     for r in &plan.runs {
-        if matches!(store.lookup(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
+        if matches!(store.record(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
         {
             done += 1;
         }
@@ -80,9 +80,9 @@ pub fn run_unit(
             .filter(|p| !p.as_os_str().is_empty())
             .unwrap_or_else(|| std::path::Path::new("."))
     });
-    let job = job_of(&plan, index)?;
+    let job = job(&plan, index)?;
     let store = Store::open(dir)?.with_checkpoint_every(checkpoint_every);
-    let record = match store.lookup(&job.fingerprint)? {
+    let record = match store.record(&job.fingerprint)? {
         Some(r) if r.status == RunStatus::Completed => {
             eprintln!("run {index}: already done");
             r

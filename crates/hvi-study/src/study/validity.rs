@@ -18,13 +18,13 @@ use serde_json::Value;
 
 use super::figures::{field_of, map_axes};
 use super::figures::{plan_tiles, shown_axis};
+use super::options::StudyOptions;
 use super::sweep::print_failures;
-use crate::cli::ValidityArgs;
 use hvi_analysis::contour::{Field, Point};
 use hvi_analysis::observable::Observable;
 use hvi_plot::contour::{contour_plot, ContourPlot};
 use hvi_plot::snapshots::{snapshot_matrix, MatrixText};
-use hvi_run::output::write_atomic;
+use hvi_run::output::write_atomic_with;
 use hvi_run::plan::Plan;
 use hvi_run::store::{Record, RunStatus};
 use hvi_run::study::execute_plan;
@@ -90,7 +90,7 @@ impl Default for ValidityConfig {
 
 /// Writes the boundary polylines as CSV: `polyline, point, <x key>, <y key>`.
 pub fn write_boundary(path: &Path, keys: (&str, &str), lines: &[Vec<Point>]) -> Result<()> {
-    write_atomic(path, |w| {
+    write_atomic_with(path, |w| {
         writeln!(w, "polyline,point,{},{}", keys.0, keys.1)?;
         for (k, line) in lines.iter().enumerate() {
             for (i, (x, y)) in line.iter().enumerate() {
@@ -98,7 +98,8 @@ pub fn write_boundary(path: &Path, keys: (&str, &str), lines: &[Vec<Point>]) -> 
             }
         }
         Ok(())
-    })
+    })?;
+    Ok(())
 }
 
 /// What `validity-map` produced.
@@ -114,8 +115,17 @@ pub struct ValidityMap {
     pub plot: PathBuf,
 }
 
+/// What `validity-map` runs: the study and the cut-off.
+#[derive(Debug, Clone)]
+pub struct ValidityOptions {
+    /// The study, tier, output and threads.
+    pub study: StudyOptions,
+    /// The cut-off of the observable (None: the study's, else the paper's F = 0.3).
+    pub cutoff: Option<f64>,
+}
+
 /// `hvi-study validity-map`.
-pub fn validity_map(args: &ValidityArgs) -> Result<ValidityMap> {
+pub fn validity_map(args: &ValidityOptions) -> Result<ValidityMap> {
     let (study, plan, out) = args.study.plan()?;
     let cfg = ValidityConfig::of(&study)?;
     let cutoff = cfg.cutoff(args.cutoff)?;

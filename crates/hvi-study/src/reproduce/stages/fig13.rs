@@ -8,7 +8,7 @@ use hvi_analysis::decide;
 use hvi_analysis::observable::Observable;
 use hvi_engine::paper;
 use hvi_plot::paper as plots;
-use hvi_run::output::write_atomic;
+use hvi_run::output::write_atomic_with;
 use hvi_run::plan::Plan;
 use hvi_run::store::Record;
 
@@ -85,13 +85,14 @@ fn draw(ctx: &Ctx, plan: &Plan, pts: &[(f64, f64)], tau: Option<f64>, has_gap: b
             tau.map_or("?".into(), |t| format!("{:.1} \u{b5}s", t * 1e6))
         ),
     )?;
-    write_atomic(&ctx.out.join("fig13_front_velocity.csv"), |w| {
+    write_atomic_with(&ctx.out.join("fig13_front_velocity.csv"), |w| {
         writeln!(w, "t_over_d,front_velocity_ratio")?;
         for (x, y) in pts {
             writeln!(w, "{x},{y}")?;
         }
         Ok(())
-    })
+    })?;
+    Ok(())
 }
 
 fn figure(pts: &[(f64, f64)], gap: Option<String>) -> Figure {

@@ -17,10 +17,9 @@ use hvi_run::plan::Plan;
 
 use super::shared::{axis, completed_runs, plan_records, timing, Ctx};
 use super::shared::{keeps_large_fragment, largest_fragment_bound};
-use crate::cli::ValidityArgs;
 use crate::reproduce::report::{fmt_num, judge, short, Check, Figure, StageTiming, Value, Verdict};
 use crate::study::figures::field_of;
-use crate::study::validity::{validity_map, ValidityMap};
+use crate::study::validity::{validity_map, ValidityMap, ValidityOptions};
 
 /// Paper text of Fig. 16.
 pub fn fig16_paper() -> String {
@@ -70,8 +69,8 @@ pub fn fig16_17(
     let dir = ctx.runs.join(&plan.study);
     let cached = completed_runs(plan, &dir).unwrap_or(0);
     let cutoff = paper::VALIDITY_FRAGMENTATION_CUTOFF;
-    let map = validity_map(&ValidityArgs {
-        study: ctx.study_args(study_path, sref, &dir),
+    let map = validity_map(&ValidityOptions {
+        study: ctx.study_options(study_path, sref, &dir),
         cutoff: Some(cutoff),
     })?;
     // `validity_map` returns its map but not the runs' records: those are the store's.

@@ -10,7 +10,7 @@ use hvi_analysis::observable::Observable;
 use hvi_engine::paper;
 use hvi_plot::paper as plots;
 use hvi_plot::paper::SizingCurve;
-use hvi_run::output::write_atomic;
+use hvi_run::output::write_atomic_with;
 use hvi_run::plan::Plan;
 use hvi_run::store::{Record, RunStatus};
 
@@ -144,7 +144,7 @@ fn draw(ctx: &Ctx, plan: &Plan, curves: &[SizingCurve], n: &SizingNumbers) -> Re
             plan.tier
         ),
     )?;
-    write_atomic(&ctx.out.join("fig04_energy.csv"), |w| {
+    write_atomic_with(&ctx.out.join("fig04_energy.csv"), |w| {
         writeln!(w, "particles,sizing,tau_s,kinetic_j,potential_j")?;
         for c in curves {
             for s in &c.samples {
@@ -156,7 +156,8 @@ fn draw(ctx: &Ctx, plan: &Plan, curves: &[SizingCurve], n: &SizingNumbers) -> Re
             }
         }
         Ok(())
-    })
+    })?;
+    Ok(())
 }
 
 fn figure(n: &SizingNumbers, failed: &[usize]) -> Figure {

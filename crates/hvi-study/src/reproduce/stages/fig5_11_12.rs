@@ -11,7 +11,7 @@ use hvi_analysis::observable::{Observable, Observables};
 use hvi_analysis::score::{objective, Score, Targets};
 use hvi_engine::paper;
 use hvi_plot::paper as plots;
-use hvi_run::output::write_atomic;
+use hvi_run::output::write_atomic_with;
 use hvi_run::plan::Plan;
 use hvi_run::store::{read_summary, Record, RunStatus};
 
@@ -156,14 +156,15 @@ fn draw_fig5(ctx: &Ctx, plan: &Plan, s: &Series, c: &Convergence) -> Result<()> 
             short(paper::BEST_RCUT_OVER_SIGMA)
         ),
     )?;
-    write_atomic(&ctx.out.join("fig05_convergence.csv"), |w| {
+    write_atomic_with(&ctx.out.join("fig05_convergence.csv"), |w| {
         writeln!(w, "particles,fragmentation,relative_change_to_next")?;
         for (k, (n, f)) in s.ns.iter().zip(&s.fs).enumerate() {
             let change = c.changes.get(k).map_or(String::new(), |c| c.to_string());
             writeln!(w, "{n},{f},{change}")?;
         }
         Ok(())
-    })
+    })?;
+    Ok(())
 }
 
 fn fig5_figure(s: &Series, c: &Convergence) -> Figure {

@@ -85,7 +85,7 @@ pub fn fig7_9_10(
     let dir = ctx.runs.join(&plan.study);
     let cached = completed_runs(plan, &dir).unwrap_or(0);
     let calibration = calibrate(&CalibrateOptions::grid_only(
-        ctx.study_args(study_path, sref, &dir).options(),
+        ctx.study_options(study_path, sref, &dir),
     ))?;
     // `calibrate` returns its result but not the grid's records: those are the store's.
     let records = plan_records(plan, &dir)?;

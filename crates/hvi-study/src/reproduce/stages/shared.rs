@@ -8,8 +8,8 @@ use anyhow::{anyhow, Context, Result};
 use hvi_analysis::observable::Observable;
 use hvi_analysis::score::Target;
 
-use crate::cli::{StudyArgs, StudySelection};
 use crate::reproduce::report::StageTiming;
+use crate::study::options::StudyOptions;
 use hvi_run::exec::ExecOptions;
 use hvi_run::output::write_atomic_bytes;
 use hvi_run::plan::Plan;
@@ -57,24 +57,23 @@ impl Ctx {
         Ok(names)
     }
 
-    pub(super) fn study_args(
+    /// The plain options of a stage's study: the reproduction's tier for it, its store
+    /// `dir`, the reproduction's threads.
+    pub(super) fn study_options(
         &self,
         study: &Path,
         r: &crate::reproduce::config::StudyRef,
         dir: &Path,
-    ) -> StudyArgs {
-        StudyArgs {
-            selection: StudySelection {
-                study: study.to_path_buf(),
-                tier: Some(r.tier.clone()),
-                particles: r.particles,
-                sets: r.set.clone(),
-                out: Some(dir.to_path_buf()),
-            },
+    ) -> StudyOptions {
+        StudyOptions {
+            tier: Some(r.tier.clone()),
+            particles: r.particles,
+            sets: r.set.clone(),
+            out: Some(dir.to_path_buf()),
             threads: self.threads,
             jobs: self.jobs,
-            checkpoint_every: hvi_run::checkpoint::Every::default(),
             quiet: self.quiet,
+            ..StudyOptions::new(study)
         }
     }
 }
@@ -118,7 +117,7 @@ pub fn plan_records(plan: &Plan, dir: &Path) -> Result<Vec<Record>> {
     plan.runs
         .iter()
         .map(|r| {
-            store.lookup(&r.fingerprint)?.ok_or_else(|| {
+            store.record(&r.fingerprint)?.ok_or_else(|| {
                 anyhow!(
                     "run {} of `{}` has no record in {}",
                     r.index,
@@ -139,7 +138,7 @@ pub fn completed_runs(plan: &Plan, dir: &Path) -> Result<usize> {
     let store = Store::open(dir)?;
     let mut n = 0;
     for r in &plan.runs {
-        if matches!(store.lookup(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
+        if matches!(store.record(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
         {
             n += 1;
         }

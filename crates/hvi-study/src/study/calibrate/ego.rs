@@ -409,7 +409,7 @@ pub(super) fn run_points(
     let mut stored = Vec::with_capacity(jobs.len());
     for j in &jobs {
         stored.push(matches!(
-            problem.store.lookup(&j.fingerprint)?,
+            problem.store.record(&j.fingerprint)?,
             Some(r) if r.status == RunStatus::Completed
         ));
     }

@@ -8,7 +8,7 @@ use hvi_analysis::score::{objective, Score, Targets};
 use hvi_run::plan::{describe_values, Plan};
 use hvi_run::runner::Runner;
 use hvi_run::store::{Job, Record, RunStatus, Store};
-use hvi_run::study::job_of;
+use hvi_run::study::job;
 use hvi_run::table::{results_table, Table};
 use serde_json::Value;
 
@@ -66,8 +66,8 @@ pub(super) fn grid_stage(
     let stored = stored_before(plan, out)?;
     let store = runner.store(out)?;
     let jobs: Vec<Job> = (0..plan.runs.len())
-        .map(|i| job_of(plan, i))
-        .collect::<Result<_>>()?;
+        .map(|i| job(plan, i))
+        .collect::<hvi_run::error::Result<_>>()?;
     let describe = |i: usize| describe_values(&plan.axes, &plan.runs[i].values);
     let report = runner.execute(&store, out, plan, &jobs, &describe, "grid")?;
     let mut table = results_table(
@@ -112,7 +112,7 @@ pub(super) fn stored_before(plan: &Plan, out: &Path) -> Result<Vec<bool>> {
         .iter()
         .map(|r| {
             // A damaged record counts as not stored (the sweep repairs and re-runs it).
-            Ok(matches!(store.lookup(&r.fingerprint),
+            Ok(matches!(store.record(&r.fingerprint),
                 Ok(Some(rec)) if rec.status == RunStatus::Completed))
         })
         .collect()

@@ -1,7 +1,7 @@
 //! `hvi-study calibrate`: the grid of a calibration study scored against the experiments
 //! ([`grid`]), then a search after it that runs real simulations through the same run store:
 //! efficient global optimisation ([`ego`], the default) or Nelder-Mead ([`nelder_mead`]); the
-//! paper's fit scored at the same tier; and the report ([`report`]).
+//! paper's fit scored at the same tier; and the report ([`mod@report`]).
 //!
 //! - [`config`]: the study's `[calibrate]` section and the method it names;
 //! - [`problem`]: a parameter point as a run through the store, scored;

@@ -136,7 +136,7 @@ impl Refinement<'_> {
             Err(why) => return Ok(outside(why)),
         };
         let fp = job.fingerprint.clone();
-        let (record, cached) = match self.store.lookup(&fp)? {
+        let (record, cached) = match self.store.record(&fp)? {
             Some(r) if r.status == RunStatus::Completed => (r, true),
             _ => {
                 *self.ran.borrow_mut() += 1;

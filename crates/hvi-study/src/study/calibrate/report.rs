@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use hvi_analysis::observable::Observable;
 use hvi_analysis::score::objective;
-use hvi_run::output::{write_atomic, write_atomic_bytes};
+use hvi_run::output::{write_atomic_bytes, write_atomic_with};
 use hvi_run::plan::Plan;
 use hvi_run::store::Record;
 
@@ -280,7 +280,7 @@ pub(super) fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluatio
         k
     };
     let names: Vec<String> = r.targets.iter().map(|t| t.name.clone()).collect();
-    write_atomic(&out.join("evaluations.csv"), |w| {
+    write_atomic_with(&out.join("evaluations.csv"), |w| {
         let mut csv = csv::Writer::from_writer(w);
         let mut header = vec!["stage".to_string(), "step".into()];
         header.extend(keys.iter().cloned());
@@ -334,7 +334,7 @@ pub(super) fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluatio
 
 /// `surrogate.csv`: the search's final model over two axes (x, y, predicted log10 J).
 pub(super) fn write_surface(out: &Path, s: &Surface) -> Result<()> {
-    write_atomic(&out.join("surrogate.csv"), |w| {
+    write_atomic_with(&out.join("surrogate.csv"), |w| {
         let mut csv = csv::Writer::from_writer(w);
         csv.write_record([
             s.keys.0.as_str(),
@@ -348,7 +348,8 @@ pub(super) fn write_surface(out: &Path, s: &Surface) -> Result<()> {
         }
         csv.flush()?;
         Ok(())
-    })
+    })?;
+    Ok(())
 }
 
 /// The snapshot matrix of the grid (Fig. 7): each run's side view at the end, captioned with
@@ -454,7 +455,7 @@ fn write_index(root: &Path) -> Result<()> {
         k.dedup();
         k
     };
-    write_atomic(&root.join("index.csv"), |w| {
+    write_atomic_with(&root.join("index.csv"), |w| {
         let mut csv = csv::Writer::from_writer(w);
         let mut header: Vec<String> = ["label", "method", "seeds", "converged", "boxes"]
             .map(String::from)
@@ -499,5 +500,6 @@ fn write_index(root: &Path) -> Result<()> {
         }
         csv.flush()?;
         Ok(())
-    })
+    })?;
+    Ok(())
 }
