@@ -68,7 +68,7 @@ pub fn canonical_json(v: &serde_json::Value) -> String {
 
 /// Writes a file atomically: into a temporary sibling, flushed and synced, then renamed over
 /// the target. A reader sees the old file or the new one, never a torn one. An I/O error is a
-/// [`RunError::Write`] of `path`, anything else `write` returns is said under "cannot write
+/// [`crate::error::RunError::Write`] of `path`, anything else `write` returns is said under "cannot write
 /// PATH".
 pub fn write_atomic_with(
     path: &Path,
