@@ -17,11 +17,11 @@ fn summary(out: &Path) -> serde_json::Value {
         .expect("json")
 }
 
-#[test]
-fn an_exported_scene_runs_in_lammps_unedited_and_agrees_with_hvi() {
-    let dir = scratch("hvi-lammps", "export");
+/// hvi's run of the impact's first 150 steps at 2000 particles (bonds break, as in the CI
+/// smoke) into `dir/hvi`, exported with `--lammps dir/lammps`: the export's directory and the
+/// run's summary.json.
+fn export(dir: &Path) -> (std::path::PathBuf, serde_json::Value) {
     let (out, lmp_dir) = (dir.join("hvi"), dir.join("lammps"));
-    // The impact's first 150 steps at 2000 particles: bonds break, as in the CI smoke.
     let o = bin()
         .arg("run")
         .arg(repo().join("studies/scenes/default.toml"))
@@ -46,6 +46,13 @@ fn an_exported_scene_runs_in_lammps_unedited_and_agrees_with_hvi() {
         .expect("runs");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = summary(&out);
+    (lmp_dir, s)
+}
+
+#[test]
+fn an_exported_scene_runs_in_lammps_unedited_and_agrees_with_hvi() {
+    let dir = scratch("hvi-lammps", "export");
+    let (lmp_dir, s) = export(&dir);
     for f in ["data.lmp", "bond.table", "model.lmp", "in.lmp"] {
         assert!(lmp_dir.join(f).is_file(), "{f}");
     }
@@ -180,31 +187,7 @@ fn the_bpm_export_runs_in_a_lammps_with_bpm_and_closes_its_own_ledger() {
         return;
     };
     let dir = scratch("hvi-lammps", "bpm");
-    let (out, lmp_dir) = (dir.join("hvi"), dir.join("lammps"));
-    let o = bin()
-        .arg("run")
-        .arg(repo().join("studies/scenes/default.toml"))
-        .args([
-            "--set",
-            "resolution.particles=2000",
-            "--set",
-            "run.max_stride=1",
-            "--set",
-            "run.end_time_s=4.6e-7",
-            "--set",
-            "run.energy_every=25",
-            "--threads",
-            "1",
-            "--quiet",
-        ])
-        .arg("--out")
-        .arg(&out)
-        .arg("--lammps")
-        .arg(&lmp_dir)
-        .output()
-        .expect("runs");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let s = summary(&out);
+    let (lmp_dir, s) = export(&dir);
     let input = std::fs::read_to_string(lmp_dir.join("in_bpm.lmp")).expect("in_bpm.lmp");
     assert!(
         input.contains("model_bpm.lmp") && !input.contains("bond.table"),
