@@ -706,7 +706,9 @@ pub struct RunArgs {
     #[arg(long, value_name = "FILE")]
     pub lammps_data: Option<PathBuf>,
     /// Write the scene as LAMMPS runs it into DIR: data.lmp, bond.table, model.lmp and in.lmp
-    /// with every coefficient, runnable as `lmp -in DIR/in.lmp` (docs/running.md).
+    /// with every coefficient, runnable as `lmp -in DIR/in.lmp`; and the same scene in LAMMPS's
+    /// BPM package, `lmp -in DIR/in_bpm.lmp` (another model: its bonds also push and break in
+    /// compression; needs a LAMMPS with BPM) (docs/running.md).
     #[arg(long, value_name = "DIR")]
     pub lammps: Option<PathBuf>,
     /// No progress output.
