@@ -298,6 +298,11 @@ impl<T, E: Into<RunError>> ResultExt<T> for std::result::Result<T, E> {
     }
 }
 
+/// SIGINT's number.
+pub const SIGINT: i32 = 2;
+/// SIGTERM's number.
+pub const SIGTERM: i32 = 15;
+
 /// The error a run or a study returns when a signal stopped it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Interrupted(pub i32);
@@ -306,8 +311,8 @@ impl Interrupted {
     /// The signal's name.
     pub fn name(&self) -> &'static str {
         match self.0 {
-            2 => "SIGINT (Ctrl-C)", // crate::interrupt::SIGINT
-            15 => "SIGTERM",        // crate::interrupt::SIGTERM
+            SIGINT => "SIGINT (Ctrl-C)",
+            SIGTERM => "SIGTERM",
             _ => "a signal",
         }
     }

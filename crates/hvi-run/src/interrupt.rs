@@ -7,15 +7,10 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 
-pub use crate::error::Interrupted;
+pub use crate::error::{Interrupted, SIGINT, SIGTERM};
 
 /// The signal received (0: none).
 static RECEIVED: OnceLock<Arc<AtomicUsize>> = OnceLock::new();
-
-/// SIGINT's number.
-pub const SIGINT: i32 = 2;
-/// SIGTERM's number.
-pub const SIGTERM: i32 = 15;
 
 /// Installs the handlers (once; later calls do nothing). Without them (a library user who
 /// did not call this), a signal ends the process as usual and [`requested`] stays `None`.

@@ -57,39 +57,8 @@ fn main() -> ExitCode {
             } else {
                 eprintln!("error: {e:#}");
             }
-            ExitCode::from(exit_code(&e))
+            // docs/running.md, "Exit codes"; the mapping and its tests are hvi-run's.
+            ExitCode::from(hvi_run::error::exit_code(&*e))
         }
-    }
-}
-
-/// The exit code of a command that failed with `e` (docs/running.md, "Exit codes"), from the
-/// first cause in its chain that decides one: 128 + N after signal N, 74 when an output
-/// cannot be written (a full disk, an unwritable directory), 69 when Slurm or another
-/// external program refused or failed, 2 for anything else (a bad input, a refusal).
-fn exit_code(e: &anyhow::Error) -> u8 {
-    hvi_run::error::exit_code(&**e)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::exit_code;
-    use hvi_run::error::{Interrupted, RunError};
-    use std::path::Path;
-
-    #[test]
-    fn exit_codes_come_from_the_cause_under_the_contexts() {
-        let full = std::io::Error::new(std::io::ErrorKind::StorageFull, "No space left on device");
-        let write = RunError::write(Path::new("out/runs/x/record.json"), full).context("run 3");
-        assert_eq!(exit_code(&anyhow::Error::from(write).context("sweep")), 74);
-        let sbatch = RunError::External("sbatch not found".into());
-        assert_eq!(exit_code(&anyhow::Error::from(sbatch)), 69);
-        let stop = anyhow::Error::from(RunError::from(Interrupted(15))).context("stage fig5");
-        assert_eq!(exit_code(&stop), 143);
-        let input = RunError::Input("invalid value for `--poll`: 0".into());
-        assert_eq!(exit_code(&anyhow::Error::from(input)), 2);
-        assert_eq!(
-            exit_code(&anyhow::anyhow!("invalid value for `--seeds`")),
-            2
-        );
     }
 }

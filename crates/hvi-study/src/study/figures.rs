@@ -252,13 +252,22 @@ fn markers(result: &CalibrationResult, at: impl Fn(&Evaluation) -> Option<Point>
     markers
 }
 
+/// Seeds as a caption says them: `1, 2`.
+fn seeds_text(seeds: &[u64]) -> String {
+    seeds
+        .iter()
+        .map(|s| s.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// A scored observable's seed means over every box the calibration searched, when it moved
 /// the box: the `grid-seeds` and `extend-*` evaluations (the grid and each extension's new
 /// grid points, all at the search's seeds), at the best grid point's values of any other
 /// axis. None when the box never moved or the term is not scored.
-fn searched_lattice_field(f: &MapFrame, term: &str) -> Result<Option<(Field, Vec<u64>)>> {
+fn searched_lattice_field(f: &MapFrame, term: &str) -> Option<(Field, Vec<u64>)> {
     if f.result.boxes.len() < 2 {
-        return Ok(None);
+        return None;
     }
     let (kx, ky) = (&f.plan.axes[f.axes.0].key, &f.plan.axes[f.axes.1].key);
     let slice = &f.result.best_grid.params;
@@ -278,15 +287,12 @@ fn searched_lattice_field(f: &MapFrame, term: &str) -> Result<Option<(Field, Vec
             Some((*e.params.get(kx)?, *e.params.get(ky)?, observed.observed?))
         })
         .collect();
-    let Some(seeds) = f
+    let seeds = f
         .result
         .refinement
         .iter()
         .find(|e| e.stage == "grid-seeds")
-        .map(|e| e.seeds.clone())
-    else {
-        return Ok(None);
-    };
+        .map(|e| e.seeds.clone())?;
     let axis = |pick: fn(&(f64, f64, f64)) -> f64| {
         let mut v: Vec<f64> = points.iter().map(pick).collect();
         v.sort_by(f64::total_cmp);
@@ -304,27 +310,20 @@ fn searched_lattice_field(f: &MapFrame, term: &str) -> Result<Option<(Field, Vec
             z[r][c] = v;
         }
     }
-    Ok(Field::new(xs, ys, z).map(|field| (field, seeds)))
+    Field::new(xs, ys, z).map(|field| (field, seeds))
 }
 
 /// Fig. 9: R, the experiment's value in red. Over every box searched (seed means) when the
 /// calibration moved its box, else over the study's grid.
 fn length_ratio_map(f: &MapFrame) -> Result<ContourPlot> {
     let target = f.target_of(Observable::LengthRatio);
-    let extended = match target {
-        Some(t) => searched_lattice_field(f, &t.name)?,
-        None => None,
-    };
+    let extended = target.and_then(|t| searched_lattice_field(f, &t.name));
     let (field, over) = match extended {
         Some((field, seeds)) => (
             field,
             format!(
                 "over every box searched, seed means at seeds {}",
-                seeds
-                    .iter()
-                    .map(|s| s.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                seeds_text(&seeds)
             ),
         ),
         None => (
@@ -436,11 +435,7 @@ fn objective_map(f: &MapFrame) -> Result<ContourPlot> {
             field,
             format!(
                 "J of the seed-mean observables at seeds {}",
-                seeds
-                    .iter()
-                    .map(|s| s.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                seeds_text(&seeds)
             ),
         ),
         (None, None) => (
