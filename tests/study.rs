@@ -894,17 +894,44 @@ fn the_map_of_r_covers_every_box_searched() {
     let c = calibration_json(&out);
     let boxes = c["boxes"].as_array().expect("boxes");
     assert!(boxes.len() >= 2, "the box moved: {boxes:?}");
-    let svg = std::fs::read_to_string(out.join("map_R.svg")).expect("map_R.svg");
-    assert!(
-        svg.contains("over every box searched, seed means at seeds 1, 2"),
-        "{}",
-        stderr(&o)
-    );
-    // The eps axis reaches the extension's decade (1e-3 J), below the grid's 0.01 J.
-    assert!(
-        svg.lines().any(|l| l.trim() == "1e-3"),
-        "no 1e-3 tick on the map of R"
-    );
+    // Fig. 9's and Fig. 10's maps both cover the extension.
+    for map in ["map_R.svg", "map_va.svg"] {
+        let svg = std::fs::read_to_string(out.join(map)).expect(map);
+        assert!(
+            svg.contains("over every box searched, seed means at seeds 1, 2"),
+            "{map}: {}",
+            stderr(&o)
+        );
+        // The eps axis reaches the extension's decade (1e-3 J), below the grid's 0.01 J.
+        assert!(
+            svg.lines().any(|l| l.trim() == "1e-3"),
+            "no 1e-3 tick on {map}"
+        );
+    }
+    // What they draw: each extension point's seed means of every observable, the scored R
+    // among them equal to its term's.
+    let extended: Vec<&serde_json::Value> = c["refinement"]
+        .as_array()
+        .expect("refinement")
+        .iter()
+        .filter(|e| {
+            e["stage"]
+                .as_str()
+                .is_some_and(|s| s.starts_with("extend-"))
+        })
+        .collect();
+    assert!(!extended.is_empty(), "no extension point");
+    for e in extended {
+        let means = &e["means"];
+        let va = means["front_velocity_ratio"].as_f64().expect("va/v0 mean");
+        assert!(va > 0.0 && va < 1.5, "{e}");
+        let r_term = e["score"]["terms"]
+            .as_array()
+            .and_then(|t| t.iter().find(|t| t["name"] == "length_ratio"))
+            .and_then(|t| t["observed"].as_f64())
+            .expect("R's term");
+        assert_eq!(means["length_ratio"].as_f64(), Some(r_term), "{e}");
+    }
 }
 
 #[test]

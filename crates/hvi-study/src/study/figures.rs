@@ -183,6 +183,24 @@ impl<'a> MapFrame<'a> {
         }
     }
 
+    /// The field of an observable and what it covers: over every box searched (seed means)
+    /// when the calibration moved its box, else over the study's grid.
+    fn searched_field(&self, observable: Observable) -> Result<(Field, String)> {
+        Ok(match searched_lattice_field(self, observable) {
+            Some((field, seeds)) => (
+                field,
+                format!(
+                    "over every box searched, seed means at seeds {}",
+                    seeds_text(&seeds)
+                ),
+            ),
+            None => (
+                self.field(|r| r.observables.get(observable))?,
+                "over the study's grid".to_string(),
+            ),
+        })
+    }
+
     /// The weighted target of an observable, if the calibration scores one.
     fn target_of(&self, observable: Observable) -> Option<&'a Target> {
         self.result
@@ -261,11 +279,12 @@ fn seeds_text(seeds: &[u64]) -> String {
         .join(", ")
 }
 
-/// A scored observable's seed means over every box the calibration searched, when it moved
-/// the box: the `grid-seeds` and `extend-*` evaluations (the grid and each extension's new
-/// grid points, all at the search's seeds), at the best grid point's values of any other
-/// axis. None when the box never moved or the term is not scored.
-fn searched_lattice_field(f: &MapFrame, term: &str) -> Option<(Field, Vec<u64>)> {
+/// An observable's seed means over every box the calibration searched, when it moved the
+/// box: the `grid-seeds` and `extend-*` evaluations (the grid and each extension's new grid
+/// points, all at the search's seeds), at the best grid point's values of any other axis. The
+/// mean is the evaluation's own, or, in a calibration.json written before evaluations kept
+/// every mean, its scored term's. None when the box never moved or no point measured it.
+fn searched_lattice_field(f: &MapFrame, observable: Observable) -> Option<(Field, Vec<u64>)> {
     if f.result.boxes.len() < 2 {
         return None;
     }
@@ -283,10 +302,17 @@ fn searched_lattice_field(f: &MapFrame, term: &str) -> Option<(Field, Vec<u64>)>
         .filter(|e| e.stage == "grid-seeds" || e.stage.starts_with("extend-"))
         .filter(|e| on_slice(e))
         .filter_map(|e| {
-            let observed = e.score.as_ref()?.terms.iter().find(|t| t.name == term)?;
-            Some((*e.params.get(kx)?, *e.params.get(ky)?, observed.observed?))
+            let value = e.mean(observable).or_else(|| {
+                let term = f.target_of(observable)?;
+                let scored = e.score.as_ref()?.terms.iter().find(|t| t.name == term.name);
+                scored?.observed
+            })?;
+            Some((*e.params.get(kx)?, *e.params.get(ky)?, value))
         })
         .collect();
+    if points.is_empty() {
+        return None;
+    }
     let seeds = f
         .result
         .refinement
@@ -317,20 +343,7 @@ fn searched_lattice_field(f: &MapFrame, term: &str) -> Option<(Field, Vec<u64>)>
 /// calibration moved its box, else over the study's grid.
 fn length_ratio_map(f: &MapFrame) -> Result<ContourPlot> {
     let target = f.target_of(Observable::LengthRatio);
-    let extended = target.and_then(|t| searched_lattice_field(f, &t.name));
-    let (field, over) = match extended {
-        Some((field, seeds)) => (
-            field,
-            format!(
-                "over every box searched, seed means at seeds {}",
-                seeds_text(&seeds)
-            ),
-        ),
-        None => (
-            f.field(|r| r.observables.get(Observable::LengthRatio))?,
-            "over the study's grid".to_string(),
-        ),
-    };
+    let (field, over) = f.searched_field(Observable::LengthRatio)?;
     Ok(ContourPlot {
         title: "Debris-cloud length ratio R = La/Lr (Fig. 9)".into(),
         subtitle: format!(
@@ -355,17 +368,18 @@ pub fn width_note(plan: &Plan) -> String {
     }
 }
 
-/// Fig. 10: va / v0 (no experimental value available: no red line, said so).
+/// Fig. 10: va / v0 (no experimental value available: no red line, said so), over the same
+/// points as Fig. 9's map.
 fn front_velocity_map(f: &MapFrame) -> Result<ContourPlot> {
     let target = f.target_of(Observable::FrontVelocityRatio);
-    let field = f.field(|r| r.observables.get(Observable::FrontVelocityRatio))?;
+    let (field, over) = f.searched_field(Observable::FrontVelocityRatio)?;
     let tier = &f.tier;
     Ok(ContourPlot {
         title: "Axial front velocity va/v0 (Fig. 10)".into(),
         subtitle: match target {
-            Some(t) => format!("red: the experiment's va/v0 = {}\n{tier}", t.value),
+            Some(t) => format!("red: the experiment's va/v0 = {}; {over}\n{tier}", t.value),
             None => format!(
-                "the experiment's va/v0 is not available (experiments_data gap): no red line\n{tier}"
+                "the experiment's va/v0 is not available (experiments_data gap): no red line; {over}\n{tier}"
             ),
         },
         highlight: target.map(|t| (t.value, format!("experiment va/v0 = {}", t.value))),

@@ -32,7 +32,7 @@ use hvi_analysis::surrogate::{
 use hvi_run::store::{Job, Record, RunStatus};
 
 use super::problem::{fmt_params, Refinement};
-use super::result::{Evaluation, ParamRegion, Spread, Surface};
+use super::result::{observed_means, Evaluation, ParamRegion, Spread, Surface};
 
 /// The search's settings (`[calibrate]`).
 #[derive(Debug, Clone)]
@@ -478,12 +478,8 @@ fn scored(
         && !recs.is_empty()
         && recs.iter().all(|r| r.status == RunStatus::Completed);
     let observables: Vec<_> = recs.iter().map(|r| r.observables).collect();
-    let mean = |o: Observable| -> Option<f64> {
-        let v: Option<Vec<f64>> = observables.iter().map(|x| x.get(o)).collect();
-        v.filter(|v| !v.is_empty())
-            .map(|v| v.iter().sum::<f64>() / v.len() as f64)
-    };
-    let score = complete.then(|| objective(targets, mean));
+    let means = observed_means(&observables);
+    let score = complete.then(|| objective(targets, |o: Observable| means.get(o.name()).copied()));
     let seed_objectives = if complete {
         observables
             .iter()
@@ -515,6 +511,7 @@ fn scored(
         dir: dirs.first().cloned(),
         seeds: seeds.iter().flatten().copied().collect(),
         seed_objectives,
+        means,
     };
     (e, observables)
 }

@@ -13,7 +13,7 @@ use hvi_run::table::{results_table, Table};
 use serde_json::Value;
 
 use super::problem::describe_eval;
-use super::result::Evaluation;
+use super::result::{observed_means, Evaluation};
 use crate::study::sweep::print_failures;
 
 /// Scores every row of a results table and adds `objective` and `score_<name>` columns.
@@ -152,6 +152,7 @@ pub(super) fn grid_evaluations(
                 dir: Some(run.dir.clone()),
                 seeds: Vec::new(),
                 seed_objectives: Vec::new(),
+                means: observed_means(std::slice::from_ref(&rec.observables)),
             }
         })
         .collect()

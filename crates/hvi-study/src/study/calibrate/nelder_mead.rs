@@ -54,6 +54,7 @@ impl Refinement<'_> {
                 dir: None,
                 seeds: Vec::new(),
                 seed_objectives: Vec::new(),
+                means: Default::default(),
             }
         };
         if self.progress {

@@ -16,7 +16,7 @@ use hvi_run::store::{Job, Record, RunStatus, Store};
 use serde_json::Value;
 
 use super::config::CalibrateConfig;
-use super::result::Evaluation;
+use super::result::{observed_means, Evaluation};
 
 /// The cost of a point outside the grid's box or with an invalid scene (no run is made).
 pub const OUTSIDE_COST: f64 = 10.0 * MISSING_TERM;
@@ -130,6 +130,7 @@ impl Refinement<'_> {
             dir: None,
             seeds: Vec::new(),
             seed_objectives: Vec::new(),
+            means: BTreeMap::new(),
         };
         let job = match self.job(params, None)? {
             Ok(job) => job,
@@ -180,6 +181,7 @@ impl Refinement<'_> {
             dir: Some(hvi_run::plan::run_dir_name(&fp)),
             seeds: Vec::new(),
             seed_objectives: Vec::new(),
+            means: observed_means(std::slice::from_ref(&record.observables)),
         };
         Ok(e)
     }

@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+use hvi_analysis::observable::{Observable, Observables};
 use hvi_analysis::score::Score;
 use serde::{Deserialize, Serialize};
 
@@ -33,6 +34,33 @@ pub struct Evaluation {
     /// The objective at each seed (the point's `objective` scores the seed-mean observables).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub seed_objectives: Vec<f64>,
+    /// Every observable the point's runs measured, by name: the mean over its seeds (a grid
+    /// run's own values), whether scored or not. What the maps draw over every box searched.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub means: BTreeMap<String, f64>,
+}
+
+impl Evaluation {
+    /// The seed mean of `observable` at this point, when its runs measured it.
+    pub fn mean(&self, observable: Observable) -> Option<f64> {
+        self.means.get(observable.name()).copied()
+    }
+}
+
+/// The mean over runs of every observable that all of them measured, by name (empty without
+/// runs).
+pub fn observed_means(runs: &[Observables]) -> BTreeMap<String, f64> {
+    if runs.is_empty() {
+        return BTreeMap::new();
+    }
+    Observable::ALL
+        .iter()
+        .filter_map(|&o| {
+            let values: Option<Vec<f64>> = runs.iter().map(|r| r.get(o)).collect();
+            let v = values?;
+            Some((o.name().to_string(), v.iter().sum::<f64>() / v.len() as f64))
+        })
+        .collect()
 }
 
 /// What `calibrate` writes into calibration.json.
@@ -364,6 +392,24 @@ mod tests {
     use super::*;
     use hvi_analysis::score::Term;
 
+    #[test]
+    fn a_mean_is_over_every_seed_or_absent() {
+        let run = |r: Option<f64>, va: f64| {
+            let mut o = Observables::default();
+            o.set(Observable::LengthRatio, r);
+            o.set(Observable::FrontVelocityRatio, Some(va));
+            o
+        };
+        let means = observed_means(&[run(Some(1.5), 0.9), run(Some(1.7), 0.8)]);
+        assert_eq!(means.get("length_ratio"), Some(&1.6));
+        assert!((means["front_velocity_ratio"] - 0.85).abs() < 1e-15);
+        // A seed without R: no mean of R, the other observable's mean kept.
+        let means = observed_means(&[run(Some(1.5), 0.9), run(None, 0.8)]);
+        assert_eq!(means.get("length_ratio"), None);
+        assert!(means.contains_key("front_velocity_ratio"));
+        assert!(observed_means(&[]).is_empty());
+    }
+
     fn eval(eps: f64, kappa: f64, seeds: &[u64], terms: &[f64]) -> Evaluation {
         let terms: Vec<Term> = terms
             .iter()
@@ -393,6 +439,7 @@ mod tests {
             dir: None,
             seeds: seeds.to_vec(),
             seed_objectives: Vec::new(),
+            means: BTreeMap::new(),
         }
     }
 
