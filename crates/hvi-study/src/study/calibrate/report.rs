@@ -6,12 +6,13 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use hvi_analysis::observable::Observable;
 use hvi_analysis::score::objective;
+use hvi_analysis::surrogate::REGION_NOISE_MULTIPLE;
 use hvi_run::output::{write_atomic_bytes, write_atomic_with};
 use hvi_run::plan::Plan;
 use hvi_run::store::Record;
 
 use super::problem::describe_eval;
-use super::result::{CalibrationResult, Evaluation, Surface};
+use super::result::{fmt_value, CalibrationResult, Evaluation, FloorPoint, Surface};
 use crate::study::document::{Document, Section};
 
 /// The maps and the snapshot matrix; a figure that cannot be drawn is reported, not fatal.
@@ -67,6 +68,13 @@ pub fn report(r: &CalibrationResult) -> Document {
         sections: Vec::new(),
     };
     calibrated_point(doc.section("The calibrated point"), r);
+    if let Some(surface) = &r.surface {
+        valley(
+            doc.section("The valley's floor (the model's)"),
+            surface,
+            r.noise,
+        );
+    }
     boxes(doc.section("The boxes searched"), r);
     targets(doc.section("Every target at the best point"), r);
     let gaps = doc.section("Not scored");
@@ -172,6 +180,97 @@ fn calibrated_point(sec: &mut Section, r: &CalibrationResult) {
             ),
         );
     }
+}
+
+/// Rows of the valley's floor a report shows: all of up to `most`, else `most` evenly spaced
+/// with the lowest among them.
+fn floor_rows(floor: &[FloorPoint], most: usize) -> Vec<usize> {
+    if floor.len() <= most {
+        return (0..floor.len()).collect();
+    }
+    let lowest = (0..floor.len())
+        .min_by(|&a, &b| {
+            floor[a]
+                .log10_objective
+                .total_cmp(&floor[b].log10_objective)
+        })
+        .unwrap_or(0);
+    let mut rows: Vec<usize> = (0..most)
+        .map(|k| k * (floor.len() - 1) / (most - 1))
+        .chain([lowest])
+        .collect();
+    rows.sort_unstable();
+    rows.dedup();
+    rows
+}
+
+/// The search's final model along its valley: at each value of the second key the first
+/// key's best value and the predicted J, and how far along the floor J stays within the noise
+/// of its lowest (where the targets cannot tell the points apart).
+fn valley(sec: &mut Section, s: &Surface, noise: Option<f64>) {
+    let floor = s.floor();
+    let Some(lowest) = floor
+        .iter()
+        .map(|p| p.log10_objective)
+        .min_by(f64::total_cmp)
+    else {
+        return;
+    };
+    let threshold = noise.map(|n| lowest + REGION_NOISE_MULTIPLE * n);
+    let within = |p: &FloorPoint| threshold.is_some_and(|t| p.log10_objective <= t);
+    let rows = floor_rows(&floor, 9)
+        .into_iter()
+        .map(|k| {
+            let p = &floor[k];
+            vec![
+                fmt_value(p.along),
+                fmt_value(p.at),
+                format!("{:.4}", 10f64.powf(p.log10_objective)),
+                if threshold.is_none() {
+                    "n/a".into()
+                } else if within(p) {
+                    "yes".into()
+                } else {
+                    "no".into()
+                },
+            ]
+        })
+        .collect();
+    let (x, y) = (&s.keys.0, &s.keys.1);
+    sec.table(
+        &[
+            &format!("`{y}`"),
+            &format!("`{x}` at the floor"),
+            "predicted J",
+            "within the noise of the lowest",
+        ],
+        rows,
+    );
+    let flat: Vec<&FloorPoint> = floor.iter().filter(|p| within(p)).collect();
+    let span = |v: &dyn Fn(&FloorPoint) -> f64| {
+        let lo = flat.iter().map(|p| v(p)).fold(f64::INFINITY, f64::min);
+        let hi = flat.iter().map(|p| v(p)).fold(f64::NEG_INFINITY, f64::max);
+        format!("[{}, {}]", fmt_value(lo), fmt_value(hi))
+    };
+    if let (Some(t), false) = (threshold, flat.is_empty()) {
+        sec.fact(
+            "flat along",
+            format!(
+                "{} of {} rows of the floor within {REGION_NOISE_MULTIPLE} noise standard \
+                 errors of its lowest (J < {:.4}): `{y}` in {}, `{x}` in {} there",
+                flat.len(),
+                floor.len(),
+                10f64.powf(t),
+                span(&|p| p.along),
+                span(&|p| p.at),
+            ),
+        );
+    }
+    sec.note(format!(
+        "The model's lowest J at each `{y}` of its grid (surrogate.csv). Where the floor stays \
+         within the noise, the targets cannot tell its points apart: there the calibration \
+         fixes `{x}` for a given `{y}`, not the two together."
+    ));
 }
 
 /// Every box searched, the sides the answer touched, and the limit where one stopped it.
@@ -502,4 +601,71 @@ fn write_index(root: &Path) -> Result<()> {
         Ok(())
     })?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hvi_analysis::contour::Field;
+
+    /// A valley along the diagonal x = y whose floor rises 0.05 in log10 J per unit of y.
+    fn diagonal_valley() -> Surface {
+        let axis: Vec<f64> = (1..=5).map(f64::from).collect();
+        let z = axis
+            .iter()
+            .map(|&y| {
+                axis.iter()
+                    .map(|&x| -2.0 + 0.05 * (y - 1.0) + 0.3 * (x - y).powi(2))
+                    .collect()
+            })
+            .collect();
+        Surface {
+            keys: ("eps".into(), "kappa".into()),
+            field: Field::new(axis.clone(), axis, z).expect("field"),
+        }
+    }
+
+    #[test]
+    fn the_floor_follows_the_valley_and_says_how_far_it_is_flat() {
+        let s = diagonal_valley();
+        let floor = s.floor();
+        assert_eq!(floor.len(), 5);
+        for p in &floor {
+            assert_eq!(p.at, p.along, "{p:?}");
+        }
+        let mut doc = Document::default();
+        // Noise 0.05: within 2 x 0.05 of the lowest are the floor's rows y = 1, 2, 3.
+        valley(doc.section("valley"), &s, Some(0.05));
+        let text = doc.text();
+        assert!(
+            text.contains("3 of 5 rows of the floor within 2 noise standard errors"),
+            "{text}"
+        );
+        assert!(
+            text.contains("`kappa` in [1, 3], `eps` in [1, 3]"),
+            "{text}"
+        );
+        // Without a noise estimate the table stands, with no claim of flatness.
+        let mut doc = Document::default();
+        valley(doc.section("valley"), &s, None);
+        let text = doc.text();
+        assert!(!text.contains("rows of the floor within"), "{text}");
+        assert!(text.contains("n/a"), "{text}");
+    }
+
+    #[test]
+    fn a_long_floor_shows_nine_rows_with_its_lowest() {
+        let floor: Vec<FloorPoint> = (0..33)
+            .map(|k| FloorPoint {
+                along: k as f64,
+                at: 0.0,
+                log10_objective: (k as f64 - 17.0).abs(),
+            })
+            .collect();
+        let rows = floor_rows(&floor, 9);
+        assert_eq!(rows.first(), Some(&0));
+        assert_eq!(rows.last(), Some(&32));
+        assert!(rows.contains(&17), "{rows:?}");
+        assert!(rows.len() <= 10, "{rows:?}");
+    }
 }

@@ -304,6 +304,42 @@ pub struct Surface {
     pub field: hvi_analysis::contour::Field,
 }
 
+impl Surface {
+    /// The valley's floor as the model sees it: at each row (each value of the second key),
+    /// the first key's value where the predicted log10 J is lowest, and that prediction; rows
+    /// without a finite prediction are left out.
+    pub fn floor(&self) -> Vec<FloorPoint> {
+        let f = &self.field;
+        f.y.iter()
+            .zip(&f.z)
+            .filter_map(|(&y, row)| {
+                let (col, &z) = row
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, z)| z.is_finite())
+                    .min_by(|a, b| a.1.total_cmp(b.1))?;
+                Some(FloorPoint {
+                    along: y,
+                    at: f.x[col],
+                    log10_objective: z,
+                })
+            })
+            .collect()
+    }
+}
+
+/// A point of the valley's floor: at `along` (the surface's second key), the first key's value
+/// `at` where the model's J is lowest, and its predicted log10 J.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FloorPoint {
+    /// The second key's value.
+    pub along: f64,
+    /// The first key's value at the floor.
+    pub at: f64,
+    /// The predicted log10 J there.
+    pub log10_objective: f64,
+}
+
 /// A side of an axis of the searched box.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
