@@ -218,12 +218,13 @@ fn valley(sec: &mut Section, s: &Surface, noise: Option<f64>) {
     };
     let threshold = noise.map(|n| lowest + REGION_NOISE_MULTIPLE * n);
     let within = |p: &FloorPoint| threshold.is_some_and(|t| p.log10_objective <= t);
+    let (x, y) = (&s.keys.0, &s.keys.1);
     let rows = floor_rows(&floor, 9)
         .into_iter()
         .map(|k| {
             let p = &floor[k];
             vec![
-                fmt_value(p.along),
+                format!("`{y}` = {}", fmt_value(p.along)),
                 fmt_value(p.at),
                 format!("{:.4}", 10f64.powf(p.log10_objective)),
                 if threshold.is_none() {
@@ -236,10 +237,9 @@ fn valley(sec: &mut Section, s: &Surface, noise: Option<f64>) {
             ]
         })
         .collect();
-    let (x, y) = (&s.keys.0, &s.keys.1);
     sec.table(
         &[
-            &format!("`{y}`"),
+            "along the valley",
             &format!("`{x}` at the floor"),
             "predicted J",
             "within the noise of the lowest",
