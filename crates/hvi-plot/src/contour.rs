@@ -180,16 +180,34 @@ pub(crate) fn tick(v: f64, log: bool) -> String {
     let x = if log { 10f64.powf(v) } else { v };
     let a = x.abs();
     if a != 0.0 && !(1e-2..=1e5).contains(&a) {
-        let e = a.log10().floor();
-        let m = x / 10f64.powf(e);
-        if (m - m.round()).abs() < 1e-6 {
-            format!("{}e{}", m.round(), e)
-        } else {
-            format!("{m:.2}e{e}")
-        }
+        scientific(x)
     } else {
         let s = format!("{x:.3}");
         s.trim_end_matches('0').trim_end_matches('.').to_string()
+    }
+}
+
+/// A tick's label on an axis whose top is `top` (drawn coordinate): as [`tick`], except that
+/// on an axis reaching past 1e5 every label from 1e3 up is scientific, so that one axis does
+/// not read `100000` beside `1e6`.
+pub(crate) fn axis_tick(v: f64, log: bool, top: f64) -> String {
+    let x = if log { 10f64.powf(v) } else { v };
+    let reaches = if log { top > 5.0 } else { top > 1e5 };
+    if reaches && x.abs() >= 1e3 {
+        scientific(x)
+    } else {
+        tick(v, log)
+    }
+}
+
+/// `x` as `m e k`: `5e4`, `4.56e6`.
+fn scientific(x: f64) -> String {
+    let e = x.abs().log10().floor();
+    let m = x / 10f64.powf(e);
+    if (m - m.round()).abs() < 1e-6 {
+        format!("{}e{}", m.round(), e)
+    } else {
+        format!("{m:.2}e{e}")
     }
 }
 
@@ -298,8 +316,8 @@ where
         .x_desc(&p.x_label)
         .y_desc(&p.y_label)
         .axis_text(AXIS_TEXT)
-        .x_label_formatter(&|v| tick(*v, p.x_log))
-        .y_label_formatter(&|v| tick(*v, p.y_log))
+        .x_label_formatter(&|v| axis_tick(*v, p.x_log, frame.x.1))
+        .y_label_formatter(&|v| axis_tick(*v, p.y_log, frame.y.1))
         .draw()?;
     Ok(chart)
 }
@@ -629,6 +647,15 @@ mod tests {
             .map(|&v| tick(v, true))
             .collect();
         assert_eq!(labels, ["2e6", "3e6"]);
+        // An axis reaching past 1e5 writes all its large labels alike.
+        let labels: Vec<String> = axis_keys(4.0, 6.0, true)
+            .iter()
+            .map(|&v| axis_tick(v, true, 6.0))
+            .collect();
+        assert_eq!(labels, ["1e4", "2e4", "5e4", "1e5", "2e5", "5e5", "1e6"]);
+        assert_eq!(axis_tick(3.0, true, 6.0), "1e3");
+        assert_eq!(axis_tick(2.0, true, 6.0), "100");
+        assert_eq!(axis_tick(4.0, true, 4.5), "10000");
     }
 
     #[test]

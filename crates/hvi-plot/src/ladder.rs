@@ -10,7 +10,7 @@ use anyhow::{bail, Result};
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
-use crate::contour::{tick, KeyedAxis};
+use crate::contour::{axis_tick, KeyedAxis};
 use crate::render::{fonts, write_png, FAMILY};
 
 /// One level on a parameter's panel: particles, the calibrated value, its interval (None: no
@@ -120,8 +120,8 @@ fn axes<'a, 'b>(
     chart
         .configure_mesh()
         .x_desc("particles N (log scale)")
-        .x_label_formatter(&|u| tick(*u, true))
-        .y_label_formatter(&move |u| tick(*u, y_log))
+        .x_label_formatter(&|u| axis_tick(*u, true, x.1))
+        .y_label_formatter(&move |u| axis_tick(*u, y_log, y.1))
         .label_style((FAMILY, 16))
         .axis_desc_style((FAMILY, 17))
         .draw()?;
