@@ -461,7 +461,14 @@ fn objective_map(f: &MapFrame) -> Result<ContourPlot> {
         ),
     };
     Ok(ContourPlot {
-        title: "Objective J over the grid, log10 (optimum marked)".into(),
+        title: format!(
+            "Objective J over the {}, log10 (optimum marked)",
+            if surface.is_some() {
+                "searched box"
+            } else {
+                "grid"
+            }
+        ),
         subtitle: format!(
             "{what} = weighted mean of the target terms (experiments_data/README.md); search: {} ({})\n{}",
             result.method,
