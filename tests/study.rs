@@ -823,15 +823,7 @@ fn an_optimum_outside_the_first_box_extends_it_and_ends_inside() {
     // Each later box reaches a decade further down; the new grid values ran at both seeds.
     let last = &boxes[boxes.len() - 1]["bounds"]["material.eps_j"];
     assert!(last[0].as_f64().expect("lo") <= 1.0001e-3, "{last}");
-    let evals = c["refinement"].as_array().expect("evaluations");
-    let extended: Vec<&serde_json::Value> = evals
-        .iter()
-        .filter(|e| {
-            e["stage"]
-                .as_str()
-                .is_some_and(|s| s.starts_with("extend-"))
-        })
-        .collect();
+    let extended = extension_points(&c);
     assert!(!extended.is_empty());
     for e in &extended {
         assert_eq!(e["seeds"], serde_json::json!([1, 2]), "{e}");
@@ -873,6 +865,20 @@ fn an_optimum_outside_the_first_box_extends_it_and_ends_inside() {
     );
 }
 
+/// The evaluations of calibration.json at the grid points each extension of the box added.
+fn extension_points(c: &serde_json::Value) -> Vec<&serde_json::Value> {
+    c["refinement"]
+        .as_array()
+        .expect("refinement")
+        .iter()
+        .filter(|e| {
+            e["stage"]
+                .as_str()
+                .is_some_and(|s| s.starts_with("extend-"))
+        })
+        .collect()
+}
+
 /// The map of R after the box moved shows every box searched (the new grid points' seed
 /// means), not only the study's grid, and says so.
 #[test]
@@ -910,16 +916,7 @@ fn the_map_of_r_covers_every_box_searched() {
     }
     // What they draw: each extension point's seed means of every observable, the scored R
     // among them equal to its term's.
-    let extended: Vec<&serde_json::Value> = c["refinement"]
-        .as_array()
-        .expect("refinement")
-        .iter()
-        .filter(|e| {
-            e["stage"]
-                .as_str()
-                .is_some_and(|s| s.starts_with("extend-"))
-        })
-        .collect();
+    let extended = extension_points(&c);
     assert!(!extended.is_empty(), "no extension point");
     for e in extended {
         let means = &e["means"];
