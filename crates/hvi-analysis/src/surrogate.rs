@@ -15,8 +15,9 @@
 //!   noise of the objective (its standard error); more runs could not tell a better point from
 //!   scatter. On a prior, the model of the observations alone must agree ([`step`]).
 //! - The confidence region: every lattice point whose predicted objective is within
-//!   [`REGION_NOISE_MULTIPLE`] noise standard errors of the best prediction, reported as one
-//!   interval per parameter.
+//!   [`REGION_NOISE_MULTIPLE`] noise standard errors of the best prediction, and every
+//!   observed point whose own value is (a model smooths a steep valley wall; a point measured
+//!   inside the threshold is not ruled out by it), reported as one interval per parameter.
 //!
 //! - A prior from a lower fidelity (a coarser resolution of the same model, [`Prior`]): the
 //!   model is then `rho * prior + a kriging model of the difference` (the autoregressive
@@ -544,7 +545,8 @@ pub struct Region {
 }
 
 /// The confidence region of the minimum: the lattice points whose predicted objective is within
-/// [`REGION_NOISE_MULTIPLE`] x `noise_sd` of the lowest prediction.
+/// [`REGION_NOISE_MULTIPLE`] x `noise_sd` of the lowest prediction, widened to every observation
+/// whose own value is within it (`share_of_box` counts the lattice points alone).
 pub fn region(
     space: &SearchBox,
     observations: &[Observation],
@@ -568,6 +570,13 @@ pub fn region(
                 iv.0 = iv.0.min(v);
                 iv.1 = iv.1.max(v);
             }
+        }
+    }
+    // A point measured below the threshold stays in, wherever the model puts it.
+    for o in observations.iter().filter(|o| o.y <= threshold) {
+        for (iv, &v) in intervals.iter_mut().zip(&o.x) {
+            iv.0 = iv.0.min(v);
+            iv.1 = iv.1.max(v);
         }
     }
     let sides: Vec<(bool, bool)> = intervals
@@ -870,6 +879,40 @@ mod tests {
         let r = region(&space, &obs, 0.02, None).expect("region");
         assert!(r.share_of_box > 0.9, "{}", r.share_of_box);
         assert!(r.at_boundary.iter().all(|&b| b));
+    }
+
+    #[test]
+    fn a_point_measured_inside_the_threshold_stays_in_the_region() {
+        // A bowl at x = 0.3, and at x = 0.8 two neighbouring measurements that disagree: the
+        // model averages them above the threshold, but the lower one is inside it.
+        let space = SearchBox::new(vec![(0.0, 1.0)]).expect("box");
+        let mut obs: Vec<Observation> = (0..=10)
+            .map(|k| k as f64 / 10.0)
+            .filter(|&x| (x - 0.8).abs() > 1e-9)
+            .map(|x| Observation {
+                x: vec![x],
+                y: 4.0 * (x - 0.3) * (x - 0.3),
+            })
+            .collect();
+        obs.push(Observation {
+            x: vec![0.8],
+            y: -0.5,
+        });
+        obs.push(Observation {
+            x: vec![0.81],
+            y: 2.5,
+        });
+        let noise = 0.05;
+        let r = region(&space, &obs, noise, None).expect("region");
+        let model = Surrogate::fit_on(&space, &obs, noise, None).expect("model");
+        let at = model.predict(&[vec![0.8]]).expect("prediction")[0].0;
+        assert!(
+            at > r.threshold,
+            "the model alone keeps x = 0.8 out ({at} > {})",
+            r.threshold
+        );
+        assert!(r.intervals[0].1 >= 0.8, "{:?}", r.intervals[0]);
+        assert!(r.intervals[0].0 <= 0.3, "{:?}", r.intervals[0]);
     }
 
     #[test]

@@ -139,8 +139,9 @@ fn calibrated_point(sec: &mut Section, r: &CalibrationResult) {
     if let Some(g) = &r.region {
         sec.note(format!(
             "The interval is the confidence region of the minimum: every point the surrogate \
-             predicts within {} noise standard errors of its lowest prediction (J < {:.4}); it \
-             covers {:.1} % of the searched box.{}",
+             predicts within {} noise standard errors of its lowest prediction (J < {:.4}), and \
+             every point run whose seed-mean J is below that; the predicted part covers {:.1} % \
+             of the searched box.{}",
             hvi_analysis::surrogate::REGION_NOISE_MULTIPLE,
             g.threshold,
             100.0 * g.share_of_box,
