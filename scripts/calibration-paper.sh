@@ -77,7 +77,7 @@ lines += [
     f"{c['best_grid']['objective']:.4g} at the best grid point, {paper['objective']:.4g} at the "
     "paper's fit (eps = 0.01 J, kappa = 4.56e6 N/m) at the same resolution.",
     "",
-    "Maps: `map_objective.png` (J over the grid, the search's points and the confidence region), "
+    "Maps: `map_objective.png` (J over the searched box, the search's points and the confidence region), "
     "`map_R.png`, `map_va.png`.",
 ]
 open(os.path.join(report, "README.md"), "w").write("\n".join(lines) + "\n")
