@@ -77,6 +77,11 @@ pub struct ContourPlot {
     /// A box drawn dashed, with its legend text: (lowest corner, highest corner) in physical
     /// units (the calibration's confidence region).
     pub region: Option<(Point, Point, String)>,
+    /// Colours and iso-lines over the field's bulk only (the median within 3 median absolute
+    /// deviations, inside the field's range), for a field that a few outlying values would
+    /// otherwise flatten into one colour: values beyond saturate at the colour bar's ends, and
+    /// the bar gives the field's whole range.
+    pub bulk_colours: bool,
 }
 
 fn tx(v: f64, log: bool) -> f64 {
@@ -222,11 +227,13 @@ struct MapFrame {
     zmin: f64,
     zmax: f64,
     zspan: f64,
+    /// The field's whole range, when the colours cover less of it.
+    saturated: Option<(f64, f64)>,
 }
 
 impl MapFrame {
     /// The frame of a field in drawn coordinates.
-    fn of(field: &Field) -> Self {
+    fn of(field: &Field, bulk: bool) -> Self {
         let (x0, x1) = (field.x[0], field.x[field.x.len() - 1]);
         let (y0, y1) = (field.y[0], field.y[field.y.len() - 1]);
         let pad = |a: f64, b: f64| {
@@ -237,7 +244,12 @@ impl MapFrame {
         let (ya, yb) = pad(y0, y1);
         // Room above the data for the legend, so it hides no run.
         let yb = yb + 0.22 * (yb - ya);
-        let (zmin, zmax) = field.range().unwrap_or((0.0, 1.0));
+        let whole = field.range().unwrap_or((0.0, 1.0));
+        let (zmin, zmax) = if bulk {
+            bulk_range(field).unwrap_or(whole)
+        } else {
+            whole
+        };
         let zspan = if zmax > zmin { zmax - zmin } else { 1.0 };
         MapFrame {
             x: (xa, xb),
@@ -245,13 +257,40 @@ impl MapFrame {
             zmin,
             zmax,
             zspan,
+            saturated: ((zmin, zmax) != whole).then_some(whole),
         }
     }
 
-    /// A value's place on the colour map: 0 at the smallest, 1 at the largest.
+    /// A value's place on the colour map: 0 at the smallest, 1 at the largest (values beyond
+    /// the colours' range saturate).
     fn norm(&self, z: f64) -> f64 {
-        (z - self.zmin) / self.zspan
+        ((z - self.zmin) / self.zspan).clamp(0.0, 1.0)
     }
+}
+
+/// The field's bulk: the median within 3 median absolute deviations, inside the field's range
+/// (None when the deviation is zero).
+fn bulk_range(field: &Field) -> Option<(f64, f64)> {
+    let (lo, hi) = field.range()?;
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        }
+    };
+    let values: Vec<f64> = field
+        .z
+        .iter()
+        .flatten()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    let m = median(values.clone());
+    let mad = median(values.iter().map(|v| (v - m).abs()).collect());
+    (mad > 0.0).then(|| (lo.max(m - 3.0 * mad), hi.min(m + 3.0 * mad)))
 }
 
 /// The field in drawn coordinates (log10 on a log axis).
@@ -276,7 +315,7 @@ where
 {
     root.fill(&WHITE)?;
     let field = drawn_field(p);
-    let frame = MapFrame::of(&field);
+    let frame = MapFrame::of(&field, p.bulk_colours);
     let (main, bar) = root.split_horizontally(root.dim_in_pixel().0 - 150);
     let mut chart = map_axes(&main, p, &frame)?;
     fill_field(&mut chart, &field, &frame, max_tiles)?;
@@ -585,6 +624,21 @@ where
         (left, top - 30),
         font(16),
     ))?;
+    if let Some((lo, hi)) = frame.saturated {
+        for (k, line) in [
+            "colours saturate;".to_string(),
+            format!("values {} to {}", tick(lo, false), tick(hi, false)),
+        ]
+        .iter()
+        .enumerate()
+        {
+            bar.draw(&Text::new(
+                line.clone(),
+                (left - 10, bottom + 14 + 18 * k as i32),
+                text_style(13.0),
+            ))?;
+        }
+    }
     Ok(())
 }
 
@@ -659,6 +713,33 @@ mod tests {
     }
 
     #[test]
+    fn the_bulk_of_a_field_leaves_its_outliers_out() {
+        // Sixteen values near 1.5-1.9 and four far above: the colours cover the sixteen.
+        let mut z: Vec<Vec<f64>> = (0..4)
+            .map(|r| (0..5).map(|c| 1.4 + 0.1 * (r + c) as f64).collect())
+            .collect();
+        for row in z.iter_mut() {
+            row[4] = 11.0;
+        }
+        let field = Field::new(
+            (0..5).map(f64::from).collect(),
+            (0..4).map(f64::from).collect(),
+            z,
+        )
+        .expect("field");
+        let (lo, hi) = bulk_range(&field).expect("a spread");
+        assert_eq!(lo, 1.4);
+        assert!(hi > 1.9 && hi < 3.0, "{hi}");
+        let frame = MapFrame::of(&field, true);
+        assert_eq!(frame.saturated, Some((1.4, 11.0)));
+        assert_eq!(frame.norm(11.0), 1.0);
+        // Without it, or on a field without outliers, the colours cover the whole range.
+        assert_eq!(MapFrame::of(&field, false).saturated, None);
+        let flat = Field::new(vec![0.0, 1.0], vec![0.0, 1.0], vec![vec![1.0; 2]; 2]).expect("f");
+        assert_eq!(MapFrame::of(&flat, true).saturated, None);
+    }
+
+    #[test]
     fn writes_png_and_svg() {
         let field = Field::new(
             vec![0.01, 0.1, 1.0],
@@ -690,6 +771,7 @@ mod tests {
                 cross: true,
             }],
             region: Some(((0.03, 1.5e6), (0.2, 4e6), "confidence region".into())),
+            bulk_colours: false,
         };
         let dir = std::env::temp_dir().join(format!("hvi-plot-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("dir");
@@ -735,6 +817,7 @@ mod tests {
             samples: None,
             markers: vec![],
             region: None,
+            bulk_colours: false,
         };
         let dir = std::env::temp_dir().join(format!("hvi-plot-fine-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("dir");

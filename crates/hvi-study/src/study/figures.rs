@@ -180,6 +180,7 @@ impl<'a> MapFrame<'a> {
             samples: None,
             markers: self.markers.clone(),
             region: self.region.clone(),
+            bulk_colours: false,
         }
     }
 
@@ -199,6 +200,13 @@ impl<'a> MapFrame<'a> {
                 "over the study's grid".to_string(),
             ),
         })
+    }
+
+    /// Whether the calibration moved its box: its maps of R and va/v0 then reach points far
+    /// from the answer (a decade beyond the grid), whose values would flatten the colours of
+    /// the rest, so those maps colour the bulk of their values only.
+    fn moved(&self) -> bool {
+        self.result.boxes.len() > 1
     }
 
     /// The weighted target of an observable, if the calibration scores one.
@@ -353,6 +361,7 @@ fn length_ratio_map(f: &MapFrame) -> Result<ContourPlot> {
             f.tier
         ),
         highlight: target.map(|t| (t.value, format!("experiment R = {}", t.value))),
+        bulk_colours: f.moved(),
         ..f.plot(field, "R")
     })
 }
@@ -383,6 +392,7 @@ fn front_velocity_map(f: &MapFrame) -> Result<ContourPlot> {
             ),
         },
         highlight: target.map(|t| (t.value, format!("experiment va/v0 = {}", t.value))),
+        bulk_colours: f.moved(),
         ..f.plot(field, "va/v0")
     })
 }

@@ -271,6 +271,7 @@ fn map_plot(
         extra_points: Vec::new(),
         samples: None,
         region: None,
+        bulk_colours: false,
         markers: Vec::new(),
     }
 }
