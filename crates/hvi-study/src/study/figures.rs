@@ -289,11 +289,10 @@ fn seeds_text(seeds: &[u64]) -> String {
 
 /// An observable's seed means over every box the calibration searched, when it moved the
 /// box: the `grid-seeds` and `extend-*` evaluations (the grid and each extension's new grid
-/// points, all at the search's seeds), at the best grid point's values of any other axis. The
-/// mean is the evaluation's own, or, in a calibration.json written before evaluations kept
-/// every mean, its scored term's. None when the box never moved or no point measured it.
+/// points, all at the search's seeds), at the best grid point's values of any other axis.
+/// None when the box never moved or no point measured it.
 fn searched_lattice_field(f: &MapFrame, observable: Observable) -> Option<(Field, Vec<u64>)> {
-    if f.result.boxes.len() < 2 {
+    if !f.moved() {
         return None;
     }
     let (kx, ky) = (&f.plan.axes[f.axes.0].key, &f.plan.axes[f.axes.1].key);
@@ -309,14 +308,7 @@ fn searched_lattice_field(f: &MapFrame, observable: Observable) -> Option<(Field
         .iter()
         .filter(|e| e.stage == "grid-seeds" || e.stage.starts_with("extend-"))
         .filter(|e| on_slice(e))
-        .filter_map(|e| {
-            let value = e.mean(observable).or_else(|| {
-                let term = f.target_of(observable)?;
-                let scored = e.score.as_ref()?.terms.iter().find(|t| t.name == term.name);
-                scored?.observed
-            })?;
-            Some((*e.params.get(kx)?, *e.params.get(ky)?, value))
-        })
+        .filter_map(|e| Some((*e.params.get(kx)?, *e.params.get(ky)?, e.mean(observable)?)))
         .collect();
     if points.is_empty() {
         return None;
