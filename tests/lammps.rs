@@ -98,16 +98,7 @@ fn an_exported_scene_runs_in_lammps_unedited_and_agrees_with_hvi() {
         return;
     };
     // Unedited, from another directory.
-    let o = Command::new(lmp)
-        .current_dir(&dir)
-        .arg("-in")
-        .arg(lmp_dir.join("in.lmp"))
-        .args(["-screen", "none", "-log"])
-        .arg(dir.join("log.lammps"))
-        .output()
-        .expect("lmp runs");
-    let log = std::fs::read_to_string(dir.join("log.lammps")).unwrap_or_default();
-    assert!(o.status.success(), "{log}");
+    let log = run_lmp(lmp, &dir, &lmp_dir.join("in.lmp"), "log.lammps");
     let fin: std::collections::HashMap<&str, f64> = log
         .lines()
         .find_map(|l| l.strip_prefix("HVI_FINAL "))
@@ -149,6 +140,22 @@ fn lammps_with_bpm() -> Option<String> {
 }
 
 /// The thermo rows of a LAMMPS log, by column name.
+/// Runs `lmp -in INPUT` unedited from `dir` (another directory than the input's), quietly,
+/// logging to `dir/LOG`; asserts it succeeded and returns the log.
+fn run_lmp(lmp: &str, dir: &Path, input: &Path, log: &str) -> String {
+    let o = Command::new(lmp)
+        .current_dir(dir)
+        .arg("-in")
+        .arg(input)
+        .args(["-screen", "none", "-log"])
+        .arg(dir.join(log))
+        .output()
+        .expect("lmp runs");
+    let log = std::fs::read_to_string(dir.join(log)).unwrap_or_default();
+    assert!(o.status.success(), "{log}");
+    log
+}
+
 fn thermo_rows(log: &str) -> Vec<std::collections::HashMap<String, f64>> {
     let lines: Vec<&str> = log.lines().collect();
     let Some(h) = lines
@@ -193,16 +200,7 @@ fn the_bpm_export_runs_in_a_lammps_with_bpm_and_closes_its_own_ledger() {
         input.contains("model_bpm.lmp") && !input.contains("bond.table"),
         "{input}"
     );
-    let o = Command::new(&lmp)
-        .current_dir(&dir)
-        .arg("-in")
-        .arg(lmp_dir.join("in_bpm.lmp"))
-        .args(["-screen", "none", "-log"])
-        .arg(dir.join("log.bpm"))
-        .output()
-        .expect("lmp runs");
-    let log = std::fs::read_to_string(dir.join("log.bpm")).unwrap_or_default();
-    assert!(o.status.success(), "{log}");
+    let log = run_lmp(&lmp, &dir, &lmp_dir.join("in_bpm.lmp"), "log.bpm");
     let rows = thermo_rows(&log);
     let (first, last) = (
         rows.first().expect("thermo rows"),

@@ -40,22 +40,17 @@ impl Field {
         Some(Field { x, y, z })
     }
 
+    /// Every finite value, row by row.
+    pub fn finite_values(&self) -> impl Iterator<Item = f64> + '_ {
+        self.z.iter().flatten().copied().filter(|v| v.is_finite())
+    }
+
     /// The smallest and largest finite value.
     pub fn range(&self) -> Option<(f64, f64)> {
-        let v: Vec<f64> = self
-            .z
-            .iter()
-            .flatten()
-            .copied()
-            .filter(|v| v.is_finite())
-            .collect();
-        if v.is_empty() {
-            return None;
-        }
-        Some((
-            v.iter().copied().fold(f64::INFINITY, f64::min),
-            v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-        ))
+        self.finite_values().fold(None, |r, v| match r {
+            None => Some((v, v)),
+            Some((lo, hi)) => Some((f64::min(lo, v), f64::max(hi, v))),
+        })
     }
 
     fn locate(c: &[f64], v: f64) -> Option<(usize, f64)> {

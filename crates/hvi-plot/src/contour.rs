@@ -281,13 +281,7 @@ fn bulk_range(field: &Field) -> Option<(f64, f64)> {
             0.5 * (v[n / 2 - 1] + v[n / 2])
         }
     };
-    let values: Vec<f64> = field
-        .z
-        .iter()
-        .flatten()
-        .copied()
-        .filter(|v| v.is_finite())
-        .collect();
+    let values: Vec<f64> = field.finite_values().collect();
     let m = median(values.clone());
     let mad = median(values.iter().map(|v| (v - m).abs()).collect());
     (mad > 0.0).then(|| (lo.max(m - 3.0 * mad), hi.min(m + 3.0 * mad)))
