@@ -431,3 +431,164 @@ fn settings_that_need_new_runs_and_bad_values_are_refused_by_name() {
     assert!(stderr(&o).contains("no plan.json"), "{}", stderr(&o));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `sweep` of the two-run study into `out` with `sets` as `--set` overrides; its output.
+fn sweep_with(study: &Path, out: &Path, sets: &[&str]) -> Output {
+    let mut cmd = bin();
+    cmd.arg("sweep")
+        .arg(study)
+        .arg("--out")
+        .arg(out)
+        .args(["--threads", "2"]);
+    for s in sets {
+        cmd.args(["--set", s]);
+    }
+    cmd.output().expect("runs")
+}
+
+/// The records of a study's store, by run directory.
+fn store_records(out: &Path) -> Vec<(PathBuf, hvi_run::store::Record)> {
+    let mut v: Vec<(PathBuf, hvi_run::store::Record)> = std::fs::read_dir(out.join("runs"))
+        .expect("runs")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.join("record.json").is_file())
+        .map(|p| {
+            let text = std::fs::read_to_string(p.join("record.json")).expect("record");
+            (p, serde_json::from_str(&text).expect("a record"))
+        })
+        .collect();
+    v.sort_by(|a, b| a.0.cmp(&b.0));
+    v
+}
+
+#[test]
+fn a_run_that_differs_only_in_its_measurement_is_measured_from_a_kept_state() {
+    let dir = scratch("measured");
+    let study = write_study(&dir);
+    let out = dir.join("out");
+    let o = sweep_with(&study, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let simulated = store_records(&out);
+    assert_eq!(simulated.len(), 2);
+    assert!(simulated.iter().all(|(_, r)| r.measured_from.is_none()));
+
+    // (a) Another width and quantile: both runs measured from the kept states, none simulated,
+    // each naming its source; the numbers are a re-analysis's, bit for bit.
+    let sets = ["analysis.width=cylindrical", "analysis.quantile=0.95"];
+    let o = sweep_with(&study, &out, &sets);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("2 to run, 2 of them measured from kept states"),
+        "{err}"
+    );
+    assert!(err.contains("measured from the state of run"), "{err}");
+    assert!(
+        err.contains("0 ran, 2 measured from kept states, 0 failed"),
+        "{err}"
+    );
+    let all = store_records(&out);
+    assert_eq!(all.len(), 4);
+    let changes = AnalysisChanges::parse(&sets.map(String::from)).expect("valid");
+    let mut measured = Vec::new();
+    for (run_dir, rec) in &all {
+        let Some(source) = &rec.measured_from else {
+            continue;
+        };
+        let (src_dir, _) = simulated
+            .iter()
+            .find(|(_, s)| &s.fingerprint == source)
+            .expect("the source is a simulated run of the store");
+        let again = reanalyse_run(src_dir, &changes)
+            .expect("reads")
+            .expect("has state");
+        assert_eq!(rec.observables, again.summary.observables());
+        let summary = read_summary(run_dir).expect("summary");
+        assert_eq!(summary.measured_from.as_deref(), Some(source.as_str()));
+        assert_eq!(summary.scene.analysis.width, Width::Cylindrical);
+        assert_eq!(summary.scene.analysis.quantile, 0.95);
+        // The simulation's files are the source's; the measurement's are drawn anew; a track
+        // read with the other width is not the run's, so it has none.
+        for f in ["energy.csv", STATE_FILE] {
+            assert_eq!(
+                std::fs::read(run_dir.join(f)).expect("taken over"),
+                std::fs::read(src_dir.join(f)).expect("source"),
+                "{f}"
+            );
+        }
+        for f in [
+            "fragments.csv",
+            "craters.csv",
+            "cloud_side.png",
+            "fragments.png",
+        ] {
+            assert!(run_dir.join(f).is_file(), "{f} drawn anew");
+        }
+        assert!(!run_dir.join("cloud_track.csv").exists());
+        assert!(!run_dir.join("cloud_track.png").exists());
+        measured.push((run_dir.clone(), summary));
+    }
+    assert_eq!(measured.len(), 2, "both runs measured");
+
+    // (b) What a fresh simulation with those settings gives, in a store of its own.
+    let fresh_out = dir.join("fresh");
+    let o = sweep_with(&study, &fresh_out, &sets);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("2 ran, 0 failed"), "{}", stderr(&o));
+    let fresh = store_records(&fresh_out);
+    for (_, summary) in &measured {
+        let (_, want) = fresh
+            .iter()
+            .find(|(d, _)| {
+                read_summary(d).expect("summary").scene.material.eps_j
+                    == summary.scene.material.eps_j
+            })
+            .expect("the fresh run of the same eps");
+        assert_same_observables(&summary.observables(), &want.observables);
+    }
+
+    // (c) Running it again measures nothing; another camera keeps the track, which reads the
+    // same (quantile and width unchanged).
+    let o = sweep_with(&study, &out, &sets);
+    assert!(
+        stderr(&o).contains("2 cached, 0 ran, 0 failed"),
+        "{}",
+        stderr(&o)
+    );
+    let o = sweep_with(&study, &out, &["analysis.shadowgraph_optical_depth=0.5"]);
+    assert!(
+        stderr(&o).contains("0 ran, 2 measured from kept states"),
+        "{}",
+        stderr(&o)
+    );
+    for (run_dir, rec) in store_records(&out) {
+        let summary = read_summary(&run_dir).expect("summary");
+        if summary.scene.analysis.shadowgraph_optical_depth != 0.5 {
+            continue;
+        }
+        let source = rec.measured_from.expect("measured");
+        let (src_dir, _) = simulated
+            .iter()
+            .find(|(_, s)| s.fingerprint == source)
+            .expect("a simulated source");
+        assert_eq!(
+            std::fs::read(run_dir.join("cloud_track.csv")).expect("track kept"),
+            std::fs::read(src_dir.join("cloud_track.csv")).expect("source track")
+        );
+    }
+
+    // (d) A source whose state no longer reads: its run is simulated, nothing is lost, the
+    // other is measured.
+    let (victim, _) = &simulated[0];
+    let bytes = std::fs::read(victim.join(STATE_FILE)).expect("state");
+    std::fs::write(victim.join(STATE_FILE), &bytes[..bytes.len() / 2]).expect("truncate");
+    let o = sweep_with(&study, &out, &["analysis.witness_standoff_m=0.05"]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("1 ran, 1 measured from kept states, 0 failed"),
+        "{err}"
+    );
+    assert!(err.contains("simulating it"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -57,6 +57,9 @@ pub struct ExecReport {
     pub records: Vec<Record>,
     /// Runs simulated now.
     pub ran: usize,
+    /// Runs measured now from another run's kept state instead of simulated
+    /// ([`crate::remeasured`]).
+    pub measured: usize,
     /// Runs found finished in the store.
     pub cached: usize,
     /// Runs another process finished while this one waited for them (not run here).
@@ -68,16 +71,22 @@ pub struct ExecReport {
 }
 
 impl ExecReport {
-    /// One line: `runs: 12 total, 4 cached, 8 ran, 1 failed, 93.2 s` (with `, 3 done by
-    /// another process` before the time when another process finished some meanwhile).
+    /// One line: `runs: 12 total, 4 cached, 8 ran, 1 failed, 93.2 s` (with `, 2 measured from
+    /// kept states` after the runs simulated when some were measured, and `, 3 done by another
+    /// process` before the time when another process finished some meanwhile).
     pub fn line(&self) -> String {
         let elsewhere = if self.elsewhere > 0 {
             format!(", {} done by another process", self.elsewhere)
         } else {
             String::new()
         };
+        let measured = if self.measured > 0 {
+            format!(", {} measured from kept states", self.measured)
+        } else {
+            String::new()
+        };
         format!(
-            "runs: {} total, {} cached, {} ran, {} failed{elsewhere}, {:.1} s",
+            "runs: {} total, {} cached, {} ran{measured}, {} failed{elsewhere}, {:.1} s",
             self.records.len(),
             self.cached,
             self.ran,
@@ -171,7 +180,13 @@ pub fn execute(
     let elsewhere_before = store.done_elsewhere();
     let (records, pending) = look_up(store, jobs)?;
     let cached = records.iter().filter(|r| r.is_some()).count();
-    let (phases, costs) = order_runs(jobs, &pending, opts);
+    // Runs measured from a kept state cost about a second, not a simulation.
+    let to_measure: Vec<usize> = pending
+        .iter()
+        .copied()
+        .filter(|&i| store.source_for(&jobs[i]).is_some())
+        .collect();
+    let (phases, costs) = order_runs(jobs, &pending, &to_measure, opts);
     let total_cost: f64 = costs.values().sum();
     // (cost run in this process, cost of the finished runs)
     let done_cost = std::sync::Mutex::new((0.0f64, 0.0f64));
@@ -185,7 +200,12 @@ pub fn execute(
         }
     };
     if opts.progress {
-        say(opening_line(jobs.len(), cached, pending.len(), &phases));
+        say(opening_line(
+            jobs.len(),
+            cached,
+            (pending.len(), to_measure.len()),
+            &phases,
+        ));
     }
     let done = AtomicUsize::new(0);
     let failed_now = AtomicUsize::new(0);
@@ -245,7 +265,11 @@ pub fn execute(
         b.finish_and_clear();
     }
     let elsewhere = store.done_elsewhere() - elsewhere_before;
-    let ran = results.len() - elsewhere;
+    let measured = results
+        .iter()
+        .filter(|(_, r)| matches!(r, Some(Ok(rec)) if rec.measured_from.is_some()))
+        .count();
+    let ran = results.len() - elsewhere - measured;
     let records = gather_records(store, jobs, records, results)?;
     let failed = records
         .iter()
@@ -254,6 +278,7 @@ pub fn execute(
     Ok(ExecReport {
         records,
         ran,
+        measured,
         cached,
         elsewhere,
         failed,
@@ -285,18 +310,25 @@ fn look_up(store: &Store, jobs: &[Job]) -> Result<(Vec<Option<Record>>, Vec<usiz
 }
 
 /// The phases of the `pending` jobs (indices into `jobs`): largest first, the dominant ones
-/// alone (see the module's doc). Costing builds each scene once, in parallel, which is cheap
-/// against the runs; a single run needs no order.
+/// alone (see the module's doc); those `to_measure` from a kept state cost nothing. Costing
+/// builds each scene once, in parallel, which is cheap against the runs; a single run needs no
+/// order.
 fn order_runs(
     jobs: &[Job],
     pending: &[usize],
+    to_measure: &[usize],
     opts: &ExecOptions,
 ) -> (Vec<Phase>, std::collections::HashMap<usize, f64>) {
     let costs: Vec<f64> = if pending.len() > 1 {
         pending
             .par_iter()
-            // A scene that does not build costs nothing here; its run fails with the reason.
-            .map(|&i| run_cost(&jobs[i].scene).map_or(0.0, |c| c.1))
+            .map(|&i| {
+                if to_measure.contains(&i) {
+                    return 0.0;
+                }
+                // A scene that does not build costs nothing here; its run fails with the reason.
+                run_cost(&jobs[i].scene).map_or(0.0, |c| c.1)
+            })
             .collect()
     } else {
         vec![0.0; pending.len()]
@@ -357,9 +389,16 @@ fn progress_bar(opts: &ExecOptions, pending: usize, cached: usize) -> Option<Pro
     Some(b)
 }
 
-/// The line that opens an execution: runs, cached, to run, and how they go over the threads,
-/// e.g. `12 runs: 4 cached, 8 to run (2 at once, 1 thread each)`.
-fn opening_line(jobs: usize, cached: usize, pending: usize, phases: &[Phase]) -> String {
+/// The line that opens an execution: runs, cached, to run (`pending.0`, of which `pending.1`
+/// are measured from kept states), and how they go over the threads, e.g. `12 runs: 4 cached,
+/// 8 to run (2 at once, 1 thread each)` or `12 runs: 4 cached, 8 to run, 3 of them measured
+/// from kept states (...)`.
+fn opening_line(
+    jobs: usize,
+    cached: usize,
+    (pending, measured): (usize, usize),
+    phases: &[Phase],
+) -> String {
     let solo: Vec<&Phase> = phases.iter().take_while(|p| p.at_once == 1).collect();
     let mut parts: Vec<String> = Vec::new();
     if phases.len() > 1 && !solo.is_empty() {
@@ -382,8 +421,13 @@ fn opening_line(jobs: usize, cached: usize, pending: usize, phases: &[Phase]) ->
             if p.per_run == 1 { "" } else { "s" }
         ));
     }
+    let measured = if measured > 0 {
+        format!(", {measured} of them measured from kept states")
+    } else {
+        String::new()
+    };
     format!(
-        "{} runs: {} cached, {} to run ({}{})",
+        "{} runs: {} cached, {} to run{measured} ({}{})",
         jobs,
         cached,
         pending,
@@ -413,8 +457,15 @@ fn finished_line(
         Ok(rec) if rec.status == RunStatus::Completed => {
             let o = &rec.observables;
             let f = |x: Option<f64>| x.map_or("n/a".into(), |v| format!("{v:.3}"));
+            let how = match &rec.measured_from {
+                Some(fp) => format!(
+                    "measured from the state of run {}",
+                    &fp[..crate::files::DIR_DIGITS.min(fp.len())]
+                ),
+                None => "completed".to_string(),
+            };
             format!(
-                "[{n}/{total}] run {} ({}): completed in {:.1} s; F = {}, R = {}, va/v0 = {}",
+                "[{n}/{total}] run {} ({}): {how} in {:.1} s; F = {}, R = {}, va/v0 = {}",
                 i,
                 describe(i),
                 rec.wall_seconds,

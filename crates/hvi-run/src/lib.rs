@@ -3,7 +3,8 @@
 //! Runs scenes and studies and keeps their results: scene files with `--set` overrides
 //! ([`scene_file`]), one run and its files ([`run`], [`output`]), the cloud's kept state for
 //! re-analysis ([`state`]), study files and their validated plans ([`spec`], [`plan`]), the
-//! run store that keeps each result once ([`store`]), checkpoints of runs in progress
+//! run store that keeps each result once ([`store`]) and measures a run from another's kept
+//! state where only the measurement differs ([`remeasured`]), checkpoints of runs in progress
 //! ([`checkpoint`]), parallel execution ([`exec`]) or as Slurm batches ([`runner`]), results tables ([`table`]), Slurm job
 //! arrays ([`slurm`]) and the engine benchmark ([`mod@bench`]). Every function returns
 //! [`error::Result`]: its [`error::RunError`] says what went wrong, and [`error::exit_code`]
@@ -47,6 +48,7 @@ pub mod lammps;
 pub mod lock;
 pub mod output;
 pub mod plan;
+pub mod remeasured;
 pub mod run;
 pub mod runner;
 pub mod scene_file;

@@ -81,9 +81,26 @@ pub struct PlanRequest {
 /// engine version, the tier and the full scene as run (which holds every parameter, the
 /// resolution and the seed). Two runs with the same fingerprint give the same result.
 pub fn fingerprint(scene: &SceneSpec, tier: &str) -> Result<String> {
+    digest(scene, tier, ENGINE_VERSION)
+}
+
+/// The fingerprint of what a run simulates: [`fingerprint`] of its scene with the analysis
+/// settings that only say how the cloud is measured at their defaults
+/// ([`hvi_engine::scene::Analysis::as_simulated`]), for a run of `engine_version`. Runs with
+/// the same key simulate the same thing and keep the same states; only their measurements
+/// differ (the store measures one from the other's kept state, [`crate::store`]).
+pub fn simulation_key(scene: &SceneSpec, tier: &str, engine_version: &str) -> Result<String> {
+    let mut simulated = scene.clone();
+    simulated.analysis = scene.analysis.as_simulated();
+    digest(&simulated, tier, engine_version)
+}
+
+/// SHA-256 (hex) of the canonical JSON of the format version, `engine_version`, the tier and
+/// the scene.
+fn digest(scene: &SceneSpec, tier: &str, engine_version: &str) -> Result<String> {
     let doc = serde_json::json!({
         "format": STUDY_FORMAT_VERSION,
-        "engine_version": ENGINE_VERSION,
+        "engine_version": engine_version,
         "tier": tier,
         "scene": serde_json::to_value(scene).context("scene as JSON")?,
     });
@@ -371,5 +388,56 @@ mod tests {
         let back: SceneSpec =
             serde_json::from_str(&serde_json::to_string(&a).expect("json")).expect("back");
         assert_eq!(fa, fingerprint(&back, "quick").expect("fp"));
+    }
+
+    #[test]
+    fn the_simulation_key_ignores_exactly_the_measurement_keys() {
+        use hvi_engine::scene::MEASUREMENT_KEYS;
+        let text = "[scene]\nkind = \"sphere_on_plate\"\ndiameter_m = 1e-2\nt_over_d = 0.4\nv0_m_s = 6000\n[resolution]\nparticles = 500\n[material]\n";
+        let key = |set: &[&str]| {
+            let set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
+            let scene = parse_scene(text, &set).expect("scene");
+            (
+                fingerprint(&scene, "quick").expect("fp"),
+                simulation_key(&scene, "quick", ENGINE_VERSION).expect("key"),
+            )
+        };
+        let (fp0, key0) = key(&[]);
+        // A value other than the default for every measurement key, and keep_state off: each
+        // is another run (fingerprint) of the same simulation (key).
+        let others = [
+            "analysis.quantile=0.95",
+            "analysis.width=cylindrical",
+            "analysis.shadowgraph_pixel_m=1e-3",
+            "analysis.shadowgraph_blur_m=1e-3",
+            "analysis.shadowgraph_grain_m=1e-3",
+            "analysis.shadowgraph_optical_depth=0.5",
+            "analysis.witness_standoff_m=0.05",
+            "analysis.keep_state=false",
+        ];
+        for (k, set) in MEASUREMENT_KEYS.iter().zip(&others) {
+            assert!(set.starts_with(&format!("{k}=")), "{k} has its case");
+        }
+        for set in others {
+            let (fp, key) = key(&[set]);
+            assert_ne!(fp, fp0, "{set}: another run");
+            assert_eq!(key, key0, "{set}: the same simulation");
+        }
+        assert_eq!(key(&others).1, key0, "all of them at once");
+        // What the run keeps or simulates differently is another simulation.
+        for set in [
+            "analysis.front_times_s=[1e-6, 2e-6]",
+            "analysis.track_every=50",
+            "material.eps_j=0.1",
+            "run.seed=7",
+        ] {
+            assert_ne!(key(&[set]).1, key0, "{set}: another simulation");
+        }
+        let scene = parse_scene(text, &[]).expect("scene");
+        assert_ne!(
+            key0,
+            simulation_key(&scene, "paper", ENGINE_VERSION).expect("key")
+        );
+        assert_ne!(key0, simulation_key(&scene, "quick", "0.0.1").expect("key"));
     }
 }

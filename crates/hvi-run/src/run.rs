@@ -216,6 +216,12 @@ pub struct TimingSummary {
     pub other_s: f64,
 }
 
+/// A run directory's `summary.json` ([`run_scene`]), if it has one this version reads.
+pub fn read_summary(run_dir: &Path) -> Option<Summary> {
+    let text = std::fs::read_to_string(run_dir.join("summary.json")).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
 /// `summary.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
@@ -287,6 +293,11 @@ pub struct Summary {
     pub cloud: Option<CloudReport>,
     /// The scene as run (after overrides).
     pub scene: SceneSpec,
+    /// The fingerprint of the stored run whose kept state this run's cloud was measured from,
+    /// when a study's store measured it rather than simulated it (`hvi_run::store`): every
+    /// number but the cloud's is that run's simulation. Absent for a simulated run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_from: Option<String>,
 }
 
 impl Summary {
@@ -1342,13 +1353,33 @@ fn write_tables(
         write_csv_atomic(&dir.join("cloud_track.csv"), track)?;
     }
     if let Some(c) = cloud {
-        write_csv_atomic(&dir.join("fragments.csv"), size_distribution(&c.fragments))?;
-        write_csv_atomic(&dir.join("craters.csv"), &c.craters)?;
+        write_cloud_tables(dir, c)?;
         if let Some(kept) = &c.kept {
             crate::state::write_state(&dir.join(crate::state::STATE_FILE), kept)?;
         }
     }
     Ok(t.elapsed())
+}
+
+/// The files of a run that its cloud's measurement writes (the fragment and crater tables and
+/// the pictures that show the measurement): what a run measured from another's kept state
+/// writes anew rather than takes over ([`crate::remeasured`]).
+pub const MEASURED_FILES: [&str; 5] = [
+    "fragments.csv",
+    "craters.csv",
+    "cloud_side.png",
+    "fragments.png",
+    "shadowgraph.png",
+];
+
+/// Writes the cloud's tables into `dir`: `fragments.csv` (the size distribution) and
+/// `craters.csv` (the witness plate).
+pub(crate) fn write_cloud_tables(dir: &Path, cloud: &CloudResult) -> Result<()> {
+    write_csv_atomic(
+        &dir.join("fragments.csv"),
+        size_distribution(&cloud.fragments),
+    )?;
+    write_csv_atomic(&dir.join("craters.csv"), &cloud.craters)
 }
 
 /// Draws the run's pictures of its `n` particles: the side view at the end, the 3-D series of
@@ -1365,41 +1396,11 @@ fn render_pictures(
     let t = Instant::now();
     let info = SceneInfo::new(spec, &sim.derived, n);
     let dir = &opts.out_dir;
-    let last = Frame::capture(sim);
-    render::side_view(
-        &dir.join("cloud_side.png"),
-        &last,
-        &info,
-        cloud.map(|c| &c.report.measurement),
-    )
-    .map_err(RunError::library)
-    .context("rendering cloud_side.png")?;
+    render_measured(dir, &info, &Frame::capture(sim), cloud)?;
     if !frames.is_empty() {
         render::series(&dir.join("cloud_series.png"), frames, &info)
             .map_err(RunError::library)
             .context("rendering cloud_series.png")?;
-    }
-    if let Some(c) = cloud {
-        render::fragment_histogram(
-            &dir.join("fragments.png"),
-            &c.fragments,
-            &c.report.measurement,
-            &info,
-        )
-        .map_err(RunError::library)
-        .context("rendering fragments.png")?;
-        if let (Some(image), Some(sil)) = (&c.shadowgraph, &c.report.silhouette) {
-            render::shadowgraph(
-                &dir.join("shadowgraph.png"),
-                image,
-                sil,
-                &info,
-                c.report.measurement.tau_s,
-                c.report.front_velocity_ratio,
-            )
-            .map_err(RunError::library)
-            .context("rendering shadowgraph.png")?;
-        }
     }
     if !track.is_empty() {
         render::track_plot(
@@ -1422,6 +1423,47 @@ fn render_pictures(
         );
     }
     Ok(took)
+}
+
+/// Draws the pictures that show the cloud's measurement into `dir`: the side view of `last`
+/// (the particles at the analysis time) with La and Lr, and with a measured cloud its fragment
+/// histogram and its shadowgraph.
+pub(crate) fn render_measured(
+    dir: &Path,
+    info: &SceneInfo,
+    last: &Frame,
+    cloud: Option<&CloudResult>,
+) -> Result<()> {
+    render::side_view(
+        &dir.join("cloud_side.png"),
+        last,
+        info,
+        cloud.map(|c| &c.report.measurement),
+    )
+    .map_err(RunError::library)
+    .context("rendering cloud_side.png")?;
+    let Some(c) = cloud else { return Ok(()) };
+    render::fragment_histogram(
+        &dir.join("fragments.png"),
+        &c.fragments,
+        &c.report.measurement,
+        info,
+    )
+    .map_err(RunError::library)
+    .context("rendering fragments.png")?;
+    if let (Some(image), Some(sil)) = (&c.shadowgraph, &c.report.silhouette) {
+        render::shadowgraph(
+            &dir.join("shadowgraph.png"),
+            image,
+            sil,
+            info,
+            c.report.measurement.tau_s,
+            c.report.front_velocity_ratio,
+        )
+        .map_err(RunError::library)
+        .context("rendering shadowgraph.png")?;
+    }
+    Ok(())
 }
 
 /// What the summary is assembled from besides the scene and the simulation.
@@ -1478,6 +1520,7 @@ fn summarise(spec: &SceneSpec, sim: &Simulation, counts: Counts, m: Measured) ->
         timing: m.timing,
         cloud: m.cloud,
         scene: spec.clone(),
+        measured_from: None,
     }
 }
 

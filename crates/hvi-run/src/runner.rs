@@ -148,9 +148,26 @@ impl SlurmBatches {
         } else {
             (0, finished)
         };
+        // The array's tasks measure runs from kept states as a local execution does: of the
+        // runs finished now, those measured (each once).
+        let measured = if job_id.is_some() {
+            let now: HashSet<&str> = jobs
+                .iter()
+                .zip(&records)
+                .filter(|(j, r)| {
+                    r.measured_from.is_some() && !done_before.contains(j.fingerprint.as_str())
+                })
+                .map(|(j, _)| j.fingerprint.as_str())
+                .collect();
+            now.len().min(ran)
+        } else {
+            0
+        };
+        let ran = ran - measured;
         Ok(ExecReport {
             records,
             ran,
+            measured,
             cached,
             elsewhere,
             failed,
@@ -221,6 +238,7 @@ fn no_result(job: &Job, queue: &QueueView) -> Record {
         wall_seconds: 0.0,
         threads: 0,
         engine_version: ENGINE_VERSION.to_string(),
+        measured_from: None,
         checksum: None,
     }
 }

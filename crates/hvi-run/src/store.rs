@@ -25,7 +25,17 @@
 //! [`Store::with_checkpoint_every`] and when a signal stops it): a run killed mid-way resumes
 //! from its last checkpoint in a new temporary directory and ends as it would have, and the
 //! checkpoint is removed once the run is stored.
+//!
+//! A run whose scene differs from a completed run's of the store only in how the cloud is
+//! measured ([`hvi_engine::scene::MEASUREMENT_KEYS`]: the quantile, the width, the camera, the
+//! witness plate) is measured from that run's kept state rather than simulated again
+//! ([`crate::remeasured`]); its record names the run it was measured from (`measured_from`).
+//! The runs that can serve so are those completed, with a kept state, when the store first
+//! looks for one ([`Store::source_for`]), so which runs are measured does not depend on the
+//! order in which the runs of one execution finish. A run that cannot be measured so (its
+//! source's state unreadable) is simulated.
 
+use std::collections::HashMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -54,12 +64,7 @@ pub enum RunStatus {
     Failed,
 }
 
-/// A run directory's `summary.json` ([`crate::run::run_scene`]), if it has one this version
-/// reads.
-pub fn read_summary(run_dir: &Path) -> Option<Summary> {
-    let text = fs::read_to_string(run_dir.join("summary.json")).ok()?;
-    serde_json::from_str(&text).ok()
-}
+pub use crate::run::read_summary;
 
 /// `record.json`: the last file of a run's directory, and the proof that it is complete.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -86,6 +91,10 @@ pub struct Record {
     pub threads: usize,
     /// hvi-study version that ran it.
     pub engine_version: String,
+    /// The fingerprint of the run whose kept state this one was measured from, when the store
+    /// measured it rather than simulated it (see the module's doc); absent for a simulated run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_from: Option<String>,
     /// SHA-256 (hex) of the record's canonical JSON without this field ([`Record::digest`]):
     /// a record changed on disk is caught, not used. Absent in records of earlier versions.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -150,6 +159,28 @@ pub struct Store {
     /// Per fingerprint, the share of a run (in base steps) done before this process resumed it
     /// from its checkpoint ([`Store::resumed_share`]).
     resumed: std::sync::Arc<std::sync::Mutex<std::collections::HashMap<String, f64>>>,
+    /// The completed runs with a kept state, by simulation key, as the store held them when
+    /// first asked ([`Store::source_for`]).
+    sources: std::sync::Arc<std::sync::OnceLock<HashMap<String, Vec<Candidate>>>>,
+}
+
+/// A run of the index of sources ([`Store::source_for`]).
+#[derive(Debug, Clone)]
+struct Candidate {
+    source: Source,
+    /// Its analysis settings.
+    analysis: hvi_engine::scene::Analysis,
+    /// Whether it was simulated (not itself measured from a kept state).
+    simulated: bool,
+}
+
+/// A completed run whose kept state can serve another run's measurement.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Source {
+    /// Its fingerprint.
+    pub fingerprint: String,
+    /// Its directory.
+    pub dir: PathBuf,
 }
 
 static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
@@ -226,6 +257,7 @@ impl Store {
             repair: true,
             elsewhere: Default::default(),
             resumed: Default::default(),
+            sources: Default::default(),
             checkpoint_every: crate::checkpoint::Every::default(),
         };
         store.sweep_stale()?;
@@ -256,6 +288,7 @@ impl Store {
             repair: false,
             elsewhere: Default::default(),
             resumed: Default::default(),
+            sources: Default::default(),
             checkpoint_every: crate::checkpoint::Every::default(),
         })
     }
@@ -425,6 +458,75 @@ impl Store {
         Ok(None)
     }
 
+    /// The completed run, with a kept state, that `job` can be measured from instead of
+    /// simulated (see the module's doc): one whose scene differs from the job's only in how
+    /// the cloud is measured. The candidates are the runs the store held when this was first
+    /// asked. Of several, a simulated one whose track reads as the job's would (the same
+    /// quantile and width, so the job keeps its track), else a simulated one, else any; each
+    /// time the first by directory name.
+    pub fn source_for(&self, job: &Job) -> Option<Source> {
+        let key = crate::plan::simulation_key(&job.scene, &job.tier, ENGINE_VERSION).ok()?;
+        let candidates = self
+            .sources
+            .get_or_init(|| self.index_sources())
+            .get(&key)?;
+        let rank = |c: &Candidate| match (
+            c.simulated,
+            c.analysis.same_track_reading(&job.scene.analysis),
+        ) {
+            (true, true) => 0,
+            (true, false) => 1,
+            (false, _) => 2,
+        };
+        candidates
+            .iter()
+            .filter(|c| c.source.fingerprint != job.fingerprint)
+            .min_by_key(|c| rank(c))
+            .map(|c| c.source.clone())
+    }
+
+    /// The store's completed runs with a kept state, by simulation key, each key's in the
+    /// order of their directories. A run whose record, summary or checksum does not read is
+    /// left out (it serves nothing, and is judged when a study asks for it).
+    fn index_sources(&self) -> HashMap<String, Vec<Candidate>> {
+        let mut index: HashMap<String, Vec<Candidate>> = HashMap::new();
+        for dir in self.run_dirs().unwrap_or_default() {
+            let Ok(text) = fs::read_to_string(dir.join("record.json")) else {
+                continue;
+            };
+            let Ok(rec) = serde_json::from_str::<Record>(&text) else {
+                continue;
+            };
+            let intact = match &rec.checksum {
+                Some(sum) => stored_digest(&text).is_ok_and(|d| d == *sum),
+                None => true,
+            };
+            if !intact
+                || rec.status != RunStatus::Completed
+                || !dir.join(crate::state::STATE_FILE).is_file()
+            {
+                continue;
+            }
+            let Some(summary) = read_summary(&dir) else {
+                continue;
+            };
+            let Ok(key) =
+                crate::plan::simulation_key(&summary.scene, &rec.tier, &rec.engine_version)
+            else {
+                continue;
+            };
+            index.entry(key).or_default().push(Candidate {
+                source: Source {
+                    fingerprint: rec.fingerprint,
+                    dir,
+                },
+                analysis: summary.scene.analysis,
+                simulated: rec.measured_from.is_none(),
+            });
+        }
+        index
+    }
+
     /// The share of the run with this fingerprint (in base steps, 0 to 1) that was done before
     /// this store resumed it from its checkpoint; 0 for a run computed from t = 0 or not here.
     pub fn resumed_share(&self, fingerprint: &str) -> f64 {
@@ -461,15 +563,42 @@ impl Store {
             fs::remove_dir_all(&tmp)?;
         }
         let params = serde_json::Value::Object(job.params.clone());
+        let source = self.source_for(job);
+        let from = source.as_ref().map_or(String::new(), |s| {
+            format!(
+                ", measured from the state of run {}",
+                &s.fingerprint[..DIR_DIGITS.min(s.fingerprint.len())]
+            )
+        });
         self.log(&format!(
-            "start {digits} on {} process {} with {threads} thread(s): {params}",
+            "start {digits} on {} process {} with {threads} thread(s){from}: {params}",
             host_name(),
             std::process::id()
         ));
         let t0 = Instant::now();
-        let outcome = self.execute_in(job, threads, &tmp);
+        let outcome = match &source {
+            Some(source) => self.measure_in(job, source, &tmp).or_else(|e| {
+                // Nothing is lost: the run is simulated instead.
+                log::warn!(
+                    "run store: run {digits} could not be measured from {}'s kept state \
+                     ({e:#}); simulating it",
+                    source.dir.display()
+                );
+                self.log(&format!(
+                    "measuring {digits} failed ({e:#}); simulating it instead"
+                ));
+                if tmp.exists() {
+                    fs::remove_dir_all(&tmp)?;
+                }
+                self.execute_in(job, threads, &tmp)
+            }),
+            None => self.execute_in(job, threads, &tmp),
+        };
         let wall = t0.elapsed().as_secs_f64();
         self.log(&match &outcome {
+            Ok(r) if r.status == RunStatus::Completed && r.measured_from.is_some() => {
+                format!("end {digits}: measured in {wall:.1} s")
+            }
             Ok(r) if r.status == RunStatus::Completed => {
                 format!("end {digits}: completed in {wall:.1} s")
             }
@@ -612,15 +741,46 @@ impl Store {
             wall_seconds: t0.elapsed().as_secs_f64(),
             threads: threads.max(1),
             engine_version: ENGINE_VERSION.to_string(),
+            measured_from: None,
             checksum: None,
-        }
-        .sealed()?;
+        };
+        self.seal_and_install(record, &tmp)
+    }
+
+    /// Measures `job` from the kept state of `source` ([`crate::remeasured`]) in the temporary
+    /// directory `tmp` and moves it into place with its record.
+    fn measure_in(&self, job: &Job, source: &Source, tmp: &Path) -> Result<Record> {
+        let t0 = Instant::now();
+        let summary =
+            crate::remeasured::measure_from(&source.dir, &source.fingerprint, &job.scene, tmp)?;
+        let record = Record {
+            format: STUDY_FORMAT_VERSION,
+            fingerprint: job.fingerprint.clone(),
+            study: job.study.clone(),
+            tier: job.tier.clone(),
+            params: job.params.clone(),
+            status: RunStatus::Completed,
+            error: None,
+            observables: summary.observables(),
+            wall_seconds: t0.elapsed().as_secs_f64(),
+            threads: 1,
+            engine_version: ENGINE_VERSION.to_string(),
+            measured_from: Some(source.fingerprint.clone()),
+            checksum: None,
+        };
+        self.seal_and_install(record, tmp)
+    }
+
+    /// Seals `record`, writes it last into the run's temporary directory `tmp` and moves the
+    /// directory into place.
+    fn seal_and_install(&self, record: Record, tmp: &Path) -> Result<Record> {
+        let record = record.sealed()?;
         write_atomic_bytes(
             &tmp.join("record.json"),
             serde_json::to_string_pretty(&record)?.as_bytes(),
         )?;
-        sync_dir(&tmp);
-        self.install(&tmp, &job.fingerprint)?;
+        sync_dir(tmp);
+        self.install(tmp, &record.fingerprint)?;
         Ok(record)
     }
 
@@ -703,6 +863,7 @@ mod tests {
             wall_seconds: 1.0,
             threads: 1,
             engine_version: "0.6.0".into(),
+            measured_from: None,
             checksum: None,
         };
         // As an earlier version wrote it: without an observable this version added, sealed

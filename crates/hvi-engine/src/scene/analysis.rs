@@ -172,7 +172,49 @@ impl Default for Analysis {
     }
 }
 
+/// The `[analysis]` keys that only say how the cloud is measured from the states a run keeps
+/// (`analysis.keep_state`): the quantile, the width, the camera and the witness plate. They
+/// change neither the simulation nor when it is observed, so a re-analysis may change them
+/// (`hvi-study reanalyse`), and a run that differs from a stored one only in them is measured
+/// from that run's kept state instead of simulated again (docs/studies.md, "Runs measured from
+/// a kept state"). The other keys (the front times, the track, the pictures) are fixed by what
+/// the run kept.
+pub const MEASUREMENT_KEYS: [&str; 7] = [
+    "analysis.quantile",
+    "analysis.width",
+    "analysis.shadowgraph_pixel_m",
+    "analysis.shadowgraph_blur_m",
+    "analysis.shadowgraph_grain_m",
+    "analysis.shadowgraph_optical_depth",
+    "analysis.witness_standoff_m",
+];
+
 impl Analysis {
+    /// These settings with every [`MEASUREMENT_KEYS`] key at its default and the state kept:
+    /// what decides the simulation and the states it keeps. Two runs whose scenes differ only
+    /// in the measurement keys (and in `keep_state`) have equal `as_simulated` settings.
+    pub fn as_simulated(&self) -> Analysis {
+        let d = Analysis::default();
+        Analysis {
+            quantile: d.quantile,
+            width: d.width,
+            shadowgraph_pixel_m: d.shadowgraph_pixel_m,
+            shadowgraph_blur_m: d.shadowgraph_blur_m,
+            shadowgraph_grain_m: d.shadowgraph_grain_m,
+            shadowgraph_optical_depth: d.shadowgraph_optical_depth,
+            witness_standoff_m: d.witness_standoff_m,
+            keep_state: true,
+            ..self.clone()
+        }
+    }
+
+    /// Whether the cloud's track (`cloud_track.csv`: the front, La and Lr over time, measured
+    /// during the run) reads the same under these settings as under `other`: the same quantile
+    /// and width.
+    pub fn same_track_reading(&self, other: &Analysis) -> bool {
+        self.quantile == other.quantile && self.width == other.width
+    }
+
     /// The two front times for va, s since first contact, for a run that ends at `end_time_s`:
     /// the given ones, or the experiment's (28, 32) us when the run reaches 32 us, or else
     /// (7/8 T, T) with T the end time (the same ratio, so a short run still measures a speed).

@@ -21,7 +21,7 @@ mod spec;
 mod time_step;
 mod validate;
 
-pub use analysis::{Analysis, Width, DEFAULT_FRONT_TIMES_S, DEFAULT_QUANTILE};
+pub use analysis::{Analysis, Width, DEFAULT_FRONT_TIMES_S, DEFAULT_QUANTILE, MEASUREMENT_KEYS};
 pub use build::{Derived, Setup};
 pub use spec::{
     Geometry, Material, Resolution, RunSettings, SceneSpec, SizingRule, TimeStep,

@@ -45,6 +45,20 @@ impl Frame {
         }
     }
 
+    /// The particles of a kept cloud state (`state.bin`: the analysis time or a front time),
+    /// in id order.
+    pub fn of_state(state: &hvi_engine::cloud::CloudState) -> Frame {
+        Frame {
+            tau_s: state.tau_s,
+            pos: state
+                .pos
+                .iter()
+                .map(|x| [x.x as f32, x.y as f32, x.z as f32])
+                .collect(),
+            impactor: state.body.iter().map(|b| *b == Body::Impactor).collect(),
+        }
+    }
+
     pub(super) fn point(&self, i: usize) -> DVec3 {
         let [x, y, z] = self.pos[i];
         DVec3::new(x as f64, y as f64, z as f64)

@@ -361,6 +361,7 @@ fn missing_record(plan: &Plan, i: usize) -> Record {
         wall_seconds: f64::NAN,
         threads: 0,
         engine_version: plan.engine_version.clone(),
+        measured_from: None,
         checksum: None,
     }
 }

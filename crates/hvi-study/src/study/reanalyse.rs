@@ -11,22 +11,13 @@ use hvi_engine::cloud::{remeasure, CloudResult};
 use hvi_engine::scene::{Analysis, Width};
 use hvi_run::plan::{describe_values, Plan};
 use hvi_run::run::Summary;
-use hvi_run::state::{read_state, STATE_FILE};
 use hvi_run::store::{read_summary, Record, RunStatus, Store};
 use hvi_run::table::{num, result_columns, ResultRow, Table};
 use serde_json::Value;
 
-/// The `[analysis]` keys a re-analysis may change; the others (the front times, the track,
-/// the pictures) are fixed by what the run kept.
-pub const CHANGEABLE_KEYS: [&str; 7] = [
-    "analysis.quantile",
-    "analysis.width",
-    "analysis.shadowgraph_pixel_m",
-    "analysis.shadowgraph_blur_m",
-    "analysis.shadowgraph_grain_m",
-    "analysis.shadowgraph_optical_depth",
-    "analysis.witness_standoff_m",
-];
+/// The `[analysis]` keys a re-analysis may change ([`hvi_engine::scene::MEASUREMENT_KEYS`]);
+/// the others (the front times, the track, the pictures) are fixed by what the run kept.
+pub use hvi_engine::scene::MEASUREMENT_KEYS as CHANGEABLE_KEYS;
 
 /// The analysis settings a re-analysis changes (`--set analysis.KEY=VALUE`); the rest stays
 /// each run's own.
@@ -142,24 +133,9 @@ pub struct Reanalysis {
 /// settings changed by `changes`; `Ok(None)` when the run kept no state. Errors (an unreadable
 /// summary or state file) name the file.
 pub fn reanalyse_run(dir: &Path, changes: &AnalysisChanges) -> Result<Option<Reanalysis>> {
-    let mut summary = read_summary(dir).ok_or_else(|| {
-        anyhow!(
-            "{}: no summary.json this version reads",
-            dir.join("summary.json").display()
-        )
-    })?;
-    let path = dir.join(STATE_FILE);
-    let Some(kept) = read_state(&path)? else {
+    let Some((mut summary, kept)) = hvi_run::remeasured::read_kept(dir)? else {
         return Ok(None);
     };
-    if kept.end.len() != summary.particles {
-        bail!(
-            "state file {}: {} particles, but the run's summary.json has {}",
-            path.display(),
-            kept.end.len(),
-            summary.particles
-        );
-    }
     let analysis = changes
         .apply(&summary.scene.analysis, summary.scene.run.end_time_s)
         .with_context(|| format!("the run in {}", dir.display()))?;
