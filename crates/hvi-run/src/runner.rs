@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use crate::error::{Result, RunError};
 use crate::exec::{execute, ExecOptions, ExecReport};
-use crate::plan::{run_dir_name, Plan, PlannedRun, ENGINE_VERSION, STUDY_FORMAT_VERSION};
+use crate::plan::{run_dir_name, Plan, PlannedRun, STUDY_FORMAT_VERSION};
 use crate::slurm::{submit_batch, QueueView, SlurmOptions, TaskState};
 use crate::spec::Axis;
 use crate::store::{Job, Record, RunStatus, Store};
@@ -226,21 +226,8 @@ fn no_result(job: &Job, queue: &QueueView) -> Record {
         ),
         None => "it has no result and Slurm is not running it".to_string(),
     };
-    Record {
-        format: STUDY_FORMAT_VERSION,
-        fingerprint: job.fingerprint.clone(),
-        study: job.study.clone(),
-        tier: job.tier.clone(),
-        params: job.params.clone(),
-        status: RunStatus::Failed,
-        error: Some(why),
-        observables: Default::default(),
-        wall_seconds: 0.0,
-        threads: 0,
-        engine_version: ENGINE_VERSION.to_string(),
-        measured_from: None,
-        checksum: None,
-    }
+    // Not run here: no time, no threads.
+    Record::of(job, Some(why), Default::default(), 0.0, 0)
 }
 
 /// A plan of these jobs (each run once, in order): the study's `template` with the jobs'
@@ -298,6 +285,7 @@ pub fn batch_plan(template: &Plan, jobs: &[Job]) -> Plan {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::ENGINE_VERSION;
 
     fn job(fp: &str, params: serde_json::Value) -> Job {
         let scene = crate::scene_file::parse_scene(

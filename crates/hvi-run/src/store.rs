@@ -124,6 +124,36 @@ impl Record {
         Ok(digest.iter().map(|b| format!("{b:02x}")).collect())
     }
 
+    /// The unsealed record of `job` computed here now: completed, or failed with `error`, in
+    /// `wall_seconds` on `threads` threads.
+    pub(crate) fn of(
+        job: &Job,
+        error: Option<String>,
+        observables: Observables,
+        wall_seconds: f64,
+        threads: usize,
+    ) -> Record {
+        Record {
+            format: STUDY_FORMAT_VERSION,
+            fingerprint: job.fingerprint.clone(),
+            study: job.study.clone(),
+            tier: job.tier.clone(),
+            params: job.params.clone(),
+            status: if error.is_none() {
+                RunStatus::Completed
+            } else {
+                RunStatus::Failed
+            },
+            error,
+            observables,
+            wall_seconds,
+            threads,
+            engine_version: ENGINE_VERSION.to_string(),
+            measured_from: None,
+            checksum: None,
+        }
+    }
+
     /// The record with its checksum set.
     pub fn sealed(mut self) -> Result<Record> {
         self.checksum = Some(self.digest()?);
@@ -725,25 +755,13 @@ impl Store {
             .as_ref()
             .map(Summary::observables)
             .unwrap_or_default();
-        let record = Record {
-            format: STUDY_FORMAT_VERSION,
-            fingerprint: job.fingerprint.clone(),
-            study: job.study.clone(),
-            tier: job.tier.clone(),
-            params: job.params.clone(),
-            status: if error.is_none() {
-                RunStatus::Completed
-            } else {
-                RunStatus::Failed
-            },
+        let record = Record::of(
+            job,
             error,
             observables,
-            wall_seconds: t0.elapsed().as_secs_f64(),
-            threads: threads.max(1),
-            engine_version: ENGINE_VERSION.to_string(),
-            measured_from: None,
-            checksum: None,
-        };
+            t0.elapsed().as_secs_f64(),
+            threads.max(1),
+        );
         self.seal_and_install(record, &tmp)
     }
 
@@ -754,19 +772,14 @@ impl Store {
         let summary =
             crate::remeasured::measure_from(&source.dir, &source.fingerprint, &job.scene, tmp)?;
         let record = Record {
-            format: STUDY_FORMAT_VERSION,
-            fingerprint: job.fingerprint.clone(),
-            study: job.study.clone(),
-            tier: job.tier.clone(),
-            params: job.params.clone(),
-            status: RunStatus::Completed,
-            error: None,
-            observables: summary.observables(),
-            wall_seconds: t0.elapsed().as_secs_f64(),
-            threads: 1,
-            engine_version: ENGINE_VERSION.to_string(),
             measured_from: Some(source.fingerprint.clone()),
-            checksum: None,
+            ..Record::of(
+                job,
+                None,
+                summary.observables(),
+                t0.elapsed().as_secs_f64(),
+                1,
+            )
         };
         self.seal_and_install(record, tmp)
     }

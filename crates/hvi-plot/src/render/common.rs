@@ -33,29 +33,24 @@ impl Frame {
     /// The simulation's particles now.
     pub fn capture(sim: &Simulation) -> Frame {
         let full = sim.full_particles();
-        let p = &*full;
-        Frame {
-            tau_s: sim.tau_s(),
-            pos: p
-                .pos
-                .iter()
-                .map(|x| [x.x as f32, x.y as f32, x.z as f32])
-                .collect(),
-            impactor: p.body.iter().map(|b| *b == Body::Impactor).collect(),
-        }
+        Frame::of(sim.tau_s(), &full.pos, &full.body)
     }
 
     /// The particles of a kept cloud state (`state.bin`: the analysis time or a front time),
     /// in id order.
     pub fn of_state(state: &hvi_engine::cloud::CloudState) -> Frame {
+        Frame::of(state.tau_s, &state.pos, &state.body)
+    }
+
+    /// The frame of particles at `pos` of bodies `body`, `tau_s` after first contact.
+    fn of(tau_s: f64, pos: &[DVec3], body: &[Body]) -> Frame {
         Frame {
-            tau_s: state.tau_s,
-            pos: state
-                .pos
+            tau_s,
+            pos: pos
                 .iter()
                 .map(|x| [x.x as f32, x.y as f32, x.z as f32])
                 .collect(),
-            impactor: state.body.iter().map(|b| *b == Body::Impactor).collect(),
+            impactor: body.iter().map(|b| *b == Body::Impactor).collect(),
         }
     }
 
