@@ -532,6 +532,7 @@ impl Store {
                 None => true,
             };
             if !intact
+                || rec.format != STUDY_FORMAT_VERSION
                 || rec.status != RunStatus::Completed
                 || !dir.join(crate::state::STATE_FILE).is_file()
             {

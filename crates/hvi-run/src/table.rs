@@ -94,13 +94,14 @@ pub fn observable_cell(o: Observable, x: Option<f64>) -> Value {
 }
 
 /// The columns of a results table over `axes`: `index`, one per axis, `status`,
-/// `fingerprint`, `dir`, one per observable, `wall_seconds`, `error`.
+/// `fingerprint`, `dir`, one per observable, `wall_seconds`, `measured_from` (the fingerprint
+/// of the run whose kept state a run was measured from, empty for a simulated run), `error`.
 pub fn result_columns(axes: &[Axis]) -> Vec<String> {
     let mut columns = vec!["index".to_string()];
     columns.extend(axes.iter().map(|a| a.key.clone()));
     columns.extend(["status", "fingerprint", "dir"].map(String::from));
     columns.extend(Observable::names().map(String::from));
-    columns.extend(["wall_seconds", "error"].map(String::from));
+    columns.extend(["wall_seconds", "measured_from", "error"].map(String::from));
     columns
 }
 
@@ -121,6 +122,8 @@ pub struct ResultRow<'a> {
     pub observables: Option<&'a Observables>,
     /// Its wall time, s.
     pub wall_seconds: Option<f64>,
+    /// The fingerprint of the run it was measured from, when it was not simulated.
+    pub measured_from: Option<&'a str>,
     /// Its error.
     pub error: Option<&'a str>,
 }
@@ -140,6 +143,10 @@ impl ResultRow<'_> {
             ));
         }
         row.push(num(self.wall_seconds));
+        row.push(
+            self.measured_from
+                .map_or(Value::Null, |f| Value::String(f.into())),
+        );
         row.push(self.error.map_or(Value::Null, |e| Value::String(e.into())));
         row
     }
@@ -165,6 +172,7 @@ pub fn results_table(plan: &Plan, records: &[Option<Record>]) -> Table {
                 dir: &run.dir,
                 observables: rec.as_ref().map(|r| &r.observables),
                 wall_seconds: rec.as_ref().map(|r| r.wall_seconds),
+                measured_from: rec.as_ref().and_then(|r| r.measured_from.as_deref()),
                 error: rec.as_ref().and_then(|r| r.error.as_deref()),
             }
             .cells()

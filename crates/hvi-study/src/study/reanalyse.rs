@@ -340,6 +340,7 @@ impl StudyReanalysis {
                     dir: &e.dir,
                     observables: observables.as_ref(),
                     wall_seconds: e.record.as_ref().map(|r| r.wall_seconds),
+                    measured_from: e.record.as_ref().and_then(|r| r.measured_from.as_deref()),
                     error: error.as_deref(),
                 }
                 .cells();
