@@ -531,7 +531,9 @@ fn a_run_that_differs_only_in_its_measurement_is_measured_from_a_kept_state() {
     assert_eq!(measured.len(), 2, "both runs measured");
     // results.csv says so too.
     for row in rows(&out.join("results.json")) {
-        let source = row["measured_from"].as_str().expect("a measured run's source");
+        let source = row["measured_from"]
+            .as_str()
+            .expect("a measured run's source");
         assert!(simulated.iter().any(|(_, s)| s.fingerprint == source));
     }
 

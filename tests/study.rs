@@ -1008,6 +1008,38 @@ fn an_optimum_on_the_edge_is_never_converged() {
             .all(|r| r.starts_with("ego-seeds1_2-") && r.contains(",false,1,")),
         "{index}"
     );
+    // Asked again under the other width: the stored grid is measured from its kept states, not
+    // simulated, and the answer sits beside the others under a label of its own.
+    let o = bin()
+        .arg("calibrate")
+        .arg(edge_study(&dir, ""))
+        .arg("--out")
+        .arg(&out)
+        .args([
+            "--threads",
+            "2",
+            "--no-extend",
+            "--set",
+            "analysis.width=side",
+        ])
+        .output()
+        .expect("runs");
+    assert_ok(&o);
+    let err = stderr(&o);
+    assert!(
+        err.contains("grid: runs: 3 total, 0 cached, 0 ran, 3 measured from kept states"),
+        "{err}"
+    );
+    let c = calibration_json(&out);
+    assert_ne!(
+        c["label"],
+        calibration_json(
+            &out.join("calibrations")
+                .join(rows[0].split(',').next().expect("label"))
+        )["label"]
+    );
+    let index = std::fs::read_to_string(out.join("calibrations/index.csv")).expect("index.csv");
+    assert_eq!(index.lines().skip(1).count(), 3, "{index}");
 }
 
 #[test]

@@ -726,8 +726,11 @@ fn paper_point(
 
 /// The calibration's label: `<method>-seeds<s1_s2...>-<digest>`, the digest (8 hex digits of
 /// SHA-256) over every setting that can change its answer (the search's settings, the targets
-/// and weights, the first box) so that two calibrations differ in label whenever they may
-/// differ in result; the tier and the scene overrides are the study directory's own.
+/// and weights, the first box, and the command line's `--set` overrides when it has any) so that
+/// two calibrations differ in label whenever they may differ in result. The overrides count
+/// because one study directory can hold calibrations under several: asked again with
+/// `--set analysis.width=cylindrical`, a calibration measures the stored runs from their kept
+/// states, and its answer sits beside the first one's.
 fn label_of(
     cfg: &CalibrateConfig,
     args: &CalibrateOptions,
@@ -741,7 +744,7 @@ fn label_of(
     } else {
         method.name()
     };
-    let settings = serde_json::json!({
+    let mut settings = serde_json::json!({
         "method": name,
         "seeds": cfg.seeds,
         "batch": cfg.batch,
@@ -757,6 +760,10 @@ fn label_of(
         "weights": cfg.weights,
         "box": first_box,
     });
+    // Only when given, so that the labels of calibrations without overrides stay what they were.
+    if !args.study.sets.is_empty() {
+        settings["set"] = serde_json::json!(args.study.sets);
+    }
     let digest = Sha256::digest(hvi_run::plan::canonical_json(&settings).as_bytes());
     let hex: String = digest.iter().take(4).map(|b| format!("{b:02x}")).collect();
     // The seeds the answer is over (Nelder-Mead and the grid alone: the scene's own).
