@@ -789,11 +789,20 @@ fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_n
 /// at 1e-2 J at this coarse resolution; the search's mechanics are what these tests check.)
 fn edge_study(dir: &Path, extra: &str) -> PathBuf {
     let targets = dir.join("targets.toml");
+    edge_targets(&targets);
+    edge_study_with(dir, &targets, extra)
+}
+
+fn edge_targets(targets: &Path) {
     std::fs::write(
-        &targets,
-        "[shot]\nid = \"test\"\ndescription = \"a test\"\nsource = \"a test\"\nimpactor_diameter_m = 9.53e-3\nv0_m_s = 6700.0\nt_over_d = 0.425\nsimulated_v0_m_s = 6700.0\nsimulated_t_over_d = 0.425\n\n[[targets]]\nname = \"length_ratio\"\nobservable = \"length_ratio\"\nkind = \"value\"\nvalue = 1.2\ntolerance = 0.1\nweight = 1.0\nsource = \"a test\"\n",
+        targets,
+        "[shot]\nid = \"test\"\ndescription = \"a test\"\nsource = \"a test\"\nimpactor_diameter_m = 9.53e-3\nv0_m_s = 6700.0\nt_over_d = 0.425\nimpactor_material = \"Al\"\nplate_material = \"Al\"\n\n[[targets]]\nname = \"length_ratio\"\nobservable = \"length_ratio\"\nkind = \"value\"\nvalue = 1.2\ntolerance = 0.1\nweight = 1.0\nsource = \"a test\"\n",
     )
     .expect("targets");
+}
+
+/// The edge study over eps at 2000 particles (R read cylindrically) against `targets`.
+fn edge_study_with(dir: &Path, targets: &Path, extra: &str) -> PathBuf {
     let text = format!(
         "[study]\nname = \"edge\"\nscene = \"{}\"\n\n[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01, 0.1, 1.0]\n\n[tiers.quick]\nset = [\"resolution.particles=2000\", \"material.kappa_n_m=4.56e6\", \"analysis.width=cylindrical\"]\n\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nbatch = 2\nmax_batches = 3\n{extra}",
         repo().join("studies/scenes/calibration.toml").display(),
@@ -1692,4 +1701,187 @@ fn a_ladder_refuses_counts_it_cannot_climb_naming_the_flag() {
         assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
     }
     assert!(!out.join("n1000").exists(), "nothing was run");
+}
+
+/// A study of the calibration grid over eps at 400 particles (the scene's other keys at the
+/// paper's fit), scored against `shots` (paths relative to the study file's directory).
+fn shots_study(dir: &Path, scene: &str, shots: &[PathBuf], extra: &str) -> PathBuf {
+    let list = shots
+        .iter()
+        .map(|p| format!("\"{}\"", p.display()))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let text = format!(
+        "[study]\nname = \"shots\"\nscene = \"{}\"\n\n[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01, 0.1]\n\n[tiers.quick]\nset = [\"resolution.particles=400\"]\n\n[calibrate]\nshots = [{list}]\nseeds = [1, 2]\nbatch = 1\nmax_batches = 1\nmax_extensions = 0\n{extra}",
+        repo().join(scene).display()
+    );
+    let path = dir.join("shots.toml");
+    std::fs::write(&path, text).expect("study");
+    path
+}
+
+#[test]
+fn a_calibration_whose_scene_disagrees_with_its_shot_is_refused_naming_both_values() {
+    let dir = scratch("shot-disagrees");
+    // The paper's calibration scene (6.7 km/s, t/D 0.425, D 9.53 mm, 32 us) against a shot at
+    // 5 km/s, t/D 0.2, D 6.35 mm, observed at 20 us.
+    let synthetic = repo().join("experiments_data/examples/synthetic-al-5kms.toml");
+    let study = shots_study(&dir, "studies/scenes/calibration.toml", &[synthetic], "");
+    let out = dir.join("out");
+    let o = calibrate(&study, &out);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let e = stderr(&o);
+    for needle in [
+        "shot `synthetic-al-5kms`",
+        "scene.v0_m_s = 6700 m/s (the scene file",
+        "the shot's v0 = 5000 m/s",
+        "scene.t_over_d = 0.425 (",
+        "the shot's t/D = 0.2",
+        "scene.diameter_m = 9.53e-3 m",
+        "run.end_time_s = 3.2e-5 s",
+    ] {
+        assert!(e.contains(needle), "`{needle}` missing from:\n{e}");
+    }
+    // Refused before anything ran.
+    assert!(!out.join("runs").exists());
+    // A --set that moves the paper's shot off its documented offset is refused the same way.
+    let paper = repo().join("experiments_data/calibration-shot.toml");
+    let study = shots_study(&dir, "studies/scenes/calibration.toml", &[paper], "");
+    let o = calibrate_with(&study, &out, &["--set", "scene.v0_m_s=6500"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("scene.v0_m_s = 6500 m/s (--set), the shot's v0 = 6700 m/s"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn a_two_shot_calibration_scores_each_shot_at_its_impact_and_predicts_a_held_out_one() {
+    let dir = scratch("two-shots");
+    let paper = repo().join("experiments_data/calibration-shot.toml");
+    let synthetic = repo().join("experiments_data/examples/synthetic-al-5kms.toml");
+    // The shots' scene gives no impact: each shot sets its own.
+    let study = shots_study(&dir, "studies/scenes/shot.toml", &[paper, synthetic], "");
+    let out = dir.join("out");
+    let o = calibrate(&study, &out);
+    assert_ok(&o);
+    let c = calibration_json(&out);
+    let ids: Vec<&str> = c["shots"]
+        .as_array()
+        .expect("shots")
+        .iter()
+        .map(|s| s["id"].as_str().expect("id"))
+        .collect();
+    assert_eq!(ids, ["emi-calibration-shot", "synthetic-al-5kms"]);
+    assert_eq!(c["shots"][1]["synthetic"], true);
+    // Every shot's terms, named by shot; J is the mean of the shots' own J.
+    let terms = c["best"]["score"]["terms"].as_array().expect("terms");
+    let names: Vec<&str> = terms
+        .iter()
+        .map(|t| t["name"].as_str().expect("name"))
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "emi-calibration-shot:length_ratio",
+            "emi-calibration-shot:no_large_fragment",
+            "emi-calibration-shot:fragment_size",
+            "synthetic-al-5kms:length_ratio",
+            "synthetic-al-5kms:no_large_fragment",
+        ]
+    );
+    let (sum, w) = terms.iter().fold((0.0, 0.0), |(s, w), t| {
+        (
+            s + num(&t["weight"]) * num(&t["term"]),
+            w + num(&t["weight"]),
+        )
+    });
+    assert!((sum / w - num(&c["best"]["score"]["objective"])).abs() < 1e-9);
+    assert!((w - 1.0).abs() < 1e-9, "weights sum to 1: {w}");
+    // Each shot ran at its own impact: the grid's runs of the second shot are at 5 km/s.
+    let table = std::fs::read_to_string(out.join("results-synthetic-al-5kms.csv"))
+        .expect("the second shot's table");
+    assert_eq!(table.lines().count(), 3, "{table}");
+    let scene = |dir: &str| -> serde_json::Value {
+        let s: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join(dir).join("summary.json")).expect("summary"),
+        )
+        .expect("json");
+        s["scene"].clone()
+    };
+    let first = scene(c["best_grid"]["dir"].as_str().expect("dir"));
+    assert_eq!(num(&first["scene"]["v0_m_s"]), 6700.0);
+    assert_eq!(num(&first["scene"]["t_over_d"]), 0.425);
+    let header: Vec<&str> = table.lines().next().expect("header").split(',').collect();
+    let col = header.iter().position(|h| *h == "dir").expect("dir column");
+    let row: Vec<&str> = table.lines().nth(1).expect("row").split(',').collect();
+    let second = scene(row[col]);
+    assert_eq!(num(&second["scene"]["v0_m_s"]), 5000.0);
+    assert_eq!(num(&second["scene"]["t_over_d"]), 0.2);
+    assert_eq!(num(&second["scene"]["diameter_m"]), 6.35e-3);
+    assert_eq!(num(&second["run"]["end_time_s"]), 20e-6);
+    let report = std::fs::read_to_string(out.join("calibration.md")).expect("md");
+    assert!(report.contains("its J at the best point"), "{report}");
+    assert!(report.contains("SYNTHETIC"), "{report}");
+
+    // Held out: calibrated on the paper's shot alone, the synthetic one predicted at the answer.
+    let o = calibrate_with(&study, &out, &["--hold-out", "synthetic-al-5kms"]);
+    assert_ok(&o);
+    let c = calibration_json(&out);
+    assert_eq!(c["shots"].as_array().expect("shots").len(), 1);
+    let h = &c["held_out"];
+    assert_eq!(h["shot"]["id"], "synthetic-al-5kms");
+    assert_eq!(h["evaluation"]["seeds"], serde_json::json!([1, 2]));
+    assert_eq!(h["evaluation"]["params"], c["best"]["params"]);
+    let spread = h["spread"].as_array().expect("spread");
+    assert!(
+        spread
+            .iter()
+            .any(|s| s["target"] == "length_ratio" && s["seeds"] == 2),
+        "{spread:?}"
+    );
+    assert!(
+        stderr(&o).contains("prediction:  length_ratio: predicted"),
+        "{}",
+        stderr(&o)
+    );
+    // A shot the study does not name is refused, naming those it does.
+    let o = calibrate_with(&study, &out, &["--hold-out", "nope"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("synthetic-al-5kms"), "{}", stderr(&o));
+}
+
+#[test]
+fn a_calibration_whose_targets_bound_eps_from_above_only_reports_the_bound() {
+    let dir = scratch("calibrate-bound");
+    // R read cylindrically rises with eps (about 1.05 at 1e-4 J, 1.2 at 1e-3 J, 1.7 at 1e-2 J
+    // at 2000 particles): R <= 1.3 holds everywhere below about 2e-3 J, so the target bounds
+    // eps from above and not from below.
+    let targets = dir.join("targets.toml");
+    std::fs::write(
+        &targets,
+        "[shot]\nid = \"bound\"\ndescription = \"a test\"\nsource = \"a test\"\nimpactor_diameter_m = 9.53e-3\nimpactor_material = \"Al\"\nplate_material = \"Al\"\nv0_m_s = 6700.0\nt_over_d = 0.425\n\n[[targets]]\nname = \"length_ratio\"\nobservable = \"length_ratio\"\nkind = \"at_most\"\nvalue = 1.3\ntolerance = 0.1\nweight = 1.0\nsource = \"a test\"\n",
+    )
+    .expect("targets");
+    let study = edge_study_with(&dir, &targets, "max_extensions = 4\n");
+    let out = dir.join("out");
+    let o = calibrate(&study, &out);
+    assert_ok(&o);
+    let c = calibration_json(&out);
+    assert_eq!(c["bounded"], true, "{}", c["termination"]);
+    assert_eq!(c["converged"], false);
+    let eps = &c["identified"]["material.eps_j"];
+    assert_eq!(eps["kind"], "at_most", "{eps}");
+    let (high, floor) = (num(&eps["high"]), num(&eps["floor"]));
+    assert!(high > 3e-4 && high < 5e-3, "{eps}");
+    // The side stopped moving where the targets stopped telling points apart (met at the side
+    // and a step inside), well before its 4 allowed steps.
+    assert!(floor >= 0.99e-4, "{eps}");
+    let e = stderr(&o);
+    assert!(e.contains("BOUNDED (ego)"), "{e}");
+    assert!(
+        e.contains("material.eps_j <= ") && e.contains("not identified below the box's"),
+        "{e}"
+    );
 }

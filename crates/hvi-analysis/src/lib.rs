@@ -11,4 +11,5 @@ pub mod decide;
 pub mod number;
 pub mod observable;
 pub mod score;
+pub mod shot;
 pub mod surrogate;

@@ -254,6 +254,10 @@ pub struct CalibrateArgs {
     /// (overrides calibrate.ladder_check).
     #[arg(long, value_name = "N")]
     pub ladder_check: Option<f64>,
+    /// Calibrate without this shot (its id, in a study of several shots), then run it at the
+    /// answer and report its prediction against its measurement, with the seed spread.
+    #[arg(long, value_name = "SHOT")]
+    pub hold_out: Option<String>,
 }
 
 impl CalibrateArgs {
@@ -304,6 +308,7 @@ impl CalibrateArgs {
             extend: !self.no_extend,
             slurm,
             coarse: None,
+            hold_out: self.hold_out.clone(),
         })
     }
 }

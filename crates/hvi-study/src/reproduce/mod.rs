@@ -284,8 +284,7 @@ fn print_estimate(e: &Estimate) {
 fn calibration_targets(plans: &Plans) -> Result<Targets> {
     let study = Study::load(&plans.calibration_study)?;
     let cfg = crate::study::calibrate::CalibrateConfig::of(&study)?;
-    let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-    Ok(hvi_run::output::load_targets(&base.join(&cfg.targets))?)
+    cfg.load_targets(&study)
 }
 
 /// experiments_data's note on Fig. 13's experimental points, if it records one.

@@ -429,9 +429,7 @@ fn collect_calibration(
 ) -> Result<()> {
     let study = Study::load(&plan.study_file)?;
     let cfg = CalibrateConfig::of(&study)?;
-    let base = study.path.parent().unwrap_or_else(|| Path::new("."));
-    let targets =
-        hvi_run::output::load_targets(&base.join(&cfg.targets))?.with_weights(&cfg.weights)?;
+    let targets = cfg.load_targets(&study)?;
     score_table(&mut table, filled, &targets);
     let scored: Vec<usize> = (0..table.columns.len())
         .filter(|&c| table.columns[c] == "objective" || table.columns[c].starts_with("score_"))

@@ -60,15 +60,20 @@ impl StudyOptions {
     /// Loads the study and builds and validates its plan; returns it with the output
     /// directory, writing nothing.
     pub fn build_plan(&self) -> Result<(Study, Plan, PathBuf)> {
+        let study = self.load_study()?;
+        let (plan, out) = self.build_plan_of(&study)?;
+        Ok((study, plan, out))
+    }
+
+    /// Checks the thread and job counts and loads the study file.
+    pub fn load_study(&self) -> Result<Study> {
         if self.threads == Some(0) {
             bail!("invalid value for `--threads`: 0 (allowed: an integer >= 1)");
         }
         if self.jobs == Some(0) {
             bail!("invalid value for `--jobs`: 0 (allowed: an integer >= 1)");
         }
-        let study = Study::load(&self.study)?;
-        let (plan, out) = self.build_plan_of(&study)?;
-        Ok((study, plan, out))
+        Ok(Study::load(&self.study)?)
     }
 
     /// Builds and validates the plan of `study` (loaded, and possibly changed, by the caller)

@@ -2,7 +2,7 @@
 //!
 //! ```toml
 //! [calibrate]
-//! targets = "../experiments_data/calibration-shot.toml"   # relative to the study file
+//! shots = ["../experiments_data/calibration-shot.toml"]   # relative to the study file
 //! weights = { fragment_size = 0.5 }       # optional: override target weights by name
 //! refine = ["material.eps_j", "material.kappa_n_m"]   # default: every axis with > 1 value
 //! log_axes = ["material.eps_j", "material.kappa_n_m"] # searched in log10 (default these two)
@@ -79,8 +79,14 @@ impl Method {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CalibrateConfig {
-    /// The target file, relative to the study file.
-    pub targets: PathBuf,
+    /// The shot files (each an experiment's impact and its targets), relative to the study
+    /// file.
+    #[serde(default)]
+    pub shots: Vec<PathBuf>,
+    /// One shot file, the same as `shots = [targets]` (the key of studies written before
+    /// `shots`).
+    #[serde(default)]
+    pub targets: Option<PathBuf>,
     /// Weights by target name, overriding the target file's.
     #[serde(default)]
     pub weights: BTreeMap<String, f64>,
@@ -190,16 +196,78 @@ impl CalibrateConfig {
             }
         }
         cfg.check_seeds("study key `calibrate.seeds`")?;
+        match (&cfg.targets, cfg.shots.len()) {
+            (Some(_), n) if n > 0 => bail!(
+                "study keys `calibrate.targets` and `calibrate.shots` are both given (allowed: \
+                 one of the two; `targets = \"f\"` is `shots = [\"f\"]`)"
+            ),
+            (None, 0) => bail!(
+                "study key `calibrate.shots` is missing (allowed: a list of shot files, e.g. \
+                 shots = [\"../experiments_data/calibration-shot.toml\"])"
+            ),
+            _ => {}
+        }
         Ok(cfg)
     }
 
-    /// The targets file (relative to the study file), with the study's weights applied.
+    /// The shot files, as the study names them (relative to the study file).
+    pub fn shot_files(&self) -> Vec<PathBuf> {
+        match &self.targets {
+            Some(t) => vec![t.clone()],
+            None => self.shots.clone(),
+        }
+    }
+
+    /// The first shot's target file (resolved against the study file's directory), with the
+    /// study's weights applied.
     pub fn load_targets(&self, study: &Study) -> Result<hvi_analysis::score::Targets> {
+        self.load_shots(study)?
+            .into_iter()
+            .next()
+            .ok_or_else(|| anyhow!("study key `calibrate.shots` is empty"))
+    }
+
+    /// Every shot's target file (resolved against the study file's directory), with the
+    /// study's weights applied (a weight names a target of some shot); shot ids distinct.
+    pub fn load_shots(&self, study: &Study) -> Result<Vec<hvi_analysis::score::Targets>> {
         let base = study
             .path
             .parent()
             .unwrap_or_else(|| std::path::Path::new("."));
-        hvi_run::output::load_targets(&base.join(&self.targets))?.with_weights(&self.weights)
+        let shots: Vec<hvi_analysis::score::Targets> = self
+            .shot_files()
+            .iter()
+            .map(|f| Ok(hvi_run::output::load_targets(&base.join(f))?))
+            .collect::<Result<_>>()?;
+        for (i, s) in shots.iter().enumerate() {
+            if shots[..i].iter().any(|t| t.shot.id == s.shot.id) {
+                bail!(
+                    "study key `calibrate.shots`: two files name the shot `{}` (allowed: distinct \
+                     shot ids)",
+                    s.shot.id
+                );
+            }
+        }
+        for name in self.weights.keys() {
+            if !shots
+                .iter()
+                .any(|s| s.targets.iter().any(|t| &t.name == name))
+            {
+                bail!("calibrate.weights: no shot has a target named `{name}`");
+            }
+        }
+        shots
+            .into_iter()
+            .map(|s| {
+                let own: BTreeMap<String, f64> = self
+                    .weights
+                    .iter()
+                    .filter(|(k, _)| s.targets.iter().any(|t| &t.name == *k))
+                    .map(|(k, v)| (k.clone(), *v))
+                    .collect();
+                s.with_weights(&own)
+            })
+            .collect()
     }
 
     /// The seeds are distinct (`what` names where they came from in the error).

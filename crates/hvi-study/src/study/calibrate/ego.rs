@@ -25,14 +25,13 @@ use std::collections::BTreeMap;
 
 use anyhow::{anyhow, Result};
 use hvi_analysis::observable::{Observable, Observables};
-use hvi_analysis::score::objective;
 use hvi_analysis::surrogate::{
     self, seed_mean_noise, step, Observation, Prior, SearchBox, Surrogate,
 };
 use hvi_run::store::{Job, Record, RunStatus};
 
 use super::problem::{fmt_params, Refinement};
-use super::result::{observed_means, Evaluation, ParamRegion, Spread, Surface};
+use super::result::{observed_means, shot_means, Evaluation, ParamRegion, Spread, Surface};
 
 /// The search's settings (`[calibrate]`).
 #[derive(Debug, Clone)]
@@ -79,13 +78,13 @@ pub(super) struct EgoOutcome {
     pub prior_weight: Option<f64>,
 }
 
-/// An evaluated point with its runs' observables, one per seed.
-pub(super) type Scored = (Evaluation, Vec<Observables>);
+/// An evaluated point with its runs' observables: per shot, one per seed.
+pub(super) type Scored = (Evaluation, Vec<Vec<Observables>>);
 
-/// One point's runs at every seed, scored on the seed means.
+/// One point's runs at every seed of every shot, scored on the seed means.
 struct PointRuns {
     params: BTreeMap<String, f64>,
-    /// One job per seed (Err: the scene is invalid, with why).
+    /// One job per shot and seed, shot-major (Err: the scene is invalid, with why).
     jobs: Vec<std::result::Result<Job, String>>,
 }
 
@@ -104,17 +103,17 @@ pub(super) fn seed_list(settings: &EgoSettings) -> Vec<Option<u64>> {
 pub(super) fn seeded_grid(
     problem: &Refinement,
     settings: &EgoSettings,
-    grid: &[(Evaluation, Record)],
+    grid: &[(Evaluation, Vec<Record>)],
 ) -> Result<(Vec<Scored>, usize)> {
     let scored_grid = grid
         .iter()
-        .filter(|(e, r)| r.status == RunStatus::Completed && e.score.is_some());
+        .filter(|(e, r)| r.iter().all(|r| r.status == RunStatus::Completed) && e.score.is_some());
     if settings.seeds.is_empty() {
         let evaluations = scored_grid
             .map(|(e, r)| {
                 let mut e = e.clone();
                 e.seed_objectives = vec![e.objective];
-                (e, vec![r.observables])
+                (e, r.iter().map(|r| vec![r.observables]).collect())
             })
             .collect();
         return Ok((evaluations, 0));
@@ -187,7 +186,7 @@ pub(super) fn search(
             };
             break (
                 true,
-                format!("converged after {batch} batch(es): {why}"),
+                format!("the stopping rule held after {batch} batch(es): {why}"),
                 noise,
                 noise_source,
             );
@@ -380,9 +379,9 @@ fn noise_of(evaluations: &[Scored], floor: f64) -> (f64, String) {
     }
 }
 
-/// Runs `points` at every seed together (in parallel through the store) and scores each on
-/// its seed-mean observables. Returns the evaluations (with the runs' observables) and the
-/// runs simulated.
+/// Runs `points` at every seed of every shot together (in parallel through the store) and
+/// scores each on its seed-mean observables per shot. Returns the evaluations (with the runs'
+/// observables) and the runs simulated.
 pub(super) fn run_points(
     problem: &Refinement,
     stage: &str,
@@ -391,10 +390,15 @@ pub(super) fn run_points(
 ) -> Result<(Vec<Scored>, usize)> {
     let mut planned = Vec::new();
     for p in points {
-        let jobs = seeds
-            .iter()
-            .map(|&s| problem.job(p, s))
-            .collect::<Result<Vec<_>>>()?;
+        // Shot-major: every seed of the first shot, then of the next.
+        let mut jobs = Vec::new();
+        for &s in seeds {
+            jobs.push(problem.jobs(p, s)?);
+        }
+        let shots = jobs.first().map_or(0, Vec::len);
+        let jobs = (0..shots)
+            .flat_map(|shot| jobs.iter().map(move |per_seed| per_seed[shot].clone()))
+            .collect();
         planned.push(PointRuns {
             params: p.clone(),
             jobs,
@@ -425,11 +429,14 @@ pub(super) fn run_points(
     let mut stored = stored.into_iter();
     let mut out = Vec::new();
     for (step, p) in planned.into_iter().enumerate() {
-        let mut recs: Vec<Record> = Vec::new();
+        let mut recs: Vec<Vec<Record>> = Vec::new();
         let mut why = None;
         let mut dirs = Vec::new();
         let mut cached = true;
-        for j in &p.jobs {
+        for (k, j) in p.jobs.iter().enumerate() {
+            if k % seeds.len() == 0 {
+                recs.push(Vec::new());
+            }
             match j {
                 Ok(job) => {
                     let r = records
@@ -437,15 +444,21 @@ pub(super) fn run_points(
                         .ok_or_else(|| anyhow!("a run of the batch has no record"))?;
                     cached &= stored.next().unwrap_or(false);
                     dirs.push(hvi_run::plan::run_dir_name(&job.fingerprint));
-                    recs.push(r);
+                    if let Some(last) = recs.last_mut() {
+                        last.push(r);
+                    }
                 }
                 Err(e) => why = Some(e.clone()),
             }
         }
         let cached = cached && !dirs.is_empty();
-        out.push(scored(
-            problem, stage, step, p.params, seeds, recs, dirs, why, cached,
-        ));
+        let runs = PointRecords {
+            recs,
+            dirs,
+            invalid: why,
+            cached,
+        };
+        out.push(scored(problem, stage, step, p.params, seeds, runs));
     }
     Ok((out, report.ran))
 }
@@ -458,32 +471,46 @@ fn refined_of_job(job: &Job) -> BTreeMap<String, f64> {
         .collect()
 }
 
-/// A point's evaluation from its runs: the score of the seed-mean observables, each seed's
-/// objective, the status (completed only when every seed completed); `cached` when every run
-/// was in the store before.
-#[allow(clippy::too_many_arguments)]
+/// A point's runs: per shot, one record per seed; their directories; why the point has no
+/// runs (an invalid scene), and whether every run was in the store before.
+struct PointRecords {
+    recs: Vec<Vec<Record>>,
+    dirs: Vec<String>,
+    invalid: Option<String>,
+    cached: bool,
+}
+
+/// A point's evaluation from its runs: the combined score of each shot's seed-mean
+/// observables, each seed's combined objective, the status (completed only when every run
+/// completed); `cached` when every run was in the store before.
 fn scored(
     problem: &Refinement,
     stage: &str,
     step: usize,
     params: BTreeMap<String, f64>,
     seeds: &[Option<u64>],
-    recs: Vec<Record>,
-    dirs: Vec<String>,
-    invalid: Option<String>,
-    cached: bool,
+    runs: PointRecords,
 ) -> Scored {
-    let targets = &problem.targets.targets;
+    let PointRecords {
+        recs,
+        dirs,
+        invalid,
+        cached,
+    } = runs;
     let complete = invalid.is_none()
-        && !recs.is_empty()
-        && recs.iter().all(|r| r.status == RunStatus::Completed);
-    let observables: Vec<_> = recs.iter().map(|r| r.observables).collect();
-    let means = observed_means(&observables);
-    let score = complete.then(|| objective(targets, |o: Observable| means.get(o.name()).copied()));
-    let seed_objectives = if complete {
-        observables
+        && recs.len() == problem.targets.len()
+        && recs
             .iter()
-            .map(|x| objective(targets, |o| x.get(o)).objective)
+            .all(|r| !r.is_empty() && r.iter().all(|r| r.status == RunStatus::Completed));
+    let observables: Vec<Vec<Observables>> = recs
+        .iter()
+        .map(|r| r.iter().map(|r| r.observables).collect())
+        .collect();
+    let means: Vec<BTreeMap<String, f64>> = observables.iter().map(|o| observed_means(o)).collect();
+    let score = complete.then(|| problem.score(|s, o: Observable| means[s].get(o.name()).copied()));
+    let seed_objectives = if complete {
+        (0..observables[0].len())
+            .map(|k| problem.score(|s, o| observables[s][k].get(o)).objective)
             .collect()
     } else {
         Vec::new()
@@ -494,6 +521,7 @@ fn scored(
         (None, false) => {
             let failed: Vec<String> = recs
                 .iter()
+                .flatten()
                 .filter(|r| r.status != RunStatus::Completed)
                 .map(|r| r.error.clone().unwrap_or_else(|| "(no message)".into()))
                 .collect();
@@ -511,7 +539,7 @@ fn scored(
         dir: dirs.first().cloned(),
         seeds: seeds.iter().flatten().copied().collect(),
         seed_objectives,
-        means,
+        means: shot_means(problem.targets, &observables),
     };
     (e, observables)
 }
@@ -566,17 +594,16 @@ fn param_region(problem: &Refinement, r: &surrogate::Region) -> ParamRegion {
     }
 }
 
-/// Each target's observable over the seeds.
-fn spread_of(problem: &Refinement, observables: &[Observables]) -> Vec<Spread> {
-    problem
-        .targets
-        .targets
-        .iter()
-        .filter_map(|t| {
-            let v: Vec<f64> = observables
-                .iter()
-                .filter_map(|o| o.get(t.observable))
-                .collect();
+/// Each target's observable over the seeds, every shot's (named as the combined score names
+/// its terms).
+pub(super) fn spread_of(problem: &Refinement, observables: &[Vec<Observables>]) -> Vec<Spread> {
+    let names = hvi_analysis::score::combined_targets(problem.targets);
+    let per_shot = problem.targets.iter().zip(observables);
+    per_shot
+        .flat_map(|(shot, runs)| shot.targets.iter().map(move |t| (t, runs)))
+        .zip(&names)
+        .filter_map(|((t, runs), named)| {
+            let v: Vec<f64> = runs.iter().filter_map(|o| o.get(t.observable)).collect();
             if v.is_empty() {
                 return None;
             }
@@ -588,7 +615,7 @@ fn spread_of(problem: &Refinement, observables: &[Observables]) -> Vec<Spread> {
                 0.0
             };
             Some(Spread {
-                target: t.name.clone(),
+                target: named.name.clone(),
                 mean,
                 sd,
                 seeds: v.len(),

@@ -74,6 +74,7 @@ pub(super) fn edges_of(
                 value: round_sig(if *log { 10f64.powf(bound) } else { bound }, 6),
                 touched_by: touched_by.into(),
                 limit: None,
+                targets_met: false,
             });
         }
     }
@@ -130,6 +131,10 @@ pub(super) fn extend(
 ) -> Result<bool> {
     let mut any = false;
     for edge in edges.iter_mut() {
+        // Settled already (the targets do not bound it there).
+        if edge.limit.is_some() {
+            continue;
+        }
         if !rule.extend {
             edge.limit = Some("not extended (--no-extend)".into());
             continue;
@@ -166,7 +171,7 @@ pub(super) fn extend(
                 .collect();
             problem.values_in(&probe, &x)
         };
-        if let Err(why) = problem.job(&params, None)? {
+        if let Some(why) = problem.invalid(&params)? {
             let v = params.get(&edge.key).copied().unwrap_or(f64::NAN);
             edge.limit = Some(format!(
                 "{} = {} is rejected by the scene: {why}",
@@ -213,6 +218,20 @@ pub(super) fn limit_line(edges: &[Edge]) -> Option<String> {
         .iter()
         .filter(|e| e.limit.is_some())
         .map(|e| {
+            if e.targets_met {
+                return format!(
+                    "every target is met at the box's {} side, {} = {}: the targets do not bound \
+                     it {} ({})",
+                    e.side.name(),
+                    e.key,
+                    fmt_value(e.value),
+                    match e.side {
+                        Side::Low => "from below",
+                        Side::High => "from above",
+                    },
+                    e.limit.as_deref().unwrap_or("")
+                );
+            }
             format!(
                 "{} lies at or {} the box's {} side, {} = {} ({})",
                 e.key,

@@ -4,7 +4,9 @@
 use std::path::Path;
 
 use anyhow::{anyhow, Result};
-use hvi_analysis::score::{objective, Score, Targets};
+use hvi_analysis::score::{
+    combined_objective, combined_targets, objective, Score, Target, Targets,
+};
 use hvi_run::plan::{describe_values, Plan};
 use hvi_run::runner::Runner;
 use hvi_run::store::{Job, Record, RunStatus, Store};
@@ -13,7 +15,7 @@ use hvi_run::table::{results_table, Table};
 use serde_json::Value;
 
 use super::problem::describe_eval;
-use super::result::{observed_means, Evaluation};
+use super::result::{shot_means, Evaluation};
 use crate::study::sweep::print_failures;
 
 /// Scores every row of a results table and adds `objective` and `score_<name>` columns.
@@ -22,6 +24,13 @@ pub fn score_table(table: &mut Table, records: &[Record], targets: &Targets) -> 
         .iter()
         .map(|r| objective(&targets.targets, |name| r.observables.get(name)))
         .collect();
+    push_score_columns(table, &scores, &targets.targets);
+    scores
+}
+
+/// Adds `objective` and a `score_<name>` column per target (in the order of the scores'
+/// terms) to a results table.
+fn push_score_columns(table: &mut Table, scores: &[Score], targets: &[Target]) {
     let num = |x: f64| {
         if x.is_finite() {
             serde_json::json!(x)
@@ -33,54 +42,86 @@ pub fn score_table(table: &mut Table, records: &[Record], targets: &Targets) -> 
         "objective",
         scores.iter().map(|s| num(s.objective)).collect(),
     );
-    for (k, t) in targets.targets.iter().enumerate() {
+    for (k, t) in targets.iter().enumerate() {
         table.push_column(
             &format!("score_{}", t.name),
             scores.iter().map(|s| num(s.terms[k].term)).collect(),
         );
     }
-    scores
 }
 
 /// The grid stage's outcome.
 pub(super) struct Grid {
     /// Runs simulated by this invocation.
     pub(super) ran: usize,
-    /// Every grid run as an evaluation, in plan order.
+    /// Every grid point as an evaluation, in plan order.
     pub(super) evaluations: Vec<Evaluation>,
-    /// The runs' records, in plan order.
+    /// The first shot's runs' records, in plan order (what the maps draw).
     pub(super) records: Vec<Record>,
-    /// The run with the lowest objective.
+    /// Per grid point, every shot's record, in shot order.
+    pub(super) shot_records: Vec<Vec<Record>>,
+    /// The point with the lowest objective.
     pub(super) best: usize,
 }
 
-/// Stage 1: the grid, run (or reused) through the store and scored; results.csv/json gain the
-/// objective and the terms.
+/// Stage 1: the grid of every shot (`plans`, the study's grid at each shot's impact, the first
+/// the study's own), run (or reused) through the store and scored together per grid point;
+/// `results.csv/json` (the first shot's runs) and, with several shots, `results-<shot>.csv/json`
+/// gain the objective and the terms.
 pub(super) fn grid_stage(
-    plan: &Plan,
+    plans: &[&Plan],
     out: &Path,
     runner: &Runner,
-    targets: &Targets,
+    targets: &[Targets],
     progress: bool,
 ) -> Result<Grid> {
-    let stored = stored_before(plan, out)?;
+    let plan = plans[0];
+    let stored: Vec<Vec<bool>> = plans
+        .iter()
+        .map(|p| stored_before(p, out))
+        .collect::<Result<_>>()?;
     let store = runner.store(out)?;
-    let jobs: Vec<Job> = (0..plan.runs.len())
-        .map(|i| job(plan, i))
-        .collect::<hvi_run::error::Result<_>>()?;
-    let describe = |i: usize| describe_values(&plan.axes, &plan.runs[i].values);
+    let mut jobs: Vec<Job> = Vec::new();
+    for p in plans {
+        for i in 0..p.runs.len() {
+            jobs.push(job(p, i)?);
+        }
+    }
+    let n = plan.runs.len();
+    let describe = |i: usize| {
+        let shot = &targets[(i / n).min(targets.len() - 1)].shot.id;
+        let values = describe_values(&plan.axes, &plan.runs[i % n].values);
+        if plans.len() > 1 {
+            format!("{shot}: {values}")
+        } else {
+            values
+        }
+    };
     let report = runner.execute(&store, out, plan, &jobs, &describe, "grid")?;
-    let mut table = results_table(
-        plan,
-        &report.records.iter().cloned().map(Some).collect::<Vec<_>>(),
-    );
     if progress {
         eprintln!("grid: {}", report.line());
     }
     print_failures(&report.records);
-    let scores = score_table(&mut table, &report.records, targets);
-    table.write(out, "results")?;
-    let evaluations = grid_evaluations(plan, &report.records, &scores, &stored);
+    let by_shot: Vec<Vec<Record>> = report.records.chunks(n).map(<[Record]>::to_vec).collect();
+    let scores: Vec<Score> = (0..n)
+        .map(|i| combined_objective(targets, |s, o| by_shot[s][i].observables.get(o)))
+        .collect();
+    let flat = combined_targets(targets);
+    for (s, (p, records)) in plans.iter().zip(&by_shot).enumerate() {
+        let mut table = results_table(p, &records.iter().cloned().map(Some).collect::<Vec<_>>());
+        push_score_columns(&mut table, &scores, &flat);
+        let name = if s == 0 {
+            "results".to_string()
+        } else {
+            format!("results-{}", targets[s].shot.id)
+        };
+        table.write(out, &name)?;
+    }
+    let shot_records: Vec<Vec<Record>> = (0..n)
+        .map(|i| by_shot.iter().map(|r| r[i].clone()).collect())
+        .collect();
+    let cached: Vec<bool> = (0..n).map(|i| stored.iter().all(|s| s[i])).collect();
+    let evaluations = grid_evaluations(plan, &shot_records, &scores, &cached, targets);
     let best = (0..evaluations.len())
         .filter(|&i| evaluations[i].objective.is_finite())
         .min_by(|&a, &b| {
@@ -98,7 +139,8 @@ pub(super) fn grid_stage(
     Ok(Grid {
         ran: report.ran,
         evaluations,
-        records: report.records,
+        records: by_shot[0].clone(),
+        shot_records,
         best,
     })
 }
@@ -118,41 +160,41 @@ pub(super) fn stored_before(plan: &Plan, out: &Path) -> Result<Vec<bool>> {
         .collect()
 }
 
-/// The grid runs as evaluations: their numeric axis values, scores and status (`cached`: the
-/// run was in the store before this invocation).
+/// The grid points as evaluations: their numeric axis values, scores and status (`cached`:
+/// every shot's run was in the store before this invocation).
 pub(super) fn grid_evaluations(
     plan: &Plan,
-    records: &[Record],
+    records: &[Vec<Record>],
     scores: &[Score],
     stored: &[bool],
+    targets: &[Targets],
 ) -> Vec<Evaluation> {
     plan.runs
         .iter()
         .zip(records)
         .zip(scores)
         .zip(stored)
-        .map(|(((run, rec), score), &cached)| {
+        .map(|(((run, recs), score), &cached)| {
             let params = plan
                 .axes
                 .iter()
                 .zip(&run.values)
                 .filter_map(|(a, v)| v.as_f64().map(|x| (a.key.clone(), x)))
                 .collect();
+            let completed = recs.iter().all(|r| r.status == RunStatus::Completed);
+            let per_shot: Vec<_> = recs.iter().map(|r| vec![r.observables]).collect();
             Evaluation {
                 stage: "grid".into(),
                 step: run.index,
                 params,
                 objective: score.objective,
                 score: Some(score.clone()),
-                status: match rec.status {
-                    RunStatus::Completed => "completed".into(),
-                    RunStatus::Failed => "failed".into(),
-                },
+                status: if completed { "completed" } else { "failed" }.into(),
                 cached,
                 dir: Some(run.dir.clone()),
                 seeds: Vec::new(),
                 seed_objectives: Vec::new(),
-                means: observed_means(std::slice::from_ref(&rec.observables)),
+                means: shot_means(targets, &per_shot),
             }
         })
         .collect()

@@ -35,7 +35,7 @@ use serde::{Deserialize, Serialize};
 use super::config::{CalibrateConfig, Method};
 use super::problem::{fixed_overrides, refined_axes, Dim, Stage, PAPER_BEST};
 use super::result::{fmt_bounds, fmt_value, CalibrationResult, Edge, TargetsMet};
-use super::{calibrate_plan, ego, runner_of, CalibrateOptions, Coarse};
+use super::{calibrate_plan, ego, runner_of, CalibrateOptions, Coarse, ShotPlan};
 use crate::study::document::Document;
 
 /// What a ladder takes beside the calibration's options.
@@ -190,10 +190,13 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
     if args.study.particles.is_some() {
         bail!("--ladder sets the particle count of each level: leave out --particles");
     }
+    if args.hold_out.is_some() {
+        bail!("--ladder calibrates against one shot: leave out --hold-out");
+    }
     if args.no_refine {
         bail!("--ladder needs the search after the grid (each level's confidence region steers the next): leave out --no-refine");
     }
-    let study = Study::load(&args.study.study)?;
+    let study = super::shots::shot_study(&args.study)?;
     let cfg = CalibrateConfig::of(&study)?;
     if args.method.unwrap_or(cfg.method) != Method::Ego {
         bail!("--ladder needs `--method ego` (its confidence region steers the next level; Nelder-Mead gives none)");
@@ -248,7 +251,11 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
         if k == 0 {
             keys = refined_axes(&plan, &cfg)?.1;
         }
-        let r = calibrate_plan(&level_args, &level_study, &plan, &out)?;
+        let shot = ShotPlan {
+            targets: cfg.load_targets(&level_study)?,
+            plan,
+        };
+        let r = calibrate_plan(&level_args, &level_study, std::slice::from_ref(&shot), &out)?;
         let (runs, core) = store_cost(&out)?;
         levels.push(LadderLevel {
             particles: n,
@@ -517,9 +524,12 @@ fn check_run(
     let runner = runner_of(&check_args)?;
     let store = runner.store(&out)?;
     let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
+    let targets = [targets];
+    let plans = [&plan];
     let stage = Stage {
         study: &one,
         plan: &plan,
+        plans: &plans,
         store: &store,
         targets: &targets,
         threads,
@@ -528,7 +538,7 @@ fn check_run(
         progress,
     };
     let first = plan.run(0)?;
-    let fixed = fixed_overrides(&plan, &first.values, |k| params.contains_key(k))?;
+    let fixed = fixed_overrides(&plans, &first.values, |k| params.contains_key(k))?;
     let problem = stage.problem(fixed, Vec::new());
     let seeds: Vec<Option<u64>> = if cfg.seeds.is_empty() {
         vec![None]
@@ -1002,6 +1012,7 @@ mod tests {
             value: 0.05,
             touched_by: "confidence region".into(),
             limit: None,
+            targets_met: false,
         });
         assert!(!verdict(&dims, &edge).converged);
     }

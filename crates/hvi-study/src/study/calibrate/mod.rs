@@ -5,17 +5,20 @@
 //!
 //! - [`config`]: the study's `[calibrate]` section and the method it names;
 //! - [`problem`]: a parameter point as a run through the store, scored;
-//! - [`result`]: what `calibration.json` holds.
+//! - [`result`]: what `calibration.json` holds;
+//! - [`shots`]: the shot's impact, checked against the study's scene and filled into it.
 
 pub mod config;
 pub mod ego;
 pub mod extend;
 pub mod grid;
+pub mod identify;
 pub mod ladder;
 pub mod nelder_mead;
 pub mod problem;
 pub mod report;
 pub mod result;
+pub mod shots;
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -30,6 +33,7 @@ pub use config::{CalibrateConfig, Method};
 pub use grid::score_table;
 pub use report::report;
 pub use result::{CalibrationResult, Evaluation, ParamRegion, Spread, Surface, TargetsMet};
+pub use shots::ShotPlan;
 
 use super::options::StudyOptions;
 use extend::{
@@ -68,6 +72,8 @@ pub struct CalibrateOptions {
     /// A coarser resolution's calibration whose scored points are the surrogate search's prior
     /// (a ladder's level passes its own to the next; None: no prior).
     pub coarse: Option<Coarse>,
+    /// A shot left out of the calibration and predicted at its answer (`--hold-out`).
+    pub hold_out: Option<String>,
 }
 
 /// A coarser resolution's scored points, the prior of a surrogate search: the search then
@@ -128,6 +134,7 @@ impl CalibrateOptions {
             extend: true,
             slurm: None,
             coarse: None,
+            hold_out: None,
         }
     }
 }
@@ -136,8 +143,8 @@ impl CalibrateOptions {
 /// paper's fit at this tier, then calibration.json, calibration.md, evaluations.csv, the maps
 /// and the snapshots.
 pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
-    let (study, plan, out) = args.study.plan()?;
-    let result = calibrate_plan(args, &study, &plan, &out)?;
+    let (study, shots, out) = shots::shot_plans(&args.study, args.hold_out.as_deref())?;
+    let result = calibrate_plan(args, &study, &shots, &out)?;
     println!("{}", out.join("calibration.json").display());
     Ok(result)
 }
@@ -147,7 +154,7 @@ pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
 pub(crate) fn calibrate_plan(
     args: &CalibrateOptions,
     study: &hvi_run::spec::Study,
-    plan: &hvi_run::plan::Plan,
+    shots: &[ShotPlan],
     out: &Path,
 ) -> Result<CalibrationResult> {
     let t0 = std::time::Instant::now();
@@ -156,20 +163,32 @@ pub(crate) fn calibrate_plan(
         cfg.seeds = seeds.clone();
         cfg.check_seeds("--seeds")?;
     }
-    let targets = cfg.load_targets(study)?;
+    let (calibrated, held_out): (Vec<&ShotPlan>, Vec<&ShotPlan>) = shots
+        .iter()
+        .partition(|s| args.hold_out.as_deref() != Some(s.targets.shot.id.as_str()));
+    let targets: Vec<hvi_analysis::score::Targets> =
+        calibrated.iter().map(|s| s.targets.clone()).collect();
+    let plans: Vec<&hvi_run::plan::Plan> = calibrated.iter().map(|s| &s.plan).collect();
+    let plan = plans[0];
     let progress = !args.study.quiet;
+    if progress {
+        for t in &targets {
+            eprintln!("{}", shots::describe_shot(t));
+        }
+    }
     let (refine_keys, dims) = refined_axes(plan, &cfg)?;
     let runner = runner_of(args)?;
 
-    let grid = grid_stage(plan, out, &runner, &targets, progress)?;
+    let grid = grid_stage(&plans, out, &runner, &targets, progress)?;
     let best_grid = grid.evaluations[grid.best].clone();
     let best_run = plan.run(grid.best)?;
     let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
-    let fixed = fixed_overrides(plan, &best_run.values, |k| refine_keys.contains(k))?;
+    let fixed = fixed_overrides(&plans, &best_run.values, |k| refine_keys.contains(k))?;
     let store = runner.store(out)?;
     let stage = Stage {
         study,
         plan,
+        plans: &plans,
         store: &store,
         targets: &targets,
         threads,
@@ -219,18 +238,38 @@ pub(crate) fn calibrate_plan(
         .filter_map(|(k, v)| paper_params.get(k).map(|p| (k.clone(), v / p)))
         .collect();
     let label = label_of(&cfg, args, method, &search, &first_box)?;
+    // The grid's own runs count where the answer is at the scene's seed (no search at seeds).
     let targets_met = TargetsMet::of(
-        search.evaluations.iter().chain(std::iter::once(&paper)),
+        grid.evaluations
+            .iter()
+            .chain(&search.evaluations)
+            .chain(std::iter::once(&paper)),
         &best.seeds,
+    );
+    let identified = identify::identify(
+        &search.boxes,
+        search.region.as_ref(),
+        targets_met.as_ref(),
+        &search.edges,
     );
     let result = CalibrationResult {
         study: plan.study.clone(),
         label,
         tier: plan.tier.clone(),
         particles: particles_of(out, &best),
-        targets_file: targets.path.clone(),
-        targets: targets.targets.clone(),
-        gaps: targets.gaps.clone(),
+        particles_asked: args.study.particles,
+        targets_file: targets[0].path.clone(),
+        targets: hvi_analysis::score::combined_targets(&targets),
+        gaps: targets.iter().flat_map(|t| t.gaps.clone()).collect(),
+        shots: targets.iter().map(result::ShotUse::of).collect(),
+        held_out: match held_out.first() {
+            Some(h) => {
+                let fixed =
+                    fixed_overrides(&[&h.plan], &best_run.values, |k| refine_keys.contains(k))?;
+                Some(shots::predict_held_out(&stage, h, fixed, &best)?)
+            }
+            None => None,
+        },
         best,
         best_grid,
         paper,
@@ -260,6 +299,8 @@ pub(crate) fn calibrate_plan(
                 weight: search.prior_weight,
             }),
         targets_met,
+        identified,
+        bounded: search.bounded,
     };
     write_outputs(out, &result, &grid.evaluations)?;
     draw_figures(out, plan, &grid.records, &result, &cfg.log_axes, progress);
@@ -295,6 +336,9 @@ struct SearchOutcome {
     best: Option<Evaluation>,
     termination: String,
     converged: bool,
+    /// The answer is a bound (ego): the stopping rule held and every target is met on each
+    /// side the answer touches.
+    bounded: bool,
     noise: Option<f64>,
     noise_source: Option<String>,
     surface: Option<Surface>,
@@ -331,6 +375,7 @@ fn search_stage(
         best: None,
         termination: why.to_string(),
         converged: false,
+        bounded: false,
         noise: None,
         noise_source: None,
         surface: None,
@@ -368,6 +413,7 @@ fn search_stage(
                 evaluations,
                 best: None,
                 converged,
+                bounded: false,
                 boxes: vec![SearchedBox {
                     bounds: bounds_of(&problem.dims),
                     termination: termination.clone(),
@@ -434,11 +480,11 @@ fn ego_boxes(
             }
         );
     }
-    let pairs: Vec<(Evaluation, Record)> = grid
+    let pairs: Vec<(Evaluation, Vec<Record>)> = grid
         .evaluations
         .iter()
         .cloned()
-        .zip(grid.records.iter().cloned())
+        .zip(grid.shot_records.iter().cloned())
         .collect();
     let (mut scored, mut runs) = ego::seeded_grid(first, &settings, &pairs)?;
     let seeds = ego::seed_list(&settings);
@@ -495,6 +541,7 @@ fn ego_boxes(
             let p = ego::search(&quiet, &probe, scored.clone(), batches)?;
             let at = ego::coords(&problem, &p.best.params);
             let mut edges = edges_of(&dims, at.as_deref(), p.region.as_ref().map(|r| &r.sides));
+            identify::settle_flat_sides(&mut edges, &dims, &values, &scored);
             let before = bounds_of(&dims);
             if !edges.is_empty()
                 && extend(
@@ -548,10 +595,12 @@ fn ego_boxes(
                             a.objective, o.best.objective
                         ),
                         limit: None,
+                        targets_met: false,
                     });
                 }
             }
         }
+        identify::settle_flat_sides(&mut edges, &dims, &values, &o.evaluations);
         let moved_now = !edges.is_empty()
             && extend(
                 &problem,
@@ -579,8 +628,23 @@ fn ego_boxes(
         if !moved_now {
             let limit = limit_line(&edges);
             let converged = o.converged && edges.is_empty();
-            let termination = if edges.is_empty() {
+            let bounded = o.converged && !edges.is_empty() && edges.iter().all(|e| e.targets_met);
+            let termination = if edges.is_empty() && o.converged {
+                format!("converged: {}", o.termination)
+            } else if edges.is_empty() {
                 o.termination
+            } else if bounded {
+                format!(
+                    "bounded: every target is met on the side{} the answer touches ({}), so the \
+                     targets bound it from the other side only; {}",
+                    if edges.len() > 1 { "s" } else { "" },
+                    edges
+                        .iter()
+                        .map(|e| format!("the {} side of {}", e.side.name(), e.key))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    o.termination
+                )
             } else {
                 format!(
                     "not converged: the answer touches {}; {}",
@@ -602,6 +666,7 @@ fn ego_boxes(
                 best: Some(o.best),
                 termination,
                 converged,
+                bounded,
                 noise: Some(o.noise),
                 noise_source: Some(o.noise_source),
                 surface: o.surface,
@@ -704,7 +769,7 @@ fn paper_point(
             paper_params.insert(k.to_string(), v);
         }
     }
-    let fixed = fixed_overrides(stage.plan, best_values, |k| paper_params.contains_key(k))?;
+    let fixed = fixed_overrides(stage.plans, best_values, |k| paper_params.contains_key(k))?;
     let problem = stage.problem(fixed, Vec::new());
     if seeds.is_empty() {
         let paper = problem.evaluate("paper", &paper_params)?;
@@ -724,7 +789,8 @@ fn paper_point(
     Ok((paper_params, scored.0.clone(), ran, Some(scored)))
 }
 
-/// The calibration's label: `<method>-seeds<s1_s2...>-<digest>`, the digest (8 hex digits of
+/// The calibration's label: `<method>-seeds<s1_s2...>-<digest>` (`<method>-<digest>` at the
+/// scene's own seed), the digest (8 hex digits of
 /// SHA-256) over every setting that can change its answer (the search's settings, the targets
 /// and weights, the first box, and the command line's `--set` overrides when it has any) so that
 /// two calibrations differ in label whenever they may differ in result. The overrides count
@@ -756,26 +822,33 @@ fn label_of(
         "sd_tolerance": cfg.sd_tolerance,
         "refine": cfg.refine,
         "log_axes": cfg.log_axes,
-        "targets": cfg.targets,
+        "targets": cfg.shot_files().first(),
         "weights": cfg.weights,
         "box": first_box,
     });
+    let files = cfg.shot_files();
+    if files.len() > 1 {
+        settings["shots"] = serde_json::json!(files);
+    }
+    if let Some(h) = &args.hold_out {
+        settings["hold_out"] = serde_json::json!(h);
+    }
     // Only when given, so that the labels of calibrations without overrides stay what they were.
     if !args.study.sets.is_empty() {
         settings["set"] = serde_json::json!(args.study.sets);
     }
     let digest = Sha256::digest(hvi_run::plan::canonical_json(&settings).as_bytes());
     let hex: String = digest.iter().take(4).map(|b| format!("{b:02x}")).collect();
-    // The seeds the answer is over (Nelder-Mead and the grid alone: the scene's own).
-    let seeds = if search.seeds.is_empty() {
-        "scene".to_string()
-    } else {
-        search
-            .seeds
-            .iter()
-            .map(u64::to_string)
-            .collect::<Vec<_>>()
-            .join("_")
-    };
+    // The seeds the answer is over; none named for Nelder-Mead and the grid alone (the scene's
+    // own seed).
+    if search.seeds.is_empty() {
+        return Ok(format!("{name}-{hex}"));
+    }
+    let seeds = search
+        .seeds
+        .iter()
+        .map(u64::to_string)
+        .collect::<Vec<_>>()
+        .join("_");
     Ok(format!("{name}-seeds{seeds}-{hex}"))
 }

@@ -1,6 +1,7 @@
-//! The calibration's problem: a point of the searched parameters becomes a run through the
-//! store (at the study's other settings) and is scored against the targets. The grid, the
-//! searches and the paper's point all evaluate through it.
+//! The calibration's problem: a point of the searched parameters becomes a run of each shot
+//! through the store (at the shot's impact and the study's other settings), and the runs are
+//! scored together against the shots' targets. The grid, the searches and the paper's point all
+//! evaluate through it.
 
 use std::cell::RefCell;
 use std::collections::BTreeMap;
@@ -8,7 +9,7 @@ use std::path::Path;
 
 use anyhow::{anyhow, bail, Result};
 use hvi_analysis::observable::Observable;
-use hvi_analysis::score::{objective, Targets, MISSING_TERM};
+use hvi_analysis::score::{combined_objective, Score, Targets, MISSING_TERM};
 use hvi_run::plan::{fingerprint, validated_scene, Plan};
 use hvi_run::runner::Runner;
 use hvi_run::spec::{json_to_override, round_sig, Study};
@@ -16,7 +17,8 @@ use hvi_run::store::{Job, Record, RunStatus, Store};
 use serde_json::Value;
 
 use super::config::CalibrateConfig;
-use super::result::{observed_means, Evaluation};
+pub use super::result::fmt_term;
+use super::result::{shot_means, Evaluation};
 
 /// The cost of a point outside the grid's box or with an invalid scene (no run is made).
 pub const OUTSIDE_COST: f64 = 10.0 * MISSING_TERM;
@@ -41,11 +43,14 @@ pub(super) fn as_num(v: &Value, key: &str) -> Result<f64> {
 /// run through the store.
 pub(super) struct Refinement<'a> {
     pub(super) study: &'a Study,
+    /// The study's plan (the first shot's), which names the study and tier of every run.
     pub(super) plan: &'a Plan,
     pub(super) store: &'a Store,
-    pub(super) targets: &'a Targets,
-    /// Fixed overrides: the plan's common ones plus the non-refined axes at the best point.
-    pub(super) fixed: Vec<String>,
+    /// Each shot's targets, in order (the first is the plan's shot).
+    pub(super) targets: &'a [Targets],
+    /// Per shot, the fixed overrides: its plan's common ones (its impact among them) plus the
+    /// non-refined axes at the best point.
+    pub(super) fixed: Vec<Vec<String>>,
     /// Refined keys, whether each is in log10, and the box in transformed coordinates.
     pub(super) dims: Vec<Dim>,
     pub(super) threads: usize,
@@ -75,14 +80,40 @@ impl Refinement<'_> {
             .collect()
     }
 
-    /// The run of a parameter point (by key), at `seed` (None: the scene's), or why there is
-    /// none (its scene is invalid).
-    pub(super) fn job(
+    /// The combined score of observables per shot (`observable(s, o)`: shot s's value of o).
+    pub(super) fn score(&self, observable: impl Fn(usize, Observable) -> Option<f64>) -> Score {
+        combined_objective(self.targets, observable)
+    }
+
+    /// The runs of a parameter point (by key), one per shot in order, at `seed` (None: the
+    /// scene's), each or why there is none (its scene is invalid).
+    pub(super) fn jobs(
         &self,
         params: &BTreeMap<String, f64>,
         seed: Option<u64>,
+    ) -> Result<Vec<std::result::Result<Job, String>>> {
+        (0..self.fixed.len())
+            .map(|shot| self.job(shot, params, seed))
+            .collect()
+    }
+
+    /// Why a parameter point makes no valid scene for some shot (None: valid for all).
+    pub(super) fn invalid(&self, params: &BTreeMap<String, f64>) -> Result<Option<String>> {
+        Ok(self
+            .jobs(params, None)?
+            .into_iter()
+            .find_map(std::result::Result::err))
+    }
+
+    /// The run of shot `shot` at a parameter point (by key), at `seed` (None: the scene's), or
+    /// why there is none (its scene is invalid).
+    fn job(
+        &self,
+        shot: usize,
+        params: &BTreeMap<String, f64>,
+        seed: Option<u64>,
     ) -> Result<std::result::Result<Job, String>> {
-        let mut set = self.fixed.clone();
+        let mut set = self.fixed[shot].clone();
         for (k, v) in params {
             set.push(format!("{k}={}", json_to_override(&serde_json::json!(v))?));
         }
@@ -107,7 +138,8 @@ impl Refinement<'_> {
         }))
     }
 
-    /// Evaluates a parameter point (by key), running it if the store lacks it.
+    /// Evaluates a parameter point (by key) at the scene's seed, running each shot's run the
+    /// store lacks.
     pub(super) fn evaluate(
         &self,
         stage: &str,
@@ -119,74 +151,101 @@ impl Refinement<'_> {
             .iter()
             .filter(|e| e.stage == stage)
             .count();
-        let outside = |status: String| Evaluation {
-            stage: stage.into(),
-            step,
-            params: params.clone(),
-            score: None,
-            objective: OUTSIDE_COST,
-            status,
-            cached: false,
-            dir: None,
-            seeds: Vec::new(),
-            seed_objectives: Vec::new(),
-            means: BTreeMap::new(),
-        };
-        let job = match self.job(params, None)? {
-            Ok(job) => job,
-            Err(why) => return Ok(outside(why)),
-        };
-        let fp = job.fingerprint.clone();
-        let (record, cached) = match self.store.record(&fp)? {
-            Some(r) if r.status == RunStatus::Completed => (r, true),
-            _ => {
-                let record = match self.runner {
-                    Runner::Local(_) => self.store.execute(&job, self.threads)?,
-                    Runner::Slurm(_) => {
-                        let describe = |_: usize| fmt_params(params);
-                        let report = self.runner.execute(
-                            self.store,
-                            self.out,
-                            self.plan,
-                            std::slice::from_ref(&job),
-                            &describe,
-                            stage,
-                        )?;
-                        report
-                            .records
-                            .into_iter()
-                            .next()
-                            .ok_or_else(|| anyhow!("the run of {stage} has no record"))?
-                    }
-                };
-                // A run measured from another's kept state is no simulation.
-                if record.measured_from.is_none() {
-                    *self.ran.borrow_mut() += 1;
-                }
-                (record, false)
+        let mut jobs = Vec::new();
+        for job in self.jobs(params, None)? {
+            match job {
+                Ok(job) => jobs.push(job),
+                Err(why) => return Ok(outside(stage, step, params, why)),
             }
-        };
-        let score = objective(&self.targets.targets, |n| record.observables.get(n));
-        let e = Evaluation {
+        }
+        let mut records = Vec::new();
+        let mut cached = true;
+        for job in &jobs {
+            let (record, hit) = self.record_of(stage, params, job)?;
+            cached &= hit;
+            records.push(record);
+        }
+        let completed = records.iter().all(|r| r.status == RunStatus::Completed);
+        let score = self.score(|s, o| records[s].observables.get(o));
+        let failed: Vec<String> = records
+            .iter()
+            .filter(|r| r.status != RunStatus::Completed)
+            .map(|r| r.error.clone().unwrap_or_else(|| "(no message)".into()))
+            .collect();
+        let per_shot: Vec<_> = records.iter().map(|r| vec![r.observables]).collect();
+        Ok(Evaluation {
             stage: stage.into(),
             step,
             params: params.clone(),
             objective: score.objective,
             score: Some(score),
-            status: match record.status {
-                RunStatus::Completed => "completed".into(),
-                RunStatus::Failed => format!(
-                    "failed: {}",
-                    record.error.as_deref().unwrap_or("(no message)")
-                ),
+            status: if completed {
+                "completed".into()
+            } else {
+                format!("failed: {}", failed.join("; "))
             },
             cached,
-            dir: Some(hvi_run::plan::run_dir_name(&fp)),
+            dir: Some(hvi_run::plan::run_dir_name(&jobs[0].fingerprint)),
             seeds: Vec::new(),
             seed_objectives: Vec::new(),
-            means: observed_means(std::slice::from_ref(&record.observables)),
+            means: shot_means(self.targets, &per_shot),
+        })
+    }
+
+    /// A run's record from the store, or run (here or on Slurm); whether it was stored.
+    fn record_of(
+        &self,
+        stage: &str,
+        params: &BTreeMap<String, f64>,
+        job: &Job,
+    ) -> Result<(Record, bool)> {
+        if let Some(r) = self.store.record(&job.fingerprint)? {
+            if r.status == RunStatus::Completed {
+                return Ok((r, true));
+            }
+        }
+        let record = match self.runner {
+            Runner::Local(_) => self.store.execute(job, self.threads)?,
+            Runner::Slurm(_) => {
+                let describe = |_: usize| fmt_params(params);
+                let report = self.runner.execute(
+                    self.store,
+                    self.out,
+                    self.plan,
+                    std::slice::from_ref(job),
+                    &describe,
+                    stage,
+                )?;
+                report
+                    .records
+                    .into_iter()
+                    .next()
+                    .ok_or_else(|| anyhow!("the run of {stage} has no record"))?
+            }
         };
-        Ok(e)
+        // A run measured from another's kept state is no simulation.
+        if record.measured_from.is_none() {
+            *self.ran.borrow_mut() += 1;
+        }
+        Ok((record, false))
+    }
+}
+
+/// A point that is not run: outside the box, or a scene the engine rejects (`status` says
+/// which).
+fn outside(stage: &str, step: usize, params: &BTreeMap<String, f64>, status: String) -> Evaluation {
+    Evaluation {
+        stage: stage.into(),
+        step,
+        params: params.clone(),
+        score: None,
+        objective: OUTSIDE_COST,
+        status,
+        cached: false,
+        dir: None,
+        seeds: Vec::new(),
+        seed_objectives: Vec::new(),
+        means: BTreeMap::new(),
     }
 }
 
@@ -202,10 +261,10 @@ pub(super) fn describe_eval(e: &Evaluation) -> String {
     if let Some(score) = &e.score {
         for t in &score.terms {
             s.push_str(&format!(
-                "\n      {:<18} observed {:>12}  term {:.4} (weight {})",
+                "\n      {:<18} observed {:>12}  term {} (weight {})",
                 t.name,
                 t.observed.map_or("n/a".to_string(), |v| format!("{v:.4e}")),
-                t.term,
+                fmt_term(t),
                 t.weight
             ));
         }
@@ -256,9 +315,13 @@ pub(super) fn refined_axes(plan: &Plan, cfg: &CalibrateConfig) -> Result<(Vec<St
 /// What the stages after the grid share: where runs go and how they are scored.
 pub(super) struct Stage<'a> {
     pub(super) study: &'a Study,
+    /// The study's plan (the first shot's).
     pub(super) plan: &'a Plan,
+    /// Each shot's plan: the study's grid at its impact.
+    pub(super) plans: &'a [&'a Plan],
     pub(super) store: &'a Store,
-    pub(super) targets: &'a Targets,
+    /// Each shot's targets.
+    pub(super) targets: &'a [Targets],
     pub(super) threads: usize,
     pub(super) runner: &'a Runner,
     pub(super) out: &'a Path,
@@ -266,8 +329,8 @@ pub(super) struct Stage<'a> {
 }
 
 impl<'a> Stage<'a> {
-    /// A problem over `dims` with the other scene keys at `fixed`.
-    pub(super) fn problem(&self, fixed: Vec<String>, dims: Vec<Dim>) -> Refinement<'a> {
+    /// A problem over `dims` with the other scene keys at `fixed` (per shot).
+    pub(super) fn problem(&self, fixed: Vec<Vec<String>>, dims: Vec<Dim>) -> Refinement<'a> {
         Refinement {
             study: self.study,
             plan: self.plan,
@@ -285,20 +348,25 @@ impl<'a> Stage<'a> {
     }
 }
 
-/// The plan's common overrides plus every axis at the best run's value, except the axes
-/// `moved` names (those the stage sets itself).
+/// Per shot, its plan's common overrides plus every axis at the best run's value, except the
+/// axes `moved` names (those the stage sets itself).
 pub(super) fn fixed_overrides(
-    plan: &Plan,
+    plans: &[&Plan],
     best_values: &[Value],
     moved: impl Fn(&String) -> bool,
-) -> Result<Vec<String>> {
-    let mut fixed = plan.set.clone();
-    for (a, v) in plan.axes.iter().zip(best_values) {
-        if !moved(&a.key) {
-            fixed.push(format!("{}={}", a.key, json_to_override(v)?));
-        }
-    }
-    Ok(fixed)
+) -> Result<Vec<Vec<String>>> {
+    plans
+        .iter()
+        .map(|plan| {
+            let mut fixed = plan.set.clone();
+            for (a, v) in plan.axes.iter().zip(best_values) {
+                if !moved(&a.key) {
+                    fixed.push(format!("{}={}", a.key, json_to_override(v)?));
+                }
+            }
+            Ok(fixed)
+        })
+        .collect()
 }
 
 /// The best scored point over the best grid point and the refinement.

@@ -40,14 +40,123 @@ pub(super) fn draw_figures(
     }
 }
 
-/// The verdict of a calibration in one line: converged or not, and why.
+/// The report's title: the study, the particle count of its runs and where it came from.
+fn title(r: &CalibrationResult) -> String {
+    let n = r.particles.map_or("?".into(), |n| format!("{n}"));
+    match r.particles_asked {
+        Some(asked) => format!(
+            "Calibration of `{}` at {n} particles (`--particles {asked}`: the lattice's nearest \
+             count; the other settings of tier `{}`)",
+            r.study, r.tier
+        ),
+        None => format!(
+            "Calibration of `{}` at tier `{}` ({n} particles)",
+            r.study, r.tier
+        ),
+    }
+}
+
+/// The verdict of a calibration in one line: converged, bounded (the answer is a one-sided
+/// bound or "not identified" on some parameter) or not converged, and why.
 fn verdict_line(r: &CalibrationResult) -> String {
-    let state = match (r.method.as_str(), r.converged) {
-        ("none", _) => "GRID ONLY",
-        (_, true) => "CONVERGED",
-        (_, false) => "NOT CONVERGED",
+    let state = match (r.method.as_str(), r.converged, r.bounded) {
+        ("none", _, _) => "GRID ONLY",
+        (_, true, _) => "CONVERGED",
+        (_, false, true) => "BOUNDED",
+        (_, false, false) => "NOT CONVERGED",
     };
     format!("{state} ({}): {}", r.method, r.termination)
+}
+
+/// The shots calibrated against, each with its impact; with several, each one's own J at the
+/// best point.
+fn shots(sec: &mut Section, r: &CalibrationResult) {
+    let per_shot = r.best.score.as_ref().map(|s| per_shot_objectives(r, s));
+    for (k, s) in r.shots.iter().enumerate() {
+        let j = per_shot
+            .as_ref()
+            .filter(|p| p.len() > 1)
+            .and_then(|p| p.get(k))
+            .map_or(String::new(), |(_, j)| {
+                format!("; its J at the best point {j:.4}")
+            });
+        sec.fact(
+            "shot",
+            format!(
+                "{}{}: {}{j} ({})",
+                s.id,
+                if s.synthetic {
+                    " (SYNTHETIC: an invented example, not a measurement)"
+                } else {
+                    ""
+                },
+                s.impact,
+                s.file.display()
+            ),
+        );
+    }
+    if r.shots.len() > 1 {
+        sec.note(
+            "J is the mean of the shots' own J, each the weighted mean of its terms (every shot \
+             counts alike); a term is named `<shot>:<target>`.",
+        );
+    }
+}
+
+/// Each shot's own J from a combined score.
+fn per_shot_objectives(
+    r: &CalibrationResult,
+    score: &hvi_analysis::score::Score,
+) -> Vec<(String, f64)> {
+    let ids: Vec<String> = r.shots.iter().map(|s| s.id.clone()).collect();
+    hvi_analysis::score::shot_objectives(&ids, score)
+}
+
+/// The held-out shot's prediction against its measurement.
+fn held_out(sec: &mut Section, h: &super::result::HeldOut) {
+    sec.fact(
+        "shot",
+        format!(
+            "{}{}: {}",
+            h.shot.id,
+            if h.shot.synthetic {
+                " (SYNTHETIC: an invented example, not a measurement)"
+            } else {
+                ""
+            },
+            h.shot.impact
+        ),
+    );
+    for line in h.lines() {
+        sec.fact("prediction", line);
+    }
+    sec.fact(
+        "J",
+        format!(
+            "{:.4} against its own targets at the calibrated point, over seeds {:?}",
+            h.evaluation.objective, h.evaluation.seeds
+        ),
+    )
+    .note(
+        "Left out of the calibration (`--hold-out`) and run at its answer: how well the \
+         calibration predicts a shot it did not see. A target is met when its term is at most 1.",
+    );
+}
+
+/// What the targets determine of each searched parameter, one fact each.
+fn identified(sec: &mut Section, r: &CalibrationResult) {
+    if r.identified.is_empty() {
+        return;
+    }
+    for (key, id) in &r.identified {
+        sec.fact("determined", id.describe(key));
+    }
+    sec.note(
+        "An interval is the model's confidence region inside the box. A bound is the answer \
+         where every target is met on the side of the box the answer touches: the targets \
+         bound the parameter from the other side only, and the side is no optimum. \
+         docs/calibration.md, \"What the targets determine\".",
+    );
 }
 
 /// The calibration's report, composed once: the verdict, the calibrated point with its
@@ -55,19 +164,16 @@ fn verdict_line(r: &CalibrationResult) -> String {
 /// console prints its text, calibration.md is its Markdown.
 pub fn report(r: &CalibrationResult) -> Document {
     let mut doc = Document {
-        title: format!(
-            "Calibration of `{}` at tier `{}` ({} particles)",
-            r.study,
-            r.tier,
-            r.particles.map_or("?".into(), |n| format!("{n}"))
-        ),
+        title: title(r),
         preamble: "Written by `hvi-study calibrate` from calibration.json (regenerate it with the \
                    command; do not edit)."
             .into(),
         verdict: verdict_line(r),
         sections: Vec::new(),
     };
+    shots(doc.section("Shots"), r);
     calibrated_point(doc.section("The calibrated point"), r);
+    identified(doc.section("What the targets determine"), r);
     if let Some(surface) = &r.surface {
         valley(
             doc.section("The valley's floor (the model's)"),
@@ -77,6 +183,9 @@ pub fn report(r: &CalibrationResult) -> Document {
     }
     boxes(doc.section("The boxes searched"), r);
     targets(doc.section("Every target at the best point"), r);
+    if let Some(h) = &r.held_out {
+        held_out(doc.section("The held-out shot"), h);
+    }
     let gaps = doc.section("Not scored");
     for g in &r.gaps {
         gaps.fact(
@@ -85,19 +194,47 @@ pub fn report(r: &CalibrationResult) -> Document {
         );
     }
     doc.section("Cost")
-        .fact(
-            "runs",
-            format!(
-                "{} simulated by this invocation ({} in the search after the grid); {} points \
-                 evaluated after the grid; wall time {:.1} s",
-                r.runs_made,
-                r.refinement_runs,
-                r.refinement.len(),
-                r.wall_seconds
-            ),
-        )
+        .fact("runs", cost_line(r))
         .note("Every evaluation is in evaluations.csv.");
     doc
+}
+
+/// The runs simulated and where they went: `12 simulated by this invocation: 4 for the grid, 8
+/// after it (the grid at the search's seeds, 2 search batches); 14 points evaluated after the
+/// grid; wall time 3.1 s`.
+fn cost_line(r: &CalibrationResult) -> String {
+    let mut batches: Vec<&str> = r
+        .refinement
+        .iter()
+        .map(|e| e.stage.as_str())
+        .filter(|s| s.starts_with("ego-"))
+        .collect();
+    batches.dedup();
+    let mut after = Vec::new();
+    if r.refinement.iter().any(|e| e.stage == "grid-seeds") {
+        after.push("the grid at the search's seeds".to_string());
+    }
+    if r.refinement.iter().any(|e| e.stage.starts_with("extend-")) {
+        after.push("the extended boxes' grid points".to_string());
+    }
+    match (r.method.as_str(), batches.len()) {
+        ("ego", n) => after.push(format!("{n} search batch(es)")),
+        ("nelder-mead", _) => after.push("the Nelder-Mead steps".to_string()),
+        _ => {}
+    }
+    let after = if after.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", after.join(", "))
+    };
+    format!(
+        "{} simulated by this invocation, {} of them after the grid{after}; {} points evaluated \
+         after the grid; wall time {:.1} s",
+        r.runs_made,
+        r.refinement_runs,
+        r.refinement.len(),
+        r.wall_seconds
+    )
 }
 
 /// The best point against the paper's fit, its confidence region, where the runs meet every
@@ -318,7 +455,11 @@ fn boxes(sec: &mut Section, r: &CalibrationResult) {
         rows,
     );
     if let Some(limit) = &r.limit {
-        sec.fact("limit", format!("Not an optimum inside the box: {limit}"));
+        if r.bounded {
+            sec.fact("limit", format!("A bound, not an optimum: {limit}"));
+        } else {
+            sec.fact("limit", format!("Not an optimum inside the box: {limit}"));
+        }
     }
 }
 
@@ -336,7 +477,7 @@ fn targets(sec: &mut Section, r: &CalibrationResult) {
                 t.name.clone(),
                 t.observed.map_or("n/a".into(), |v| format!("{v:.4}")),
                 sp.map_or("n/a".into(), |x| format!("{:.4} ({} seeds)", x.sd, x.seeds)),
-                format!("{:.4}", t.term),
+                super::problem::fmt_term(t),
                 t.weight.to_string(),
             ]
         })

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use hvi_analysis::observable::{Observable, Observables};
-use hvi_analysis::score::Score;
+use hvi_analysis::score::{Score, Target, Targets, MISSING_TERM};
 use serde::{Deserialize, Serialize};
 
 /// One evaluated point: a grid run or a refinement step.
@@ -63,6 +63,27 @@ pub fn observed_means(runs: &[Observables]) -> BTreeMap<String, f64> {
         .collect()
 }
 
+/// The seed means of a point's runs over several shots (`runs[s]`: shot s's runs, one per
+/// seed): the first shot's by observable name (what the maps draw), every other shot's as
+/// `<shot id>:<name>`.
+pub fn shot_means(
+    shots: &[hvi_analysis::score::Targets],
+    runs: &[Vec<Observables>],
+) -> BTreeMap<String, f64> {
+    let mut means = BTreeMap::new();
+    for (s, r) in runs.iter().enumerate() {
+        for (name, v) in observed_means(r) {
+            match (s, shots.get(s)) {
+                (0, _) | (_, None) => means.insert(name, v),
+                (_, Some(t)) => {
+                    means.insert(hvi_analysis::score::shot_term_name(&t.shot.id, &name), v)
+                }
+            };
+        }
+    }
+    means
+}
+
 /// What `calibrate` writes into calibration.json.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CalibrationResult {
@@ -76,9 +97,20 @@ pub struct CalibrationResult {
     pub tier: String,
     /// Particles of the runs (from the best run).
     pub particles: Option<f64>,
-    /// The target file.
+    /// The particle count asked with `--particles` (None: the tier's); the lattice takes the
+    /// nearest count it can lay out.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub particles_asked: Option<f64>,
+    /// The (first) shot's target file.
     pub targets_file: PathBuf,
-    /// The targets' names, kinds, values, tolerances and weights.
+    /// Every shot calibrated against, in order.
+    #[serde(default)]
+    pub shots: Vec<ShotUse>,
+    /// The shot left out (`--hold-out`) and its prediction at the answer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<HeldOut>,
+    /// The targets' names, kinds, values, tolerances and weights, as the objective scores them
+    /// (with several shots, `<shot id>:<target>`, each shot counting alike).
     pub targets: Vec<hvi_analysis::score::Target>,
     /// The documented gaps (not scored).
     pub gaps: Vec<hvi_analysis::score::Gap>,
@@ -141,6 +173,14 @@ pub struct CalibrationResult {
     /// The evaluated points that meet every target, at the answer's seeds (None: none scored).
     #[serde(default)]
     pub targets_met: Option<TargetsMet>,
+    /// What the targets determine of each searched parameter: an interval, a one-sided bound,
+    /// nothing over the box, or an optimum beyond a side the search could not pass.
+    #[serde(default)]
+    pub identified: BTreeMap<String, Identified>,
+    /// Whether the answer is a bound: the search's stopping rule held, the answer touches a
+    /// side, and every target is met on each side it touches.
+    #[serde(default)]
+    pub bounded: bool,
 }
 
 /// The evaluated points that meet every target: each target's term within its tolerance
@@ -374,6 +414,10 @@ pub struct Edge {
     /// Why it was not extended further (None while it can be).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub limit: Option<String>,
+    /// Whether a point on this side meets every target: the targets then bound the parameter
+    /// from the other side only (docs/calibration.md, "What the targets determine").
+    #[serde(default)]
+    pub targets_met: bool,
 }
 
 impl Edge {
@@ -421,6 +465,210 @@ pub fn fmt_bounds(bounds: &BTreeMap<String, (f64, f64)>) -> String {
         .map(|(k, (lo, hi))| format!("{k} in [{}, {}]", fmt_value(*lo), fmt_value(*hi)))
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+/// What the targets determine of one searched parameter, in its unit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Identified {
+    /// Bounded on both sides: the confidence region lies inside the box.
+    Interval {
+        /// The region's lowest value.
+        low: f64,
+        /// Its highest.
+        high: f64,
+    },
+    /// Bounded above only: every target is met down to the box's low side, `floor`; below it
+    /// nothing was looked at, and the targets did not rise towards it.
+    AtMost {
+        /// The highest value at which the targets are met or the model's region reaches.
+        high: f64,
+        /// The box's low side.
+        floor: f64,
+    },
+    /// Bounded below only (the mirror image of [`Identified::AtMost`]).
+    AtLeast {
+        /// The lowest value at which the targets are met or the model's region reaches.
+        low: f64,
+        /// The box's high side.
+        ceiling: f64,
+    },
+    /// Every target is met at both sides of the box: the targets do not determine it here.
+    NotIdentified {
+        /// The box's low side.
+        low: f64,
+        /// Its high side.
+        high: f64,
+    },
+    /// The answer lies beyond a side the search could not pass, and the targets are not met
+    /// there: the optimum is outside what was searched.
+    BeyondLimit {
+        /// Which side.
+        side: Side,
+        /// The side's value.
+        value: f64,
+    },
+}
+
+impl Identified {
+    /// Whether this is an answer (an interval, a bound or "not identified"), as opposed to an
+    /// optimum left outside the box.
+    pub fn is_answer(&self) -> bool {
+        !matches!(self, Identified::BeyondLimit { .. })
+    }
+
+    /// Whether it is bounded on both sides.
+    pub fn is_two_sided(&self) -> bool {
+        matches!(self, Identified::Interval { .. })
+    }
+
+    /// In words, with the key and its unit: `material.eps_j <= 1e-4 J, not identified below
+    /// the box's 1e-5 J`.
+    pub fn describe(&self, key: &str) -> String {
+        let unit = hvi_engine::scene::keys::find(key)
+            .map(|k| k.unit())
+            .filter(|u| *u != "-")
+            .map_or(String::new(), |u| format!(" {u}"));
+        let v = |x: f64| format!("{}{unit}", fmt_value(x));
+        match *self {
+            Identified::Interval { low, high } => {
+                format!("{key} in [{}, {}]", fmt_value(low), v(high))
+            }
+            Identified::AtMost { high, floor } => format!(
+                "{key} <= {}, not identified below the box's {} (every target is met down to it)",
+                v(high),
+                v(floor)
+            ),
+            Identified::AtLeast { low, ceiling } => format!(
+                "{key} >= {}, not identified above the box's {} (every target is met up to it)",
+                v(low),
+                v(ceiling)
+            ),
+            Identified::NotIdentified { low, high } => format!(
+                "{key} not identified in [{}, {}]: every target is met at both sides",
+                fmt_value(low),
+                v(high)
+            ),
+            Identified::BeyondLimit { side, value } => format!(
+                "{key} lies {} the box's {} side, {}, which the search could not pass, and the \
+                 targets are not met there",
+                match side {
+                    Side::Low => "below",
+                    Side::High => "beyond",
+                },
+                side.name(),
+                v(value)
+            ),
+        }
+    }
+}
+
+/// A shot as calibration.json records it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShotUse {
+    /// The shot's id.
+    pub id: String,
+    /// Its file.
+    pub file: PathBuf,
+    /// An invented example, not a measurement.
+    #[serde(default)]
+    pub synthetic: bool,
+    /// The impact it is simulated at, in words (with its documented offset, if any).
+    pub impact: String,
+}
+
+impl ShotUse {
+    /// From a shot's targets.
+    pub fn of(t: &Targets) -> ShotUse {
+        ShotUse {
+            id: t.shot.id.clone(),
+            file: t.path.clone(),
+            synthetic: t.shot.synthetic,
+            impact: impact_words(t),
+        }
+    }
+}
+
+/// The impact of a shot in words: `9.53 mm Al sphere at 6700 m/s on t/D 0.425 (simulated at
+/// ...: reason)`.
+pub(super) fn impact_words(t: &Targets) -> String {
+    let s = &t.shot;
+    let mut w = format!(
+        "a {} mm sphere ({}) at {} m/s on a plate ({}) of t/D {}",
+        hvi_run::spec::round_sig(s.impactor_diameter_m * 1e3, 6),
+        s.impactor_material,
+        s.simulated_v0_m_s(),
+        s.plate_material,
+        s.simulated_t_over_d()
+    );
+    if let Some(t) = s.observation_time_s {
+        w.push_str(&format!(", observed {} us after first contact", t * 1e6));
+    }
+    if let Some(o) = s.describe_offset() {
+        w.push_str(&format!(" ({o})"));
+    }
+    w
+}
+
+/// A held-out shot's prediction at the calibrated point: every target's observable over the
+/// seeds against its measurement.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct HeldOut {
+    /// The shot.
+    pub shot: ShotUse,
+    /// Its targets.
+    pub targets: Vec<Target>,
+    /// Its runs at the calibrated point, scored against its targets (seed means).
+    pub evaluation: Evaluation,
+    /// Each target's observable over the seeds.
+    pub spread: Vec<Spread>,
+}
+
+impl HeldOut {
+    /// Per target, in words: `length_ratio: predicted 1.43 (sd 0.02 over 2 seeds), measured
+    /// 1.40 within 0.1: term 0.09`.
+    pub fn lines(&self) -> Vec<String> {
+        let Some(score) = &self.evaluation.score else {
+            return vec![format!("no prediction: {}", self.evaluation.status)];
+        };
+        self.targets
+            .iter()
+            .zip(&score.terms)
+            .map(|(t, term)| {
+                let sp = self.spread.iter().find(|s| s.target == t.name);
+                let predicted = match (term.observed, sp) {
+                    (Some(v), Some(s)) => {
+                        format!("{v:.4} (sd {:.4} over {} seeds)", s.sd, s.seeds)
+                    }
+                    (Some(v), None) => format!("{v:.4}"),
+                    (None, _) => "not measured".into(),
+                };
+                format!(
+                    "{}: predicted {predicted}, measured {} {} (tolerance {}): term {}",
+                    t.name,
+                    match t.kind {
+                        hvi_analysis::score::TargetKind::AtMost => "at most",
+                        _ => "",
+                    },
+                    t.value,
+                    t.tolerance,
+                    fmt_term(term)
+                )
+                .replace("measured  ", "measured ")
+            })
+            .collect()
+    }
+}
+
+/// A term as reports print it: `>= 1000 (capped)` where an observed value lies so far off
+/// that its term reached the cap (the same value a missing observable costs), `n/a (missing)`
+/// where the run did not measure it.
+pub fn fmt_term(t: &hvi_analysis::score::Term) -> String {
+    match t.observed {
+        None => format!("{:.0} (observable missing)", t.term),
+        Some(_) if t.term >= MISSING_TERM => format!(">= {MISSING_TERM:.0} (capped)"),
+        Some(_) => format!("{:.4}", t.term),
+    }
 }
 
 #[cfg(test)]
