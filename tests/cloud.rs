@@ -975,3 +975,65 @@ fn adaptive_run_samples_on_schedule() {
     assert_eq!(energy.lines().count() - 1, base.div_ceil(200) as usize + 1);
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn the_largest_piece_of_the_impactor_is_reported_beside_the_clouds_largest_fragment() {
+    let mut b = Builder::default();
+    // Plate: 6 x 6 x 2 sites, rear face at 2a; its rim holds the residual plate.
+    let plate = b.block(
+        DVec3::new(-2.5 * A, -2.5 * A, 0.5 * A),
+        [6, 6, 2],
+        A,
+        Body::Target,
+        M_TARGET,
+    );
+    let rim: Vec<u32> = plate
+        .iter()
+        .filter(|&&id| {
+            let p = b.pos[id];
+            p.x.abs().max(p.y.abs()) > 2.0 * A
+        })
+        .map(|&id| id as u32)
+        .collect();
+    // Beyond the face: a 4 x 4 x 2 spall of plate material (the cloud's largest fragment), a
+    // 2 x 2 x 1 piece of the impactor and six impactor loners (impactor: 10 particles).
+    b.block(
+        DVec3::new(-1.5 * A, -1.5 * A, 8.0 * A),
+        [4, 4, 2],
+        A,
+        Body::Target,
+        M_TARGET,
+    );
+    b.block(
+        DVec3::new(6.0 * A, 6.0 * A, 12.0 * A),
+        [2, 2, 1],
+        A,
+        Body::Impactor,
+        M_IMPACTOR,
+    );
+    for k in 0..6 {
+        b.add(
+            DVec3::new(-6.0 * A, (k as f64 - 3.0) * 1.5 * A, 15.0 * A),
+            Body::Impactor,
+            M_IMPACTOR,
+        );
+    }
+    let derived = derived_with(2.0 * A, DENSITY, 1000.0);
+    let p = b.in_order();
+    let reference = CloudReference::new(&p, &derived, &rim);
+    let members = find_cloud(&p, &reference);
+    let m = measure(&p, &members, &reference, 0.995, Width::Side, 1.0, 1.0).measurement;
+    let impactor = 10.0 * M_IMPACTOR;
+    let largest = m.largest_fragment_mass_fraction.expect("largest");
+    assert!(
+        (largest - 32.0 * M_TARGET / impactor).abs() < 1e-12,
+        "{largest}"
+    );
+    let piece = m
+        .impactor_largest_fragment_mass_fraction
+        .expect("impactor's largest piece");
+    assert!(
+        (piece - 4.0 * M_IMPACTOR / impactor).abs() < 1e-12,
+        "{piece}"
+    );
+}

@@ -51,8 +51,10 @@ pub enum Observable {
     FrontVelocity,
     /// va / v0.
     FrontVelocityRatio,
-    /// Largest fragment's mass over the impactor mass.
+    /// The cloud's largest fragment's mass over the impactor mass.
     LargestFragmentMassFraction,
+    /// The impactor mass of the cloud fragment holding the most of it, over the impactor mass.
+    ImpactorLargestFragmentMassFraction,
     /// Largest fragment's volume-equivalent diameter.
     LargestFragmentDiameter,
     /// Mass-weighted mean fragment diameter.
@@ -115,7 +117,7 @@ const fn def(
 }
 
 /// Every observable, in table order (a plain table: the one place an observable is named).
-pub const DEFINITIONS: [Definition; 28] = {
+pub const DEFINITIONS: [Definition; 29] = {
     use Observable::*;
     [
         def(Particles, "particles", "N", "1", "particles in the run"),
@@ -208,7 +210,14 @@ pub const DEFINITIONS: [Definition; 28] = {
             "largest_fragment_mass_fraction",
             "largest fragment",
             "1",
-            "largest fragment's mass over the impactor's",
+            "the cloud's largest fragment's mass (impactor or plate material) over the impactor's",
+        ),
+        def(
+            ImpactorLargestFragmentMassFraction,
+            "impactor_largest_fragment_mass_fraction",
+            "largest impactor piece",
+            "1",
+            "the impactor mass of the cloud fragment holding the most of it, over the impactor's",
         ),
         def(
             LargestFragmentDiameter,

@@ -437,8 +437,15 @@ pub struct CloudMeasurement {
     pub impactor_mass_fraction_in_cloud: f64,
     /// Mass of the largest fragment, kg.
     pub largest_fragment_mass_kg: Option<f64>,
-    /// Mass of the largest fragment over the impactor's mass.
+    /// Mass of the cloud's largest fragment (of impactor or plate material, or both) over the
+    /// impactor's mass.
     pub largest_fragment_mass_fraction: Option<f64>,
+    /// The largest piece of the impactor in the cloud: the impactor mass of the cloud fragment
+    /// that holds the most of it, over the impactor's mass (0 when no cloud fragment holds
+    /// impactor particles). What "no large piece of the impactor remains intact" is about; the
+    /// cloud's largest fragment can be a piece of the plate.
+    #[serde(default)]
+    pub impactor_largest_fragment_mass_fraction: Option<f64>,
     /// Volume-equivalent diameter of the largest fragment, m.
     pub largest_fragment_diameter_m: Option<f64>,
     /// Particles in the largest fragment.
@@ -557,6 +564,15 @@ pub fn measure(
         .map(|&i| p.mass[i])
         .sum();
     let largest = fragments.first();
+    // Every impactor particle has the impactor's particle mass (one lattice, one density).
+    let impactor_particle_kg = order
+        .iter()
+        .find(|&&i| p.body[i] == Body::Impactor)
+        .map(|&i| p.mass[i]);
+    let impactor_largest = impactor_particle_kg.and_then(|m| {
+        let most = fragments.iter().map(|f| f.impactor_particles).max()?;
+        Some(most as f64 * m)
+    });
     let mean_fragment_diameter_m = (mass_kg > 0.0).then(|| {
         fragments
             .iter()
@@ -597,6 +613,7 @@ pub fn measure(
         impactor_mass_fraction_in_cloud: per_impactor(impactor_in_cloud),
         largest_fragment_mass_kg: largest.map(|f| f.mass_kg),
         largest_fragment_mass_fraction: largest.map(|f| per_impactor(f.mass_kg)),
+        impactor_largest_fragment_mass_fraction: impactor_largest.map(per_impactor),
         largest_fragment_diameter_m: largest.map(|f| f.diameter_m),
         largest_fragment_particles: largest.map_or(0, |f| f.particles),
         mean_fragment_diameter_m,

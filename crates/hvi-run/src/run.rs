@@ -330,6 +330,9 @@ impl Summary {
                 Observable::LargestFragmentMassFraction => {
                     m.and_then(|m| m.largest_fragment_mass_fraction)
                 }
+                Observable::ImpactorLargestFragmentMassFraction => {
+                    m.and_then(|m| m.impactor_largest_fragment_mass_fraction)
+                }
                 Observable::LargestFragmentDiameter => {
                     m.and_then(|m| m.largest_fragment_diameter_m)
                 }
@@ -1564,7 +1567,8 @@ pub fn describe_cloud(c: &CloudReport) -> String {
         "cloud at tau = {:.2} us: N_part {}, N_frag {}, F = {}; La = {} mm, Lr = {} mm, R = {} \
          ({:.1} % quantile, Lr {}; by the maxima {} / {} mm, R = {})\n\
          front velocity va = {} m/s, va/v0 = {} (front at tau = {} and {} us); largest fragment \
-         {} mm, {} of the impactor mass ({} particles); mass-weighted mean d = {} mm",
+         {} mm, {} of the impactor mass ({} particles); largest piece of the impactor {} of its \
+         mass; mass-weighted mean d = {} mm",
         m.tau_s * 1e6,
         m.n_part,
         m.n_frag,
@@ -1584,6 +1588,7 @@ pub fn describe_cloud(c: &CloudReport) -> String {
         f(m.largest_fragment_diameter_m, 1e3, 3),
         f(m.largest_fragment_mass_fraction, 1.0, 4),
         m.largest_fragment_particles,
+        f(m.impactor_largest_fragment_mass_fraction, 1.0, 4),
         f(m.mean_fragment_diameter_m, 1e3, 3),
     )
 }
