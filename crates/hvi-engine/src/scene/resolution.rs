@@ -757,6 +757,27 @@ mod tests {
         );
     }
 
+    /// Quarter symmetry halves the plate laterally and keeps every layer: the target's
+    /// distinct heights in the quarter's layout are the layers the check counts.
+    #[test]
+    fn the_quarter_layout_has_the_layers_the_check_counts() {
+        for t in [0.05, 0.2, 0.425] {
+            let mut spec = calibration(2000.0, t, 3.0);
+            spec.run.symmetry = crate::symmetry::Symmetry::Quarter;
+            let setup = spec.build().expect("valid scene");
+            let p = &setup.particles;
+            let mut z: Vec<u64> = (0..p.len())
+                .filter(|&k| p.body[k] == crate::state::Body::Target)
+                .map(|k| p.pos[k].z.to_bits())
+                .collect();
+            z.sort_unstable();
+            z.dedup();
+            let check = setup.resolution_check();
+            assert_eq!(z.len() as u32, check.plates[0].layers, "t/D {t}");
+            assert_eq!(check, spec.resolution_check().expect("valid"));
+        }
+    }
+
     /// By hand: the calibration plate (t/D 0.425) at 2000 particles: V = 4.3486 D^3, r_eq =
     /// 0.12959 D, t / r_eq = 3.28: 3 layers, simulated t/D 0.3888, 8.5 % thinner: no warning.
     /// At 500: r_eq = 0.20572 D, t / r_eq = 2.07: 2 layers, simulated 0.411 (3.2 % thinner).
