@@ -740,6 +740,82 @@ fn keys_lists_the_registry_the_docs_print_and_suspicious_values_warn() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// Issue 53: a resolution that cannot represent the scene says so, with the numbers. By hand
+/// (docs/running.md, "Resolution"): the calibration scene at 2000 particles with t/D = 0.05
+/// has r_eq = 0.0787 D = 0.75 mm, so the 0.4765 mm plate is 1 layer, simulated t/D 0.0787
+/// (57 % thicker); the plate's volume fell from 4.35 D^3 to 0.974 D^3, so sigma fell from
+/// 1.1 mm to 0.668 mm. default.toml's 10000 particles on a plate of W = 6 D: sigma 0.643 mm
+/// -> 0.989 mm. The quick validity map's t/D 0.05 and 0.1 (10 particles across D) are one
+/// plate of 1 layer; its plan says so once, naming their 16 runs.
+#[test]
+fn a_plate_the_resolution_cannot_represent_is_named_with_its_numbers() {
+    let out = scratch("resolution");
+    let scene = |file: &str, sets: &[&str]| {
+        let mut cmd = bin();
+        cmd.arg("run")
+            .arg(repo().join("studies/scenes").join(file))
+            .arg("--out")
+            .arg(&out)
+            .args(["--quiet", "--fresh"]);
+        for s in sets {
+            cmd.args(["--set", s]);
+        }
+        let o = cmd.output().expect("runs");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    let at = ["resolution.particles=2000", "run.end_time_s=1e-7"];
+    let err = scene("calibration.toml", &[at[0], at[1], "scene.t_over_d=0.05"]);
+    for line in [
+        "warning: scene.t_over_d = 0.05 gives a plate of 1 particle layer (r_eq 0.75 mm; \
+         simulated t/D 0.0787), fewer than the minimum of 3: resolution.particles >= 1.22e5 \
+         (or resolution.particles_across_d >= 50) gives it 3\n",
+        "warning: scene.t_over_d = 0.05 is simulated as t/D 0.0787: 0.75 mm thick, not \
+         0.477 mm (1 layer of r_eq 0.75 mm), 57 % thicker than asked, beyond the 10 % \
+         tolerance: resolution.particles >= 9.74e5 (or resolution.particles_across_d >= 100) \
+         keeps it within 10 %\n",
+        "warning: scene.t_over_d = 0.05 (was 0.425) changes sigma from 1.1 mm to 0.668 mm at \
+         resolution.particles = 2000",
+    ] {
+        assert!(err.contains(line), "{line}\nnot in\n{err}");
+    }
+    // The scene file's own plate at the same count: 3 layers, 8.5 % thin, the same sigma.
+    let err = scene("calibration.toml", &at);
+    for word in ["layer", "tolerance", "sigma"] {
+        assert!(!err.contains(word), "{err}");
+    }
+
+    let err = scene(
+        "default.toml",
+        &["scene.width_over_d=6", "run.end_time_s=1e-7"],
+    );
+    assert!(
+        err.contains(
+            "warning: scene.width_over_d = 6 (was 3) changes sigma from 0.643 mm to 0.989 mm \
+             at resolution.particles = 10000 (the particles fill the whole scene's volume): \
+             resolution.particles = 36400 keeps sigma at 0.643 mm\n"
+        ),
+        "{err}"
+    );
+
+    let o = bin()
+        .arg("plan")
+        .arg(repo().join("studies/validity-map.toml"))
+        .arg("--out")
+        .arg(out.join("plan"))
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    let line = "warning: scene.t_over_d = 0.05 and 0.1 give the same plate of 1 particle layer \
+                (r_eq 0.953 mm; simulated t/D 0.1), fewer than the minimum of 3: \
+                resolution.particles_across_d >= 50 gives it 3 (16 of 56 runs: \
+                scene.t_over_d = 0.05, 0.1)\n";
+    assert!(err.contains(line), "{err}");
+    assert_eq!(err.matches("0.05 and 0.1").count(), 1, "once: {err}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 #[test]
 fn completions_man_pages_and_help_say_what_each_command_takes() {
     let o = bin().args(["completions", "bash"]).output().expect("runs");

@@ -3,6 +3,7 @@
 //! Runs scenes and studies and keeps their results: scene files with `--set` overrides
 //! ([`scene_file`]), one run and its files ([`run`], [`output`]), the cloud's kept state for
 //! re-analysis ([`state`]), study files and their validated plans ([`spec`], [`plan`]), the
+//! resolution warnings of a scene or a plan ([`resolution`]), the
 //! run store that keeps each result once ([`store`]) and measures a run from another's kept
 //! state where only the measurement differs ([`remeasured`]), checkpoints of runs in progress
 //! ([`checkpoint`]), parallel execution ([`exec`]) or as Slurm batches ([`runner`]), results tables ([`table`]), Slurm job
@@ -49,6 +50,7 @@ pub mod lock;
 pub mod output;
 pub mod plan;
 pub mod remeasured;
+pub mod resolution;
 pub mod run;
 pub mod runner;
 pub mod scene_file;

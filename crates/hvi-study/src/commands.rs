@@ -210,7 +210,8 @@ fn run(args: RunArgs) -> Result<()> {
         anyhow::bail!("invalid value for `--dump-every`: 0 (allowed: an integer >= 1)");
     }
     let spec = load_scene(&args.scene, &args.sets)?;
-    for w in spec.warnings() {
+    let resolution = hvi_run::resolution::scene_warnings(&args.scene, &args.sets, &spec);
+    for w in spec.warnings().into_iter().chain(resolution) {
         eprintln!("warning: {w}");
     }
     let pool = thread_pool(args.threads)?;
@@ -439,7 +440,8 @@ fn accuracy(args: AccuracyArgs) -> Result<()> {
 /// `hvi-study submit --slurm`.
 fn submit(args: &SubmitArgs) -> Result<()> {
     let opts = args.slurm_options()?;
-    let (_, plan, out) = args.study.build_plan()?;
+    let (study, plan, out) = args.study.build_plan()?;
+    crate::study::sweep::print_resolution_warnings(&study, &plan)?;
     match hvi_run::slurm::submit(&plan, &out, &opts)? {
         hvi_run::slurm::Submitted::Nothing => {}
         hvi_run::slurm::Submitted::DryRun { script } => print!("{script}"),

@@ -198,7 +198,7 @@ impl SceneSpec {
 impl Resolution {
     /// The lattice spacing r_eq, m: the cube root of the volume per particle, or the sphere
     /// diameter over the particles across it.
-    fn lattice_spacing_m(&self, geometry: &Geometry) -> Result<f64> {
+    pub(super) fn lattice_spacing_m(&self, geometry: &Geometry) -> Result<f64> {
         match (self.particles, self.particles_across_d) {
             (Some(n), None) => {
                 keys::check("resolution.particles", n)?;

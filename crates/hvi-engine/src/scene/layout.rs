@@ -237,6 +237,14 @@ pub(super) fn lay_out(geometry: &Geometry, r_eq: f64, symmetry: Symmetry) -> Res
     }
 }
 
+/// Particle layers through a plate of thickness `thickness_m` at spacing `r_eq`: the nearest
+/// whole number. Both geometries lay out their plates as this many lattice layers, and
+/// quarter symmetry keeps every layer (it halves the plate only laterally), so this is the
+/// one count the resolution's checks (`resolution`) read.
+pub(super) fn layer_count(thickness_m: f64, r_eq: f64) -> i64 {
+    (thickness_m / r_eq).round() as i64
+}
+
 /// Sites per side of a square of side `width` at spacing `r_eq` (at least 1, or 2 when
 /// `even`).
 fn sites_per_side(width: f64, r_eq: f64, even: bool) -> i64 {
@@ -288,7 +296,7 @@ fn lay_out_sphere_on_plate(
     even: bool,
 ) -> Result<Layout> {
     let t = t_over_d * diameter_m;
-    let nz = (t / r_eq).round() as i64;
+    let nz = layer_count(t, r_eq);
     if nz < 1 {
         return Err(EngineError::invalid(
             "scene.t_over_d",
@@ -376,8 +384,8 @@ fn lay_out_flyer_plate(
     r_eq: f64,
     even: bool,
 ) -> Result<Layout> {
-    let nt = (target_thickness_m / r_eq).round() as i64;
-    let nf = (flyer_thickness_m / r_eq).round() as i64;
+    let nt = layer_count(target_thickness_m, r_eq);
+    let nf = layer_count(flyer_thickness_m, r_eq);
     if nt < 1 {
         return Err(EngineError::invalid(
             "scene.target_thickness_m",

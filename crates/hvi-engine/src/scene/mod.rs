@@ -11,18 +11,26 @@
 //! `keys` (the registry of every key: meaning, allowed values, default; the intervals the
 //! checks use), `validate` (range checks of the geometry and run settings), `build` (the steps from a spec
 //! to a [`Setup`], and the [`Derived`] numbers), `layout` (lattice sites, bonds, thermal
-//! velocities). Everything public is re-exported here, so paths are `hvi_engine::scene::X`.
+//! velocities), `resolution` (each plate's layers at this resolution, and the warnings when
+//! the lattice cannot represent the scene or a change of the geometry moved sigma).
+//! Everything public is re-exported here, so paths are `hvi_engine::scene::X`.
 
 mod analysis;
 mod build;
 pub mod keys;
 mod layout;
+mod resolution;
 mod spec;
 mod time_step;
 mod validate;
 
 pub use analysis::{Analysis, Width, DEFAULT_FRONT_TIMES_S, DEFAULT_QUANTILE, MEASUREMENT_KEYS};
 pub use build::{Derived, Setup};
+pub use resolution::{
+    merged_warnings, sigma_change, KeyChange, MergedWarning, Plate, ResolutionCheck,
+    ResolutionIssue, ResolutionWarning, SigmaChange, MIN_PLATE_LAYERS, SIGMA_CHANGE_TOLERANCE,
+    THICKNESS_TOLERANCE,
+};
 pub use spec::{
     Geometry, Material, Resolution, RunSettings, SceneSpec, SizingRule, TimeStep,
     DEFAULT_SKIN_OVER_SIGMA,

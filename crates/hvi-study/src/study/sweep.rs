@@ -1,16 +1,18 @@
 //! `hvi-study plan`, `sweep` and `run-unit`: a study planned, run whole, or one of its runs
-//! executed for an external scheduler.
+//! executed for an external scheduler; a plan's resolution warnings printed.
 
 use super::options::StudyOptions;
 use anyhow::Result;
 
 use hvi_run::plan::Plan;
+use hvi_run::spec::Study;
 use hvi_run::store::{RunStatus, Store};
 use hvi_run::study::{execute_plan, job};
 
 /// `hvi-study plan`: validates a study and writes its plan.json without running anything.
 pub fn plan(args: &StudyOptions) -> Result<()> {
-    let (_, plan, out) = args.plan()?;
+    let (study, plan, out) = args.plan()?;
+    print_resolution_warnings(&study, &plan)?;
     let store = Store::open(&out)?;
     let mut done = 0;
     for r in &plan.runs {
@@ -40,11 +42,21 @@ pub fn plan(args: &StudyOptions) -> Result<()> {
 
 /// `hvi-study sweep`: plans and executes every run of a study, writes results.csv/json.
 pub fn sweep(args: &StudyOptions) -> Result<()> {
-    let (_, plan, out) = args.plan()?;
+    let (study, plan, out) = args.plan()?;
+    print_resolution_warnings(&study, &plan)?;
     let (_, report) = execute_plan(&plan, &out, &args.exec_options())?;
     eprintln!("{}", report.line());
     print_failures(&report.records);
     println!("{}", out.join("results.csv").display());
+    Ok(())
+}
+
+/// Prints each distinct resolution warning of a plan once, with the runs it concerns
+/// (docs/running.md, "Resolution"), as `warning: ...` on stderr.
+pub fn print_resolution_warnings(study: &Study, plan: &Plan) -> Result<()> {
+    for w in hvi_run::resolution::plan_warnings(study, plan)? {
+        eprintln!("warning: {}", w.line(plan));
+    }
     Ok(())
 }
 

@@ -127,6 +127,7 @@ pub struct ValidityOptions {
 /// `hvi-study validity-map`.
 pub fn validity_map(args: &ValidityOptions) -> Result<ValidityMap> {
     let (study, plan, out) = args.study.plan()?;
+    super::sweep::print_resolution_warnings(&study, &plan)?;
     let cfg = ValidityConfig::of(&study)?;
     let cutoff = cfg.cutoff(args.cutoff)?;
     map_axes(&plan)?;
