@@ -1766,6 +1766,17 @@ fn a_two_shot_calibration_scores_each_shot_at_its_impact_and_predicts_a_held_out
     let out = dir.join("out");
     let o = calibrate(&study, &out);
     assert_ok(&o);
+    // At 400 particles the synthetic shot's plate (t/D 0.2) is thinner than 3 layers, and no
+    // particle is well below the paper's shot's 1 mm fragments: both said, with their numbers.
+    let e = stderr(&o);
+    assert!(
+        e.contains("warning: shot synthetic-al-5kms: scene.t_over_d = 0.2 gives a plate of 1 particle layer"),
+        "{e}"
+    );
+    assert!(
+        e.contains("warning: shot emi-calibration-shot: target `fragment_size` measures fragments of 1 mm, and one particle is already"),
+        "{e}"
+    );
     let c = calibration_json(&out);
     let ids: Vec<&str> = c["shots"]
         .as_array()

@@ -176,6 +176,11 @@ pub(crate) fn calibrate_plan(
             eprintln!("{}", shots::describe_shot(t));
         }
     }
+    for s in shots {
+        for w in shots::resolution_warnings(study, s)? {
+            eprintln!("warning: {w}");
+        }
+    }
     let (refine_keys, dims) = refined_axes(plan, &cfg)?;
     let runner = runner_of(args)?;
 

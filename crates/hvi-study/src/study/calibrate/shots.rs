@@ -30,6 +30,57 @@ pub struct ShotPlan {
     pub plan: Plan,
 }
 
+/// A fragment-size target says little unless one particle is at most this fraction of the
+/// size it measures: a fragment of that size is then at least a 3 x 3 x 3 cube of particles,
+/// and sizes a factor 3 apart (the paper's shot's tolerance) are told apart.
+pub const FRAGMENT_SIZE_RESOLUTION: f64 = 1.0 / 3.0;
+
+/// Every resolution warning of a shot's plan (docs/running.md, "Resolution"), then whether one
+/// particle is well below the fragment size a target measures
+/// ([`FRAGMENT_SIZE_RESOLUTION`]), each as one line naming the shot.
+pub fn resolution_warnings(study: &Study, shot: &ShotPlan) -> Result<Vec<String>> {
+    let id = &shot.targets.shot.id;
+    let mut out: Vec<String> = hvi_run::resolution::plan_warnings(study, &shot.plan)?
+        .into_iter()
+        .map(|w| format!("shot {id}: {}", w.line(&shot.plan)))
+        .collect();
+    let Some(run) = shot.plan.runs.first() else {
+        return Ok(out);
+    };
+    let check = run.scene.resolution_check()?;
+    // A lone particle's volume-equivalent diameter: (6 / pi)^(1/3) r_eq.
+    let particle_m = (6.0 / std::f64::consts::PI).cbrt() * check.r_eq_m;
+    for t in &shot.targets.targets {
+        use hvi_analysis::observable::Observable::{LargestFragmentDiameter, MeanFragmentDiameter};
+        if !matches!(t.observable, MeanFragmentDiameter | LargestFragmentDiameter) {
+            continue;
+        }
+        let finest = FRAGMENT_SIZE_RESOLUTION * t.value;
+        if particle_m <= finest {
+            continue;
+        }
+        let scale = (particle_m / finest).powi(3);
+        let particles = run.scene.resolution.particles.map_or(String::new(), |n| {
+            format!(
+                "; resolution.particles >= {} gives particles of {:.3} mm",
+                hvi_run::spec::round_sig(n * scale, 2),
+                finest * 1e3
+            )
+        });
+        out.push(format!(
+            "shot {id}: target `{}` measures fragments of {} mm, and one particle is already {:.3} \
+             mm across (sigma {:.3} mm): more than {:.2} of that size, so the term cannot tell \
+             fragment sizes apart at this resolution{particles}",
+            t.name,
+            t.value * 1e3,
+            particle_m * 1e3,
+            check.sigma_m * 1e3,
+            FRAGMENT_SIZE_RESOLUTION
+        ));
+    }
+    Ok(out)
+}
+
 /// One line per shot for the console: `shot emi-calibration-shot: ...`, synthetic ones marked.
 pub fn describe_shot(t: &Targets) -> String {
     format!(
