@@ -1861,6 +1861,14 @@ fn a_two_shot_calibration_scores_each_shot_at_its_impact_and_predicts_a_held_out
     let o = calibrate_with(&study, &out, &["--hold-out", "nope"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("synthetic-al-5kms"), "{}", stderr(&o));
+    // A resolution ladder calibrates against both shots at each count.
+    let ladder = dir.join("ladder");
+    let o = calibrate_with(&study, &ladder, &["--ladder", "400,800"]);
+    assert_ok(&o);
+    for level in ["n400", "n800"] {
+        let c = calibration_json(&ladder.join(level));
+        assert_eq!(c["shots"].as_array().map(Vec::len), Some(2), "{level}");
+    }
 }
 
 #[test]

@@ -28,6 +28,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use hvi_analysis::number::round_sig;
 use hvi_run::exec::thread_split;
 use hvi_run::files::write_atomic_bytes;
+use hvi_run::plan::Plan;
 use hvi_run::spec::{Axis, Study};
 use hvi_run::store::{Record, Store};
 use serde::{Deserialize, Serialize};
@@ -35,7 +36,8 @@ use serde::{Deserialize, Serialize};
 use super::config::{CalibrateConfig, Method};
 use super::problem::{fixed_overrides, refined_axes, Dim, Stage, PAPER_BEST};
 use super::result::{fmt_bounds, fmt_value, CalibrationResult, Edge, TargetsMet};
-use super::{calibrate_plan, ego, runner_of, CalibrateOptions, Coarse, ShotPlan};
+use super::shots::plans_of;
+use super::{calibrate_plan, ego, runner_of, CalibrateOptions, Coarse};
 use crate::study::document::Document;
 
 /// What a ladder takes beside the calibration's options.
@@ -191,12 +193,12 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
         bail!("--ladder sets the particle count of each level: leave out --particles");
     }
     if args.hold_out.is_some() {
-        bail!("--ladder calibrates against one shot: leave out --hold-out");
+        bail!("--ladder holds out no shot: leave out --hold-out (or give it to a calibration at one count)");
     }
     if args.no_refine {
         bail!("--ladder needs the search after the grid (each level's confidence region steers the next): leave out --no-refine");
     }
-    let study = super::shots::shot_study(&args.study)?;
+    let study = args.study.load_study()?;
     let cfg = CalibrateConfig::of(&study)?;
     if args.method.unwrap_or(cfg.method) != Method::Ego {
         bail!("--ladder needs `--method ego` (its confidence region steers the next level; Nelder-Mead gives none)");
@@ -246,16 +248,16 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
                 n
             );
         }
-        let (plan, out) = level_args.study.build_plan_of(&level_study)?;
-        plan.write(&out)?;
+        let (shots, out) = plans_of(
+            &level_args.study,
+            &level_study,
+            cfg.load_shots(&study)?,
+            None,
+        )?;
         if k == 0 {
-            keys = refined_axes(&plan, &cfg)?.1;
+            keys = refined_axes(&shots[0].plan, &cfg)?.1;
         }
-        let shot = ShotPlan {
-            targets: cfg.load_targets(&level_study)?,
-            plan,
-        };
-        let r = calibrate_plan(&level_args, &level_study, std::slice::from_ref(&shot), &out)?;
+        let r = calibrate_plan(&level_args, &level_study, &shots, &out)?;
         let (runs, core) = store_cost(&out)?;
         levels.push(LadderLevel {
             particles: n,
@@ -511,8 +513,7 @@ fn check_run(
     let mut check_args = args.clone();
     check_args.study.particles = Some(n);
     check_args.study.out = Some(root.join(&dir));
-    let (plan, out) = check_args.study.build_plan_of(&one)?;
-    plan.write(&out)?;
+    let (shots, out) = plans_of(&check_args.study, &one, cfg.load_shots(study)?, None)?;
     let progress = !args.study.quiet;
     if progress {
         eprintln!(
@@ -520,15 +521,15 @@ fn check_run(
             super::problem::fmt_params(&params)
         );
     }
-    let targets = cfg.load_targets(study)?;
     let runner = runner_of(&check_args)?;
     let store = runner.store(&out)?;
     let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
-    let targets = [targets];
-    let plans = [&plan];
+    let targets: Vec<_> = shots.iter().map(|s| s.targets.clone()).collect();
+    let plans: Vec<&Plan> = shots.iter().map(|s| &s.plan).collect();
+    let plan = plans[0];
     let stage = Stage {
         study: &one,
-        plan: &plan,
+        plan,
         plans: &plans,
         store: &store,
         targets: &targets,

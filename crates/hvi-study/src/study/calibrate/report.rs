@@ -45,8 +45,8 @@ fn title(r: &CalibrationResult) -> String {
     let n = r.particles.map_or("?".into(), |n| format!("{n}"));
     match r.particles_asked {
         Some(asked) => format!(
-            "Calibration of `{}` at {n} particles (`--particles {asked}`: the lattice's nearest \
-             count; the other settings of tier `{}`)",
+            "Calibration of `{}` at {n} particles ({asked} asked: the lattice's nearest count; \
+             the other settings of tier `{}`)",
             r.study, r.tier
         ),
         None => format!(

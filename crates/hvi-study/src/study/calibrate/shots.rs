@@ -118,22 +118,34 @@ pub fn shot_plans(
             bail!("--hold-out needs a study of two or more shots (it calibrates on the others)");
         }
     }
+    let (plans, out) = plans_of(opts, &study, shots, hold_out)?;
+    Ok((study, plans, out))
+}
+
+/// The plan of each shot of `study` at these options (the study's grid at the shot's impact),
+/// the first calibrated shot's (not `hold_out`) written as the study directory's plan.json;
+/// with that directory.
+pub fn plans_of(
+    opts: &StudyOptions,
+    study: &Study,
+    shots: Vec<Targets>,
+    hold_out: Option<&str>,
+) -> Result<(Vec<ShotPlan>, PathBuf)> {
     let mut plans = Vec::new();
     let mut out = None;
     for targets in shots {
-        let s = study_for_shot(&study, opts.tier.as_deref(), &opts.sets, &targets)?;
+        let s = study_for_shot(study, opts.tier.as_deref(), &opts.sets, &targets)?;
         let (plan, dir) = opts.build_plan_of(&s)?;
         out.get_or_insert(dir);
         plans.push(ShotPlan { targets, plan });
     }
     let out = out.ok_or_else(|| anyhow!("study key `calibrate.shots` is empty"))?;
-    // The study's plan.json is the first calibrated shot's.
     let first = plans
         .iter()
         .find(|p| Some(p.targets.shot.id.as_str()) != hold_out)
         .ok_or_else(|| anyhow!("no shot left to calibrate on"))?;
     first.plan.write(&out)?;
-    Ok((study, plans, out))
+    Ok((plans, out))
 }
 
 /// Runs the held-out shot at the calibrated point (`fixed`: its overrides beside the searched
@@ -350,21 +362,6 @@ fn check_kind(study: &Study, tier: Option<&str>, sets: &[String]) -> Result<()> 
         );
     }
     Ok(())
-}
-
-/// The study a one-shot calibration plans (a resolution ladder's), from its options: loaded,
-/// and the shot's impact checked against its scene and filled into it ([`study_for_shot`]).
-pub fn shot_study(opts: &StudyOptions) -> Result<Study> {
-    let study = opts.load_study()?;
-    let cfg = super::CalibrateConfig::of(&study)?;
-    if cfg.shot_files().len() > 1 {
-        bail!(
-            "--ladder calibrates against one shot; this study names {} (allowed: one shot file)",
-            cfg.shot_files().len()
-        );
-    }
-    let targets = cfg.load_targets(&study)?;
-    study_for_shot(&study, opts.tier.as_deref(), &opts.sets, &targets)
 }
 
 #[cfg(test)]
