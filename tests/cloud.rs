@@ -165,9 +165,9 @@ const M_IMPACTOR: f64 = 2.0e-6;
 const M_TARGET: f64 = 3.0e-6;
 const DENSITY: f64 = 2700.0;
 
-fn clusters() -> Clusters {
-    let mut b = Builder::default();
-    // Plate: 6 x 6 x 2 sites, z = 0.5a and 1.5a: rear face at 2a.
+/// A plate of 6 x 6 x 2 sites, z = 0.5a and 1.5a (rear face at 2a): its sites' ids and its
+/// rim's (what holds the residual plate).
+fn plate_with_rim(b: &mut Builder) -> (Vec<usize>, Vec<u32>) {
     let plate = b.block(
         DVec3::new(-2.5 * A, -2.5 * A, 0.5 * A),
         [6, 6, 2],
@@ -183,6 +183,12 @@ fn clusters() -> Clusters {
         })
         .map(|&id| id as u32)
         .collect();
+    (plate, rim)
+}
+
+fn clusters() -> Clusters {
+    let mut b = Builder::default();
+    let (plate, rim) = plate_with_rim(&mut b);
     // A lip bent back beyond the rear face, still bonded to the plate: not cloud.
     let anchor = plate[6 * 6 + 2 * 6 + 2]; // rear layer, inner site
     let lip1 = b.add(b.pos[anchor] + DVec3::Z * A, Body::Target, M_TARGET);
@@ -979,22 +985,7 @@ fn adaptive_run_samples_on_schedule() {
 #[test]
 fn the_largest_piece_of_the_impactor_is_reported_beside_the_clouds_largest_fragment() {
     let mut b = Builder::default();
-    // Plate: 6 x 6 x 2 sites, rear face at 2a; its rim holds the residual plate.
-    let plate = b.block(
-        DVec3::new(-2.5 * A, -2.5 * A, 0.5 * A),
-        [6, 6, 2],
-        A,
-        Body::Target,
-        M_TARGET,
-    );
-    let rim: Vec<u32> = plate
-        .iter()
-        .filter(|&&id| {
-            let p = b.pos[id];
-            p.x.abs().max(p.y.abs()) > 2.0 * A
-        })
-        .map(|&id| id as u32)
-        .collect();
+    let (_, rim) = plate_with_rim(&mut b);
     // Beyond the face: a 4 x 4 x 2 spall of plate material (the cloud's largest fragment), a
     // 2 x 2 x 1 piece of the impactor and six impactor loners (impactor: 10 particles).
     b.block(

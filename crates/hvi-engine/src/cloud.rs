@@ -467,6 +467,21 @@ pub struct CloudAnalysis {
     pub fragments: Vec<Fragment>,
 }
 
+/// The impactor mass of the cloud fragment that holds the most of it (None without cloud
+/// fragments or impactor particles). Every impactor particle has the impactor's particle mass.
+fn impactor_largest_piece_kg(
+    p: &Particles,
+    order: &[usize],
+    fragments: &[Fragment],
+) -> Option<f64> {
+    let particle_kg = order
+        .iter()
+        .find(|&&i| p.body[i] == Body::Impactor)
+        .map(|&i| p.mass[i])?;
+    let most = fragments.iter().map(|f| f.impactor_particles).max()?;
+    Some(most as f64 * particle_kg)
+}
+
 /// One fragment's sums while the cloud's particles are visited in id order.
 struct FragmentSum {
     label: u32,
@@ -564,15 +579,7 @@ pub fn measure(
         .map(|&i| p.mass[i])
         .sum();
     let largest = fragments.first();
-    // Every impactor particle has the impactor's particle mass (one lattice, one density).
-    let impactor_particle_kg = order
-        .iter()
-        .find(|&&i| p.body[i] == Body::Impactor)
-        .map(|&i| p.mass[i]);
-    let impactor_largest = impactor_particle_kg.and_then(|m| {
-        let most = fragments.iter().map(|f| f.impactor_particles).max()?;
-        Some(most as f64 * m)
-    });
+    let impactor_largest = impactor_largest_piece_kg(p, &order, &fragments);
     let mean_fragment_diameter_m = (mass_kg > 0.0).then(|| {
         fragments
             .iter()

@@ -158,11 +158,7 @@ pub(crate) fn calibrate_plan(
     out: &Path,
 ) -> Result<CalibrationResult> {
     let t0 = std::time::Instant::now();
-    let mut cfg = CalibrateConfig::of(study)?;
-    if let Some(seeds) = &args.seeds {
-        cfg.seeds = seeds.clone();
-        cfg.check_seeds("--seeds")?;
-    }
+    let cfg = config_of(study, args)?;
     let (calibrated, held_out): (Vec<&ShotPlan>, Vec<&ShotPlan>) = shots
         .iter()
         .partition(|s| args.hold_out.as_deref() != Some(s.targets.shot.id.as_str()));
@@ -171,16 +167,7 @@ pub(crate) fn calibrate_plan(
     let plans: Vec<&hvi_run::plan::Plan> = calibrated.iter().map(|s| &s.plan).collect();
     let plan = plans[0];
     let progress = !args.study.quiet;
-    if progress {
-        for t in &targets {
-            eprintln!("{}", shots::describe_shot(t));
-        }
-    }
-    for s in shots {
-        for w in shots::resolution_warnings(study, s)? {
-            eprintln!("warning: {w}");
-        }
-    }
+    announce(study, shots, progress)?;
     let (refine_keys, dims) = refined_axes(plan, &cfg)?;
     let runner = runner_of(args)?;
 
@@ -307,19 +294,57 @@ pub(crate) fn calibrate_plan(
         identified,
         bounded: search.bounded,
     };
-    write_outputs(out, &result, &grid.evaluations)?;
-    draw_figures(out, plan, &grid.records, &result, &cfg.log_axes, progress);
-    let kept = archive(out, &result)?;
+    publish(out, plan, &grid, &result, &cfg, progress)?;
+    Ok(result)
+}
+
+/// The study's `[calibrate]`, with the command line's seeds.
+fn config_of(study: &hvi_run::spec::Study, args: &CalibrateOptions) -> Result<CalibrateConfig> {
+    let mut cfg = CalibrateConfig::of(study)?;
+    if let Some(seeds) = &args.seeds {
+        cfg.seeds = seeds.clone();
+        cfg.check_seeds("--seeds")?;
+    }
+    Ok(cfg)
+}
+
+/// Names each shot with the impact it is simulated at (with progress), and prints every
+/// shot's resolution warnings (always).
+fn announce(study: &hvi_run::spec::Study, shots: &[ShotPlan], progress: bool) -> Result<()> {
+    if progress {
+        for s in shots {
+            eprintln!("{}", shots::describe_shot(&s.targets));
+        }
+    }
+    for s in shots {
+        for w in shots::resolution_warnings(study, s)? {
+            eprintln!("warning: {w}");
+        }
+    }
+    Ok(())
+}
+
+/// Writes the calibration's files and figures, keeps it beside the study's others and prints
+/// its report.
+fn publish(
+    out: &Path,
+    plan: &hvi_run::plan::Plan,
+    grid: &Grid,
+    result: &CalibrationResult,
+    cfg: &CalibrateConfig,
+    progress: bool,
+) -> Result<()> {
+    write_outputs(out, result, &grid.evaluations)?;
+    draw_figures(out, plan, &grid.records, result, &cfg.log_axes, progress);
+    let kept = archive(out, result)?;
     if progress {
         eprintln!(
             "kept beside the study's other calibrations: {}",
             kept.display()
         );
+        eprint!("{}", report(result).text());
     }
-    if progress {
-        eprint!("{}", report(&result).text());
-    }
-    Ok(result)
+    Ok(())
 }
 
 /// Where the calibration's runs execute: here (`threads`, `jobs`) or, with Slurm options,
@@ -632,35 +657,8 @@ fn ego_boxes(
         scored = o.evaluations;
         if !moved_now {
             let limit = limit_line(&edges);
-            let converged = o.converged && edges.is_empty();
-            let bounded = o.converged && !edges.is_empty() && edges.iter().all(|e| e.targets_met);
-            let termination = if edges.is_empty() && o.converged {
-                format!("converged: {}", o.termination)
-            } else if edges.is_empty() {
-                o.termination
-            } else if bounded {
-                format!(
-                    "bounded: every target is met on the side{} the answer touches ({}), so the \
-                     targets bound it from the other side only; {}",
-                    if edges.len() > 1 { "s" } else { "" },
-                    edges
-                        .iter()
-                        .map(|e| format!("the {} side of {}", e.side.name(), e.key))
-                        .collect::<Vec<_>>()
-                        .join(", "),
-                    o.termination
-                )
-            } else {
-                format!(
-                    "not converged: the answer touches {}; {}",
-                    edges
-                        .iter()
-                        .map(Edge::describe)
-                        .collect::<Vec<_>>()
-                        .join(" and "),
-                    limit.clone().unwrap_or_default()
-                )
-            };
+            let (termination, converged, bounded) =
+                verdict_of(o.converged, &o.termination, &edges, limit.as_deref());
             return Ok(SearchOutcome {
                 method: Method::Ego.name(),
                 evaluations: scored
@@ -690,6 +688,40 @@ fn ego_boxes(
         runs += n;
         extension += 1;
     }
+}
+
+/// The search's termination in words, whether it converged (the stopping rule held with the
+/// answer inside the box) and whether the answer is a bound (the rule held, and every target
+/// is met on each side the answer touches).
+fn verdict_of(
+    rule_held: bool,
+    why: &str,
+    edges: &[Edge],
+    limit: Option<&str>,
+) -> (String, bool, bool) {
+    let sides =
+        |f: &dyn Fn(&Edge) -> String, sep: &str| edges.iter().map(f).collect::<Vec<_>>().join(sep);
+    let bounded = rule_held && !edges.is_empty() && edges.iter().all(|e| e.targets_met);
+    let termination =
+        if edges.is_empty() && rule_held {
+            format!("converged: {why}")
+        } else if edges.is_empty() {
+            why.to_string()
+        } else if bounded {
+            format!(
+            "bounded: every target is met on the side{} the answer touches ({}), so the targets \
+             bound it from the other side only; {why}",
+            if edges.len() > 1 { "s" } else { "" },
+            sides(&|e| format!("the {} side of {}", e.side.name(), e.key), ", ")
+        )
+        } else {
+            format!(
+                "not converged: the answer touches {}; {}",
+                sides(&Edge::describe, " and "),
+                limit.unwrap_or_default()
+            )
+        };
+    (termination, rule_held && edges.is_empty(), bounded)
 }
 
 /// The sides of the box `dims` that a point lies beyond: (key, side, the side's value).
