@@ -587,11 +587,24 @@ impl ShotUse {
             impact: impact_words(t),
         }
     }
+
+    /// The shot's id, marked when it is an invented example: `synthetic-al-5kms (SYNTHETIC: an
+    /// invented example, not a measurement)`.
+    pub fn name(&self) -> String {
+        if self.synthetic {
+            format!(
+                "{} (SYNTHETIC: an invented example, not a measurement)",
+                self.id
+            )
+        } else {
+            self.id.clone()
+        }
+    }
 }
 
-/// The impact of a shot in words: `9.53 mm Al sphere at 6700 m/s on t/D 0.425 (simulated at
-/// ...: reason)`.
-pub(super) fn impact_words(t: &Targets) -> String {
+/// The impact of a shot in words: `a 9.53 mm sphere (aluminium) at 6700 m/s on a plate
+/// (aluminium) of t/D 0.425 (simulated at ...: reason)`.
+fn impact_words(t: &Targets) -> String {
     let s = &t.shot;
     let mut w = format!(
         "a {} mm sphere ({}) at {} m/s on a plate ({}) of t/D {}",

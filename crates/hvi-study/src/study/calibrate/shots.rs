@@ -18,7 +18,7 @@ use hvi_run::scene_file::apply_overrides;
 use hvi_run::spec::{json_to_override, override_key, Study};
 
 use super::problem::Stage;
-use super::result::{impact_words, Evaluation, HeldOut, ShotUse};
+use super::result::{Evaluation, HeldOut, ShotUse};
 use crate::study::options::StudyOptions;
 
 /// A shot with the plan of its impact: the study's grid at the shot's conditions.
@@ -83,16 +83,8 @@ pub fn resolution_warnings(study: &Study, shot: &ShotPlan) -> Result<Vec<String>
 
 /// One line per shot for the console: `shot emi-calibration-shot: ...`, synthetic ones marked.
 pub fn describe_shot(t: &Targets) -> String {
-    format!(
-        "shot {}{}: {}",
-        t.shot.id,
-        if t.shot.synthetic {
-            " (SYNTHETIC, not a measurement)"
-        } else {
-            ""
-        },
-        impact_words(t)
-    )
+    let shot = ShotUse::of(t);
+    format!("shot {}: {}", shot.name(), shot.impact)
 }
 
 /// Every shot of the calibration with its plan, the first plan written as the study's
