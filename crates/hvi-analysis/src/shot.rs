@@ -121,8 +121,7 @@ fn positive(key: &str, v: f64) -> Result<(), String> {
 
 impl Shot {
     /// Checks the shot's values: positive, finite numbers; a simulated offset within
-    /// [`MAX_SIMULATED_OFFSET`] of the experiment with its reason; one density for both bodies
-    /// (the model simulates one material, docs/model.md section 1).
+    /// [`MAX_SIMULATED_OFFSET`] of the experiment with its reason; normal impact only.
     pub fn check(&self) -> Result<(), String> {
         if self.id.trim().is_empty() || self.id.contains(char::is_whitespace) {
             return Err(format!(
@@ -149,16 +148,6 @@ impl Shot {
         ] {
             if let Some(d) = d {
                 positive(key, d)?;
-            }
-        }
-        if let (Some(a), Some(b)) = (self.impactor_density_kg_m3, self.plate_density_kg_m3) {
-            if (a - b).abs() > AGREEMENT * a.max(b) {
-                return Err(format!(
-                    "shot `{}`: impactor_density_kg_m3 = {a} and plate_density_kg_m3 = {b} differ; \
-                     the model simulates one material for both bodies (scene.density_kg_m3; \
-                     docs/model.md, \"Scope\"), so this shot cannot be simulated yet",
-                    self.id
-                ));
             }
         }
         if let Some(s) = &self.simulated {
@@ -230,13 +219,30 @@ impl Shot {
                 unit: "-",
             },
         ];
-        if let Some(d) = self.impactor_density_kg_m3.or(self.plate_density_kg_m3) {
+        // One density stated is both bodies'; two that differ are the plate's and the
+        // impactor's own.
+        let (imp, plate) = (self.impactor_density_kg_m3, self.plate_density_kg_m3);
+        if let Some(d) = plate.or(imp) {
             keys.push(ImpactKey {
                 key: "scene.density_kg_m3",
                 value: d,
-                what: "density",
+                what: if imp.is_some() && plate.is_some() {
+                    "plate density"
+                } else {
+                    "density"
+                },
                 unit: "kg/m^3",
             });
+        }
+        if let (Some(a), Some(b)) = (imp, plate) {
+            if (a - b).abs() > AGREEMENT * a.max(b) {
+                keys.push(ImpactKey {
+                    key: "impactor.density_kg_m3",
+                    value: a,
+                    what: "impactor density",
+                    unit: "kg/m^3",
+                });
+            }
         }
         if let Some(t) = self.observation_time_s {
             keys.push(ImpactKey {
@@ -316,11 +322,18 @@ mod tests {
     }
 
     #[test]
-    fn two_densities_are_refused_and_one_is_a_scene_key() {
-        let e = shot("impactor_density_kg_m3 = 7850.0\nplate_density_kg_m3 = 2700.0\n")
-            .check()
-            .expect_err("steel on aluminium");
-        assert!(e.contains("7850") && e.contains("one material"), "{e}");
+    fn two_densities_are_the_bodies_own_and_one_is_both() {
+        let steel = shot("impactor_density_kg_m3 = 7850.0\nplate_density_kg_m3 = 2700.0\n");
+        steel.check().expect("steel on aluminium");
+        let keys = steel.impact_keys();
+        let value = |key: &str| keys.iter().find(|k| k.key == key).map(|k| k.value);
+        assert_eq!(value("scene.density_kg_m3"), Some(2700.0));
+        assert_eq!(value("impactor.density_kg_m3"), Some(7850.0));
+        let same = shot("impactor_density_kg_m3 = 2700.0\nplate_density_kg_m3 = 2700.0\n");
+        assert!(same
+            .impact_keys()
+            .iter()
+            .all(|k| k.key != "impactor.density_kg_m3"));
         let s = shot("impactor_density_kg_m3 = 2800.0\nobservation_time_s = 2.5e-5\n");
         s.check().expect("one density");
         let keys = s.impact_keys();

@@ -31,6 +31,7 @@ fn default_scene() -> SceneSpec {
             particles: Some(10000.0),
             particles_across_d: None,
         },
+        impactor: Default::default(),
         material: Material {
             contact: ContactForm::Printed,
             eps_j: Some(0.01),

@@ -46,7 +46,7 @@ fn run() {
     let nl = sim.neighbour_list();
     let np = sim.particles.len();
     let listed = nl.neighbours.len();
-    let r_eq2 = sim.interaction.r_eq2();
+    let r_eq2 = sim.materials.target.r_eq2();
     let in_contact = (0..np)
         .map(|i| {
             nl.of(i)

@@ -102,8 +102,11 @@ pub fn equivalent_diameter_m(mass_kg: f64, density_kg_m3: f64) -> f64 {
 pub struct CloudReference {
     /// z of the target plate's original rear face, m: the cloud lies beyond it.
     pub plate_rear_z_m: f64,
-    /// Density of the material, kg/m^3 (a particle's volume is its mass over it).
+    /// Density of the plate's material, kg/m^3 (a particle's volume is its mass over its
+    /// body's density).
     pub density_kg_m3: f64,
+    /// Density of the impactor's material, kg/m^3 (the plate's for one material).
+    pub impactor_density_kg_m3: f64,
     /// The impactor's total mass, kg.
     pub impactor_mass_kg: f64,
     /// Impact velocity, m/s.
@@ -129,9 +132,44 @@ impl CloudReference {
         CloudReference {
             plate_rear_z_m: derived.plate_rear_z_m,
             density_kg_m3: derived.density_kg_m3,
+            impactor_density_kg_m3: derived.impactor_density_kg_m3(),
             impactor_mass_kg,
             v0_m_s: derived.v0_m_s,
             rim_by_id,
+        }
+    }
+
+    /// The volume-equivalent diameter of `mass_kg` of which `impactor_kg` is of the
+    /// impactor, m: its volume is each body's mass over its density ([`equivalent_diameter_m`]
+    /// of the whole mass at the one density for one material).
+    pub fn equivalent_diameter_m(&self, mass_kg: f64, impactor_kg: f64) -> f64 {
+        if self.impactor_density_kg_m3 == self.density_kg_m3 {
+            equivalent_diameter_m(mass_kg, self.density_kg_m3)
+        } else {
+            let volume = (mass_kg - impactor_kg) / self.density_kg_m3
+                + impactor_kg / self.impactor_density_kg_m3;
+            equivalent_diameter_m(volume, 1.0)
+        }
+    }
+
+    /// The mass of plate material with the volume of a particle of `body` and mass `mass_kg`,
+    /// kg: what the shadowgraph darkens by (it sees volume, not mass).
+    pub fn plate_equivalent_kg(&self, body: Body, mass_kg: f64) -> f64 {
+        match body {
+            Body::Impactor if self.impactor_density_kg_m3 != self.density_kg_m3 => {
+                mass_kg * self.density_kg_m3 / self.impactor_density_kg_m3
+            }
+            _ => mass_kg,
+        }
+    }
+
+    /// The mean density of fragment `f`, kg/m^3: its mass over its volume (the one density
+    /// for one material).
+    pub fn fragment_density_kg_m3(&self, f: &Fragment) -> f64 {
+        if self.impactor_density_kg_m3 == self.density_kg_m3 {
+            self.density_kg_m3
+        } else {
+            f.mass_kg / (std::f64::consts::PI / 6.0 * f.diameter_m.powi(3))
         }
     }
 
@@ -488,19 +526,20 @@ struct FragmentSum {
     particles: usize,
     impactor: usize,
     mass: f64,
+    impactor_mass: f64,
     moment: glam::DVec3,
     momentum: glam::DVec3,
     crossing: bool,
 }
 
 impl FragmentSum {
-    fn into_fragment(self, rho: f64) -> Fragment {
+    fn into_fragment(self, reference: &CloudReference) -> Fragment {
         Fragment {
             label: self.label,
             particles: self.particles,
             impactor_particles: self.impactor,
             mass_kg: self.mass,
-            diameter_m: equivalent_diameter_m(self.mass, rho),
+            diameter_m: reference.equivalent_diameter_m(self.mass, self.impactor_mass),
             centroid_m: (self.moment / self.mass).to_array(),
             velocity_m_s: (self.momentum / self.mass).to_array(),
         }
@@ -513,7 +552,7 @@ fn cloud_fragments(
     p: &Particles,
     members: &CloudMembers,
     order: &[usize],
-    rho: f64,
+    reference: &CloudReference,
 ) -> (Vec<Fragment>, usize) {
     let n = p.len();
     let mut slot_of_label = vec![u32::MAX; n];
@@ -530,6 +569,7 @@ fn cloud_fragments(
                 particles: 0,
                 impactor: 0,
                 mass: 0.0,
+                impactor_mass: 0.0,
                 moment: glam::DVec3::ZERO,
                 momentum: glam::DVec3::ZERO,
                 crossing: false,
@@ -538,7 +578,10 @@ fn cloud_fragments(
         let a = &mut acc[slot_of_label[l] as usize];
         let m = p.mass[i];
         a.particles += 1;
-        a.impactor += usize::from(p.body[i] == Body::Impactor);
+        if p.body[i] == Body::Impactor {
+            a.impactor += 1;
+            a.impactor_mass += m;
+        }
         a.mass += m;
         a.moment += p.pos[i] * m;
         a.momentum += p.vel[i] * m;
@@ -550,7 +593,10 @@ fn cloud_fragments(
         }
     }
     let crossing = acc.iter().filter(|a| a.crossing).count();
-    let mut fragments: Vec<Fragment> = acc.into_iter().map(|a| a.into_fragment(rho)).collect();
+    let mut fragments: Vec<Fragment> = acc
+        .into_iter()
+        .map(|a| a.into_fragment(reference))
+        .collect();
     fragments.sort_by(|a, b| b.mass_kg.total_cmp(&a.mass_kg).then(a.label.cmp(&b.label)));
     (fragments, crossing)
 }
@@ -565,9 +611,8 @@ pub fn measure(
     time_s: f64,
     tau_s: f64,
 ) -> CloudAnalysis {
-    let rho = reference.density_kg_m3;
     let order: Vec<usize> = ids_in_order(p).collect();
-    let (fragments, fragments_crossing_rear_face) = cloud_fragments(p, members, &order, rho);
+    let (fragments, fragments_crossing_rear_face) = cloud_fragments(p, members, &order, reference);
 
     let ext = extent(p, &members.in_cloud, reference.plate_rear_z_m, q, width);
     let n_part = ext.n_part;
@@ -587,8 +632,11 @@ pub fn measure(
             .sum::<f64>()
             / mass_kg
     });
-    // One particle's diameter: the smallest particle mass present (the finer body).
-    let particle_mass = p.mass.iter().copied().fold(f64::INFINITY, f64::min);
+    // One particle's diameter: the smallest particle volume present (the finer body), as the
+    // mass of plate material that fills it.
+    let particle_mass = (0..p.len())
+        .map(|i| reference.plate_equivalent_kg(p.body[i], p.mass[i]))
+        .fold(f64::INFINITY, f64::min);
     let per_impactor = |m: f64| {
         if reference.impactor_mass_kg > 0.0 {
             m / reference.impactor_mass_kg
@@ -625,7 +673,7 @@ pub fn measure(
         largest_fragment_particles: largest.map_or(0, |f| f.particles),
         mean_fragment_diameter_m,
         particle_diameter_m: if particle_mass.is_finite() {
-            equivalent_diameter_m(particle_mass, rho)
+            equivalent_diameter_m(particle_mass, reference.density_kg_m3)
         } else {
             0.0
         },
@@ -772,21 +820,27 @@ pub struct SilhouetteReport {
 }
 
 /// The shadowgraph of the particles marked `in_cloud`, taken in id order (`order` maps ids to
-/// storage indices).
+/// storage indices). A particle darkens by its volume: an impactor particle of another density
+/// counts as the plate material that fills it.
 pub fn cloud_shadowgraph(
     p: &Particles,
     in_cloud: &[bool],
     order: &[u32],
-    density_kg_m3: f64,
+    reference: &CloudReference,
     settings: &ShadowgraphSettings,
 ) -> Option<Shadowgraph> {
     let particles: Vec<(DVec3, f64)> = order
         .iter()
         .map(|&i| i as usize)
         .filter(|&i| in_cloud[i])
-        .map(|i| (p.pos[i], p.mass[i]))
+        .map(|i| {
+            (
+                p.pos[i],
+                reference.plate_equivalent_kg(p.body[i], p.mass[i]),
+            )
+        })
         .collect();
-    Shadowgraph::of_masses(&particles, density_kg_m3, settings)
+    Shadowgraph::of_masses(&particles, reference.density_kg_m3, settings)
 }
 
 /// The cloud part of `summary.json`: the full measurement at the analysis time, va and the
@@ -1096,14 +1150,8 @@ fn front_sample(
     shadowgraph: &ShadowgraphSettings,
     tau_s: f64,
 ) -> FrontSample {
-    let silhouette = cloud_shadowgraph(
-        p,
-        in_cloud,
-        &p.index_of_id(),
-        reference.density_kg_m3,
-        shadowgraph,
-    )
-    .and_then(|s| s.measure(reference.plate_rear_z_m));
+    let silhouette = cloud_shadowgraph(p, in_cloud, &p.index_of_id(), reference, shadowgraph)
+        .and_then(|s| s.measure(reference.plate_rear_z_m));
     FrontSample {
         tau_s,
         front_z_m,
@@ -1119,13 +1167,7 @@ fn silhouette(
     settings: &ShadowgraphSettings,
     front: &[Option<FrontSample>; 2],
 ) -> (SilhouetteReport, Option<Shadowgraph>) {
-    let image = cloud_shadowgraph(
-        p,
-        in_cloud,
-        &p.index_of_id(),
-        reference.density_kg_m3,
-        settings,
-    );
+    let image = cloud_shadowgraph(p, in_cloud, &p.index_of_id(), reference, settings);
     let m = image
         .as_ref()
         .and_then(|s| s.measure(reference.plate_rear_z_m));
@@ -1166,7 +1208,7 @@ fn craters(
                 f.centroid_m,
                 f.velocity_m_s,
                 f.diameter_m,
-                reference.density_kg_m3,
+                reference.fragment_density_kg_m3(f),
                 reference.plate_rear_z_m,
             )
         })
@@ -1222,7 +1264,7 @@ fn cloud_result(
     let witness = witness::summarise(
         &craters,
         settings.witness_plate.standoff_m,
-        equivalent_diameter_m(reference.impactor_mass_kg, reference.density_kg_m3),
+        equivalent_diameter_m(reference.impactor_mass_kg, reference.impactor_density_kg_m3),
     );
     let report = CloudReport {
         measurement: analysis.measurement.clone(),
@@ -1286,8 +1328,10 @@ pub struct CloudState {
     pub tau_s: f64,
     /// z of the target plate's original rear face, m.
     pub plate_rear_z_m: f64,
-    /// Density of the material, kg/m^3.
+    /// Density of the plate's material, kg/m^3.
     pub density_kg_m3: f64,
+    /// Density of the impactor's material, kg/m^3.
+    pub impactor_density_kg_m3: f64,
     /// The impactor's total mass, kg.
     pub impactor_mass_kg: f64,
     /// Impact velocity, m/s.
@@ -1325,6 +1369,7 @@ impl CloudState {
             tau_s: sim.tau_s(),
             plate_rear_z_m: reference.plate_rear_z_m,
             density_kg_m3: reference.density_kg_m3,
+            impactor_density_kg_m3: reference.impactor_density_kg_m3,
             impactor_mass_kg: reference.impactor_mass_kg,
             v0_m_s: reference.v0_m_s,
             pos: order.iter().map(|&i| p.pos[i]).collect(),
@@ -1356,6 +1401,7 @@ impl CloudState {
         CloudReference {
             plate_rear_z_m: self.plate_rear_z_m,
             density_kg_m3: self.density_kg_m3,
+            impactor_density_kg_m3: self.impactor_density_kg_m3,
             impactor_mass_kg: self.impactor_mass_kg,
             v0_m_s: self.v0_m_s,
             rim_by_id: Vec::new(),

@@ -17,6 +17,7 @@
 //!     },
 //!     resolution: Resolution { particles: Some(2000.0), particles_across_d: None },
 //!     material: Material::default(),
+//!     impactor: Default::default(),
 //!     run: RunSettings { end_time_s: 1e-7, ..RunSettings::default() },
 //!     analysis: Analysis::default(),
 //! };

@@ -12,6 +12,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::state::Body;
+
 /// Which prefactor the contact repulsion carries (docs/model.md section 3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
@@ -188,6 +190,142 @@ impl Interaction {
         let s6 = (self.sigma2 / r2).powi(3);
         let contact = self.c_eps * (156.0 * s6 * s6 - 42.0 * s6) / r2;
         contact.max(self.kappa_n_m)
+    }
+}
+
+/// The pair laws of a scene: the plate's, the impactor's and the one between them.
+///
+/// Both bodies share the lattice, so sigma and r_eq (and the contact form) are common; eps,
+/// kappa and rcut may differ. Bonds never join the two bodies, so a bond takes its body's
+/// law; a contact between the bodies takes the combining rule eps = sqrt(eps_impactor
+/// eps_plate) (Lorentz-Berthelot with one sigma; docs/model.md section 3, "Two materials").
+///
+/// ```
+/// use hvi_engine::potential::{ContactForm, Materials};
+/// use hvi_engine::potential::Interaction;
+///
+/// let plate = Interaction::new(1.0, 1.0, 10.0, 1.5, ContactForm::Printed);
+/// let sphere = Interaction::new(1.0, 4.0, 30.0, 1.4, ContactForm::Printed);
+/// let m = Materials::two(sphere, plate);
+/// assert!(!m.is_one());
+/// assert_eq!(m.cross.eps_j, 2.0);
+/// assert!(Materials::from(plate).is_one());
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Materials {
+    /// The target plate's law.
+    pub target: Interaction,
+    /// The impactor's law.
+    pub impactor: Interaction,
+    /// The law between an impactor and a plate particle (contact only).
+    pub cross: Interaction,
+}
+
+impl From<Interaction> for Materials {
+    fn from(ia: Interaction) -> Self {
+        Materials {
+            target: ia,
+            impactor: ia,
+            cross: ia,
+        }
+    }
+}
+
+impl Materials {
+    /// The laws of an impactor and a plate of different materials on one lattice.
+    ///
+    /// # Panics
+    /// If the two laws have different sigma or contact forms (one lattice, one law shape).
+    pub fn two(impactor: Interaction, target: Interaction) -> Self {
+        assert_eq!(impactor.sigma_m, target.sigma_m, "one lattice: one sigma");
+        assert_eq!(impactor.contact, target.contact, "one contact form");
+        let cross = Interaction::new(
+            target.sigma_m,
+            (impactor.eps_j * target.eps_j).sqrt(),
+            0.0,
+            target.rcut_m.min(impactor.rcut_m),
+            target.contact,
+        );
+        Materials {
+            target,
+            impactor,
+            cross,
+        }
+    }
+
+    /// Whether both bodies are of one material (the kernels then take their one-law path,
+    /// bit for bit what they computed before there were two).
+    pub fn is_one(&self) -> bool {
+        self.impactor == self.target
+    }
+
+    /// The law of a body's bonds.
+    #[inline(always)]
+    pub fn of_body(&self, b: Body) -> &Interaction {
+        match b {
+            Body::Impactor => &self.impactor,
+            Body::Target => &self.target,
+        }
+    }
+
+    /// The contact law between particles of bodies `a` and `b`.
+    #[inline(always)]
+    pub fn of_pair(&self, a: Body, b: Body) -> &Interaction {
+        match (a, b) {
+            (Body::Impactor, Body::Impactor) => &self.impactor,
+            (Body::Target, Body::Target) => &self.target,
+            _ => &self.cross,
+        }
+    }
+
+    /// The stiffest law at r_eq (N/m): the largest of each law's kappa and contact stiffness
+    /// at r_eq, what the time step's stability bound takes.
+    pub fn stiffest_at_r_eq(&self) -> f64 {
+        [self.target, self.impactor, self.cross]
+            .iter()
+            .map(|ia| ia.kappa_n_m.max(ia.contact_stiffness_at_r_eq()))
+            .fold(0.0, f64::max)
+    }
+
+    /// The stiffest law at squared distance `r2` (N/m), over both bodies and the contact
+    /// between them: what the adaptive step resolves.
+    pub fn stiffness_at(&self, r2: f64) -> f64 {
+        [self.target, self.impactor, self.cross]
+            .iter()
+            .map(|ia| ia.stiffness_at(r2))
+            .fold(0.0, f64::max)
+    }
+}
+
+/// How a kernel finds the law of a pair: one law for every pair ([`Interaction`], the fast
+/// path) or by the bodies of the two particles ([`Materials`] with two materials). The
+/// kernels are generic over it, so the one-material path compiles to what it was.
+pub trait PairLaw: Copy + Send + Sync {
+    /// The law of particle `i`'s bonds (`bodies` indexed by current particle index).
+    fn bond(&self, bodies: &[Body], i: usize) -> &Interaction;
+    /// The contact law between particles `i` and `j`.
+    fn contact(&self, bodies: &[Body], i: usize, j: usize) -> &Interaction;
+}
+
+impl PairLaw for Interaction {
+    #[inline(always)]
+    fn bond(&self, _: &[Body], _: usize) -> &Interaction {
+        self
+    }
+    #[inline(always)]
+    fn contact(&self, _: &[Body], _: usize, _: usize) -> &Interaction {
+        self
+    }
+}
+
+impl PairLaw for Materials {
+    #[inline(always)]
+    fn bond(&self, bodies: &[Body], i: usize) -> &Interaction {
+        self.of_body(bodies[i])
+    }
+    #[inline(always)]
+    fn contact(&self, bodies: &[Body], i: usize, j: usize) -> &Interaction {
+        self.of_pair(bodies[i], bodies[j])
     }
 }
 

@@ -5,7 +5,7 @@
 
 use glam::DVec3;
 use hvi_engine::potential::{ContactForm, Interaction};
-use hvi_engine::scene::{Derived, Geometry, RunSettings, SceneSpec};
+use hvi_engine::scene::{Derived, Geometry, ImpactorMaterial, RunSettings, SceneSpec};
 use hvi_engine::sim::{Energy, Simulation};
 use hvi_engine::state::{Body, Particles, BONDS_PER_PARTICLE, NO_BOND};
 use hvi_engine::EngineError;
@@ -310,7 +310,7 @@ fn comoving_rebuild_rule_never_misses_a_contact() {
         spec.run.dt_factor = 8.0;
         spec.run.frame_block_over_sigma = block;
         let mut sim = Simulation::new(spec.build().expect("valid")).expect("starts");
-        let r_eq = sim.interaction.r_eq_m;
+        let r_eq = sim.materials.target.r_eq_m;
         let mut checked = 0;
         while sim.step < sim.derived.steps {
             sim.step_once().expect("stable");
@@ -456,4 +456,169 @@ fn absorbing_band_out_of_range_is_refused_naming_the_key() {
         "{err}"
     );
     assert!(ringing_plate(0.7).build().is_ok());
+}
+
+/// A steel sphere on an aluminium plate: the impactor's own density, eps, kappa and rcut
+/// (`[impactor]`), the plate's from `[material]`.
+fn steel_on_aluminium(particles: f64, end_time_s: f64) -> SceneSpec {
+    let mut spec = sphere_scene(particles, end_time_s);
+    spec.impactor = ImpactorMaterial {
+        density_kg_m3: Some(7850.0),
+        eps_j: Some(0.03),
+        kappa_n_m: Some(1.3e7),
+        rcut_over_sigma: Some(1.4),
+        ..ImpactorMaterial::default()
+    };
+    spec
+}
+
+/// The impactor's centre-of-mass velocity along the impact, m/s.
+fn impactor_velocity_z(sim: &Simulation) -> f64 {
+    let p = &sim.particles;
+    let (mut m, mut pz) = (0.0, 0.0);
+    for i in 0..p.len() {
+        if p.body[i] == Body::Impactor {
+            m += p.mass[i];
+            pz += p.mass[i] * p.vel[i].z;
+        }
+    }
+    pz / m
+}
+
+/// Two materials: each body's mass is its density times its volume (eq. 20), the step is
+/// bounded by the stiffer law, momentum holds to round-off and the ledger (each body's
+/// bonds booking their own break energy) within its bound, in the full and the quarter
+/// scene; and the denser sphere keeps more of its speed than the aluminium one.
+#[test]
+fn steel_on_aluminium_keeps_the_invariants_and_the_denser_sphere_goes_deeper() {
+    let spec = steel_on_aluminium(5000.0, 3e-6);
+    let setup = spec.build().expect("valid scene");
+    let d = setup.derived;
+    let own = d.impactor.expect("the impactor's own material");
+    assert_eq!(own.density_kg_m3, 7850.0);
+    assert!((own.cross_eps_j / (own.eps_j * d.eps_j).sqrt() - 1.0).abs() < 1e-12);
+    let n_imp = setup
+        .particles
+        .body
+        .iter()
+        .filter(|&&b| b == Body::Impactor)
+        .count() as f64;
+    let sphere = std::f64::consts::PI / 6.0 * hvi_engine::paper::IMPACTOR_DIAMETER_M.powi(3);
+    assert!((d.mass_impactor_kg * n_imp / (7850.0 * sphere) - 1.0).abs() < 1e-12);
+    let aluminium = sphere_scene(5000.0, 3e-6).build().expect("valid").derived;
+    assert!(aluminium.impactor.is_none());
+    assert_eq!(d.mass_target_kg, aluminium.mass_target_kg);
+    // The bound takes the stiffest law and the lightest particle; here v0 bounds the step,
+    // and a far stiffer impactor lowers it.
+    assert_eq!(
+        d.dt_max_s,
+        hvi_engine::step::stability_bound_s(
+            d.sigma_m,
+            d.v0_m_s,
+            d.mass_impactor_kg.min(d.mass_target_kg),
+            setup.materials.stiffest_at_r_eq()
+        )
+    );
+    assert!(d.dt_max_s <= aluminium.dt_max_s);
+    let mut stiff = steel_on_aluminium(5000.0, 3e-6);
+    stiff.impactor.kappa_n_m = Some(1e11);
+    let stiff = stiff.build().expect("valid").derived;
+    assert!(
+        stiff.dt_max_s < aluminium.dt_max_s,
+        "a stiffer law bounds the step lower"
+    );
+
+    let (sim, samples) = run(&spec);
+    let broken = sim.bonds_broken as f64 / sim.bonds_initial as f64;
+    assert!(broken > 0.05, "the impact must break bonds, broke {broken}");
+    let dp = momentum_change(&sim);
+    assert!(dp < 1e-12, "momentum changed by {dp:e} of M v0");
+    let worst = worst_drift(&sim, &samples);
+    assert!(worst < ENERGY_DRIFT_BOUND, "ledger drifted by {worst:e}");
+
+    let (al, _) = run(&sphere_scene(5000.0, 3e-6));
+    let v0 = d.v0_m_s;
+    let (steel_v, al_v) = (
+        impactor_velocity_z(&sim) / v0,
+        impactor_velocity_z(&al) / v0,
+    );
+    assert!(
+        steel_v > al_v + 0.02,
+        "steel keeps {steel_v:.3} of v0, aluminium {al_v:.3}"
+    );
+
+    let mut quarter = steel_on_aluminium(5000.0, 3e-6);
+    quarter.run.symmetry = hvi_engine::symmetry::Symmetry::Quarter;
+    let (q, samples) = run(&quarter);
+    let worst = worst_drift(&q, &samples);
+    assert!(
+        worst < ENERGY_DRIFT_BOUND,
+        "quarter: ledger drifted by {worst:e}"
+    );
+    assert!(momentum_change(&q) < 1e-12);
+}
+
+#[test]
+fn two_materials_are_bit_identical_at_one_and_two_threads() {
+    let spec = steel_on_aluminium(3000.0, 1e-6);
+    let (a, ea) = pool(1).install(|| run(&spec));
+    let (b, eb) = pool(2).install(|| run(&spec));
+    assert_eq!(a.bonds_broken, b.bonds_broken);
+    for (x, y) in ea.iter().zip(&eb) {
+        assert_eq!(x.total_j().to_bits(), y.total_j().to_bits());
+    }
+    let (ia, ib) = (a.particles.index_of_id(), b.particles.index_of_id());
+    for id in 0..a.particles.len() {
+        let (i, j) = (ia[id] as usize, ib[id] as usize);
+        assert_eq!(
+            a.particles.pos[i].to_array().map(f64::to_bits),
+            b.particles.pos[j].to_array().map(f64::to_bits),
+            "particle {id}"
+        );
+    }
+}
+
+/// Each `[impactor]` key is checked with its name and allowed range; two forms of one
+/// constant are a conflict; a scene without `[impactor]` does not write it (fingerprints of
+/// one-material scenes are unchanged), and a density alone keeps one law.
+#[test]
+fn impactor_keys_are_checked_by_name() {
+    let with = |f: &dyn Fn(&mut ImpactorMaterial)| {
+        let mut spec = sphere_scene(2000.0, 1e-7);
+        f(&mut spec.impactor);
+        spec.build().map(|_| ()).map_err(|e| e.to_string())
+    };
+    for (key, e) in [
+        (
+            "impactor.density_kg_m3",
+            with(&|m| m.density_kg_m3 = Some(-1.0)),
+        ),
+        ("impactor.eps_j", with(&|m| m.eps_j = Some(0.0))),
+        (
+            "impactor.rcut_over_sigma",
+            with(&|m| m.rcut_over_sigma = Some(1.0)),
+        ),
+    ] {
+        let e = e.expect_err("out of range");
+        assert!(e.contains(key), "{key}: {e}");
+    }
+    let e = with(&|m| {
+        m.eps_j = Some(0.03);
+        m.gamma_pa = Some(1e9);
+    })
+    .expect_err("two forms");
+    assert!(
+        e.contains("impactor.eps_j") && e.contains("impactor.gamma_pa"),
+        "{e}"
+    );
+    let json = serde_json::to_string(&sphere_scene(2000.0, 1e-7)).expect("json");
+    assert!(!json.contains("impactor\""), "{json}");
+    let mut dense = sphere_scene(2000.0, 1e-7);
+    dense.impactor.density_kg_m3 = Some(7850.0);
+    let setup = dense.build().expect("valid");
+    assert!(setup.materials.is_one());
+    assert_eq!(
+        setup.derived.impactor.map(|i| i.density_kg_m3),
+        Some(7850.0)
+    );
 }

@@ -405,7 +405,19 @@ fn vtu_frame(
 
 /// The state as a LAMMPS data file (`units si`, `atom_style bond`): atoms (id = hvi id + 1,
 /// molecule = body + 1, type 1 impactor / 2 target), velocities and intact bonds.
+///
+/// Refused for a scene whose impactor has its own law (`[impactor]` eps, kappa or rcut): the
+/// export writes one bond law and one contact law (a density of its own is kept, by the
+/// per-type masses).
 pub fn write_lammps_data(path: &Path, sim: &Simulation) -> Result<()> {
+    if !sim.materials.is_one() {
+        return Err(RunError::Input(
+            "the LAMMPS export writes one bond and one contact law for both bodies, and this \
+             scene's impactor has its own ([impactor] eps, kappa or rcut): export a scene of \
+             one material (a different impactor.density_kg_m3 alone is kept)"
+                .into(),
+        ));
+    }
     let full = sim.full_particles();
     let p: &Particles = &full;
     let d = &sim.derived;

@@ -406,6 +406,14 @@ pub fn describe(d: &Derived, particles: usize, bonds: u64) -> String {
         "eps = {:.4e} J, kappa = {:.4e} N/m at this sigma; gamma = {:.4e} Pa, lambda = {:.4e} Pa; rcut = {:.4e} m",
         d.eps_j, d.kappa_n_m, d.gamma_pa, d.lambda_pa, d.rcut_m
     );
+    if let Some(i) = &d.impactor {
+        let _ = writeln!(
+            s,
+            "impactor: density {} kg/m^3, eps = {:.4e} J, kappa = {:.4e} N/m, rcut = {:.4e} m; \
+             plate density {} kg/m^3; contact between them eps = {:.4e} J",
+            i.density_kg_m3, i.eps_j, i.kappa_n_m, i.rcut_m, d.density_kg_m3, i.cross_eps_j
+        );
+    }
     let _ = write!(
         s,
         "dt = {:.4e} s (stability bound {:.4e} s), v0 = {} m/s",

@@ -1,6 +1,6 @@
-//! Scene files: TOML with `[scene]`, `[resolution]`, `[material]`, `[run]`, `[analysis]`,
-//! plus `--set` overrides `section.key=value`. Parsing and overriding happen here; every value check is the
-//! engine's (`SceneSpec::build`), so there is one place that knows the allowed ranges.
+//! Scene files: TOML with `[scene]`, `[resolution]`, `[material]`, `[impactor]`, `[run]`,
+//! `[analysis]`, plus `--set` overrides `section.key=value`. Parsing and overriding happen
+//! here; every value check is the engine's (`SceneSpec::build`), so there is one place that knows the allowed ranges.
 
 use std::path::Path;
 
@@ -10,7 +10,7 @@ use hvi_engine::scene::SceneSpec;
 use crate::error::{Result, ResultExt, RunError};
 
 /// The sections a scene file may have.
-pub const SECTIONS: [&str; 5] = ["scene", "resolution", "material", "run", "analysis"];
+pub use hvi_engine::scene::keys::SECTIONS;
 
 /// Parses one `--set` right-hand side as a TOML value; bare words become strings.
 fn parse_value(raw: &str) -> toml::Value {

@@ -4,25 +4,27 @@
 //! ([`hvi_engine::cloud::remeasure`]). Written atomically with the run's other files when
 //! `analysis.keep_state` is on (the default).
 //!
-//! # Format, version 1
+//! # Format, version 2
 //!
 //! Little-endian, in three parts: a header, one to three frames (the analysis time first,
 //! then the front times that were sampled, in order), and the SHA-256 of all bytes before it.
 //!
-//! Header, 72 bytes:
+//! Header, 80 bytes (version 1, which this code still reads, is the first 72: one density for
+//! both bodies):
 //!
 //! | offset | bytes | type | field |
 //! |---|---|---|---|
 //! | 0 | 8 | ASCII | magic `HVISTATE` |
-//! | 8 | 4 | u32 | format version, 1 |
+//! | 8 | 4 | u32 | format version, 2 |
 //! | 12 | 4 | u32 | frames F, 1 to 3 |
 //! | 16 | 8 | u64 | particles N |
 //! | 24 | 8 | f64 | z of the plate's original rear face, m |
-//! | 32 | 8 | f64 | density, kg/m^3 |
+//! | 32 | 8 | f64 | density of the plate, kg/m^3 |
 //! | 40 | 8 | f64 | the impactor's mass, kg |
 //! | 48 | 8 | f64 | impact velocity v0, m/s |
 //! | 56 | 8 | f64 | particle mass of the impactor, kg |
 //! | 64 | 8 | f64 | particle mass of the target, kg |
+//! | 72 | 8 | f64 | density of the impactor, kg/m^3 |
 //!
 //! Each frame, 32 + 29 N bytes (arrays in particle-id order):
 //!
@@ -38,7 +40,7 @@
 //! | 32 + 24 N | 4 N | u32 each | fragment label (the smallest id in the fragment) |
 //! | 32 + 28 N | N | u8 each | bit 0: target (else impactor); bit 1: residual plate; bit 2: debris cloud |
 //!
-//! Then 32 bytes: SHA-256 of everything before them. A file is 72 + F (32 + 29 N) + 32 bytes:
+//! Then 32 bytes: SHA-256 of everything before them. A file is 80 + F (32 + 29 N) + 32 bytes:
 //! 29 bytes per particle and frame, 0.87 MB for three frames of 1e4 particles, 23.5 MB for
 //! three of the paper's 2.7e5.
 //!
@@ -64,10 +66,12 @@ use crate::files::write_atomic_bytes;
 pub const STATE_FILE: &str = "state.bin";
 /// The first eight bytes of a state file.
 pub const MAGIC: [u8; 8] = *b"HVISTATE";
-/// The format version this code writes and reads.
-pub const FORMAT_VERSION: u32 = 1;
+/// The format version this code writes (it reads this one and version 1).
+pub const FORMAT_VERSION: u32 = 2;
 /// Header bytes.
-pub const HEADER_BYTES: usize = 72;
+pub const HEADER_BYTES: usize = 80;
+/// Header bytes of version 1 (one density for both bodies).
+const HEADER_BYTES_V1: usize = 72;
 /// Bytes of a frame before its arrays.
 pub const FRAME_HEADER_BYTES: usize = 32;
 /// Bytes per particle and frame.
@@ -102,12 +106,17 @@ impl fmt::Display for FrameKind {
 
 /// The size of a state file of `frames` frames of `n` particles, bytes (`None` on overflow).
 pub fn file_bytes(n: u64, frames: u64) -> Option<u64> {
+    file_bytes_of(HEADER_BYTES, n, frames)
+}
+
+/// [`file_bytes`] with a header of `header` bytes.
+fn file_bytes_of(header: usize, n: u64, frames: u64) -> Option<u64> {
     let frame = (BYTES_PER_PARTICLE as u64)
         .checked_mul(n)?
         .checked_add(FRAME_HEADER_BYTES as u64)?;
     frame
         .checked_mul(frames)?
-        .checked_add((HEADER_BYTES + CHECKSUM_BYTES) as u64)
+        .checked_add((header + CHECKSUM_BYTES) as u64)
 }
 
 /// Each body's particle mass (indexed by `Body as usize`; 0 for a body without particles).
@@ -164,6 +173,7 @@ pub fn encode(kept: &KeptStates) -> Result<Vec<u8>> {
         end.v0_m_s,
         masses[0],
         masses[1],
+        end.impactor_density_kg_m3,
     ] {
         b.extend_from_slice(&x.to_le_bytes());
     }
@@ -251,14 +261,18 @@ pub fn decode(bytes: &[u8]) -> Result<KeptStates> {
     }
     let mut c = Cursor { bytes, at: 8 };
     let version = c.u32();
-    if version != FORMAT_VERSION {
-        return Err(RunError::parse(format!(
-            "state format version {version}; this hvi-study reads version {FORMAT_VERSION}: \
-             rerun the run with it"
-        )));
-    }
+    let header = match version {
+        1 => HEADER_BYTES_V1,
+        FORMAT_VERSION => HEADER_BYTES,
+        _ => {
+            return Err(RunError::parse(format!(
+                "state format version {version}; this hvi-study reads versions 1 to \
+                 {FORMAT_VERSION}: rerun the run with it"
+            )))
+        }
+    };
     let frames = c.u32();
-    if bytes.len() < HEADER_BYTES {
+    if bytes.len() < header {
         return Err(RunError::parse(format!(
             "truncated: {} bytes, shorter than the header",
             bytes.len()
@@ -270,7 +284,7 @@ pub fn decode(bytes: &[u8]) -> Result<KeptStates> {
         )));
     }
     let n64 = c.u64();
-    let expected = file_bytes(n64, u64::from(frames))
+    let expected = file_bytes_of(header, n64, u64::from(frames))
         .filter(|_| n64 <= u64::from(u32::MAX))
         .ok_or_else(|| RunError::parse(format!("corrupt: {n64} particles")))?;
     if bytes.len() as u64 != expected {
@@ -292,6 +306,7 @@ pub fn decode(bytes: &[u8]) -> Result<KeptStates> {
     let impactor_mass_kg = c.f64();
     let v0_m_s = c.f64();
     let masses = [c.f64(), c.f64()];
+    let impactor_density_kg_m3 = if version == 1 { density_kg_m3 } else { c.f64() };
     let mut end = None;
     let mut front = [None, None];
     for k in 0..frames {
@@ -329,6 +344,7 @@ pub fn decode(bytes: &[u8]) -> Result<KeptStates> {
             tau_s,
             plate_rear_z_m,
             density_kg_m3,
+            impactor_density_kg_m3,
             impactor_mass_kg,
             v0_m_s,
             pos,
@@ -386,6 +402,7 @@ mod tests {
             tau_s: step as f64 * 1e-9 - 3e-7,
             plate_rear_z_m: 4.05e-3,
             density_kg_m3: 2700.0,
+            impactor_density_kg_m3: 7850.0,
             impactor_mass_kg: 1.3e-3,
             v0_m_s: 6700.0,
             pos: (0..5)
@@ -417,7 +434,7 @@ mod tests {
         let k = kept();
         let bytes = encode(&k).expect("encodes");
         assert_eq!(bytes.len() as u64, file_bytes(5, 2).expect("size"));
-        assert_eq!(bytes.len(), 72 + 2 * (32 + 29 * 5) + 32);
+        assert_eq!(bytes.len(), 80 + 2 * (32 + 29 * 5) + 32);
         let back = decode(&bytes).expect("decodes");
         assert!(back.front[1].is_none());
         for (a, b) in [
@@ -429,6 +446,10 @@ mod tests {
         ] {
             assert_eq!((a.step, a.time_s, a.tau_s), (b.step, b.time_s, b.tau_s));
             assert_eq!((a.plate_rear_z_m, a.v0_m_s), (b.plate_rear_z_m, b.v0_m_s));
+            assert_eq!(
+                (a.density_kg_m3, a.impactor_density_kg_m3),
+                (b.density_kg_m3, b.impactor_density_kg_m3)
+            );
             assert_eq!(a.mass, b.mass);
             assert_eq!(a.body, b.body);
             assert_eq!(a.labels, b.labels);
@@ -443,6 +464,22 @@ mod tests {
         }
     }
 
+    /// A version-1 file (one density, a 72-byte header) still reads, with the impactor of
+    /// the plate's density.
+    #[test]
+    fn version_1_files_read_with_one_density() {
+        let bytes = encode(&kept()).expect("encodes");
+        let body = &bytes[..bytes.len() - CHECKSUM_BYTES];
+        let mut v1: Vec<u8> = [&body[..72], &body[80..]].concat();
+        v1[8..12].copy_from_slice(&1u32.to_le_bytes());
+        let sum = Sha256::digest(&v1);
+        v1.extend_from_slice(&sum);
+        let back = decode(&v1).expect("version 1 decodes");
+        assert_eq!(back.end.density_kg_m3, 2700.0);
+        assert_eq!(back.end.impactor_density_kg_m3, 2700.0);
+        assert_eq!(back.end.mass, kept().end.mass);
+    }
+
     #[test]
     fn damaged_files_are_refused_with_a_reason() {
         let bytes = encode(&kept()).expect("encodes");
@@ -454,8 +491,8 @@ mod tests {
         flipped[200] ^= 1;
         assert!(err(&flipped).contains("SHA-256"));
         let mut newer = bytes.clone();
-        newer[8] = 2;
-        assert!(err(&newer).contains("version 2"));
+        newer[8] = 3;
+        assert!(err(&newer).contains("version 3"));
         let mut huge = bytes;
         huge[16..24].copy_from_slice(&u64::MAX.to_le_bytes());
         assert!(err(&huge).contains("corrupt"));

@@ -9,12 +9,12 @@ use serde::{Deserialize, Serialize};
 
 use super::keys;
 use super::layout::{lay_out, rim_ids, Layout};
-use super::spec::{Geometry, Material, Resolution, SceneSpec, SizingRule};
+use super::spec::{Geometry, ImpactorMaterial, Material, Resolution, SceneSpec, SizingRule};
 use super::time_step::choose_time_step;
 use super::validate::Impact;
 use crate::error::{check_range, EngineError, Result};
 use crate::paper;
-use crate::potential::Interaction;
+use crate::potential::{Interaction, Materials};
 use crate::state::{Body, Particles};
 use crate::step::stability_bound_s;
 use crate::symmetry::Symmetry;
@@ -42,8 +42,13 @@ pub struct Derived {
     pub mass_impactor_kg: f64,
     /// Particle mass of the target plate, kg.
     pub mass_target_kg: f64,
-    /// Density of both bodies, kg/m^3 (a particle stands for the volume mass / density).
+    /// Density of the plate, and of the impactor unless `impactor` says otherwise, kg/m^3 (a
+    /// particle stands for the volume mass / density).
     pub density_kg_m3: f64,
+    /// The impactor's material where it differs from the plate's (then the fields above are
+    /// the plate's); absent for one material.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub impactor: Option<ImpactorDerived>,
     /// Time step, s.
     pub dt_s: f64,
     /// Largest step the validation accepts, s.
@@ -60,7 +65,32 @@ pub struct Derived {
     pub steps: u64,
 }
 
+/// The impactor's own material at this resolution (a scene with `[impactor]`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ImpactorDerived {
+    /// The impactor's density, kg/m^3.
+    pub density_kg_m3: f64,
+    /// gamma = eps / sigma^3, Pa.
+    pub gamma_pa: f64,
+    /// lambda = kappa / sigma, Pa.
+    pub lambda_pa: f64,
+    /// eps at this sigma, J.
+    pub eps_j: f64,
+    /// kappa at this sigma, N/m.
+    pub kappa_n_m: f64,
+    /// rcut, m.
+    pub rcut_m: f64,
+    /// eps of the contact between the bodies, J.
+    pub cross_eps_j: f64,
+}
+
 impl Derived {
+    /// The impactor's density, kg/m^3.
+    pub fn impactor_density_kg_m3(&self) -> f64 {
+        self.impactor
+            .map_or(self.density_kg_m3, |i| i.density_kg_m3)
+    }
+
     /// Derived numbers for a hand-made particle set (tests and tools): the interaction's
     /// constants, the given step, the lattice's density mass / r_eq^3, and zeros for the
     /// scene geometry.
@@ -77,6 +107,7 @@ impl Derived {
             mass_impactor_kg: mass_kg,
             mass_target_kg: mass_kg,
             density_kg_m3: mass_kg / ia.r_eq_m.powi(3),
+            impactor: None,
             dt_s,
             dt_max_s: f64::INFINITY,
             v0_m_s: 0.0,
@@ -95,13 +126,45 @@ pub struct Setup {
     pub spec: SceneSpec,
     /// Derived numbers.
     pub derived: Derived,
-    /// Interaction constants at this sigma.
-    pub interaction: Interaction,
+    /// The pair laws at this sigma (one material, or the impactor's and the plate's).
+    pub materials: Materials,
     /// Particles and bonds at t = 0.
     pub particles: Particles,
     /// Particles of the target that lie on its lateral rim at t = 0 (by id): the residual
     /// plate is the fragment that holds them (docs/model.md section 5).
     pub rim_ids: Vec<u32>,
+}
+
+/// Both bodies' materials at this resolution.
+struct SizedBodies {
+    /// The plate's material (and the impactor's unless `impactor` is given).
+    plate: SizedMaterial,
+    /// The impactor's own law, when `[impactor]` gives one.
+    impactor: Option<SizedMaterial>,
+    /// Densities of the impactor and of the plate, kg/m^3.
+    density: [f64; 2],
+    /// The pair laws built from them.
+    materials: Materials,
+}
+
+impl SizedBodies {
+    /// The impactor's derived numbers when it differs from the plate in law or density.
+    fn impactor_derived(&self) -> Option<ImpactorDerived> {
+        let [density_imp, density] = self.density;
+        if self.impactor.is_none() && density_imp == density {
+            return None;
+        }
+        let i = self.impactor.as_ref().unwrap_or(&self.plate);
+        Some(ImpactorDerived {
+            density_kg_m3: density_imp,
+            gamma_pa: i.gamma_pa,
+            lambda_pa: i.lambda_pa,
+            eps_j: i.eps_j,
+            kappa_n_m: i.kappa_n_m,
+            rcut_m: i.interaction.rcut_m,
+            cross_eps_j: self.materials.cross.eps_j,
+        })
+    }
 }
 
 /// The material at this resolution: the size-invariant (gamma, lambda), eps and kappa at this
@@ -143,18 +206,18 @@ impl SceneSpec {
         let r_eq = self.resolution.lattice_spacing_m(geometry)?;
         let sigma = r_eq / paper::r_eq_over_sigma();
         let sigma_ref = paper::reference_sigma_m();
-        let sized = self.material.sized(sigma, sigma_ref)?;
-        let interaction = sized.interaction;
+        let bodies = self.sized_bodies(sigma, sigma_ref, density)?;
+        let (sized, materials) = (&bodies.plate, bodies.materials);
 
         let symmetry = self.run.symmetry;
         let mut layout = lay_out(geometry, r_eq, symmetry)?;
-        let [mass_imp, mass_tgt] = particle_masses_kg(geometry, &layout, density);
+        let [mass_imp, mass_tgt] = particle_masses_kg(geometry, &layout, bodies.density);
 
         let run = &self.run;
         run.validate()?;
         self.validate_band()?;
         self.analysis.validate(run.end_time_s)?;
-        let stiffness = sized.kappa_n_m.max(interaction.contact_stiffness_at_r_eq());
+        let stiffness = materials.stiffest_at_r_eq();
         let dt_max = stability_bound_s(sigma, v0, mass_imp.min(mass_tgt), stiffness);
         let dt = choose_time_step(run, dt_max, sigma, sigma_ref)?;
         place_impactor(&mut layout, standoff, r_eq)?;
@@ -168,10 +231,11 @@ impl SceneSpec {
             lambda_pa: sized.lambda_pa,
             eps_j: sized.eps_j,
             kappa_n_m: sized.kappa_n_m,
-            rcut_m: interaction.rcut_m,
+            rcut_m: sized.interaction.rcut_m,
             mass_impactor_kg: mass_imp,
             mass_target_kg: mass_tgt,
             density_kg_m3: density,
+            impactor: bodies.impactor_derived(),
             dt_s: dt,
             dt_max_s: dt_max,
             v0_m_s: v0,
@@ -188,9 +252,32 @@ impl SceneSpec {
         Ok(Setup {
             spec: self.clone(),
             derived,
-            interaction,
+            materials,
             particles,
             rim_ids,
+        })
+    }
+}
+
+impl SceneSpec {
+    /// The plate's and the impactor's material at `sigma`, and their densities (`density`
+    /// the plate's, from the geometry).
+    fn sized_bodies(&self, sigma: f64, sigma_ref: f64, density: f64) -> Result<SizedBodies> {
+        let plate = self.material.sized(sigma, sigma_ref)?;
+        let impactor = self.impactor.sized(&self.material, sigma, sigma_ref)?;
+        let density_imp = match self.impactor.density_kg_m3 {
+            Some(d) => keys::check("impactor.density_kg_m3", d)?,
+            None => density,
+        };
+        let materials = match &impactor {
+            Some(i) => Materials::two(i.interaction, plate.interaction),
+            None => Materials::from(plate.interaction),
+        };
+        Ok(SizedBodies {
+            plate,
+            impactor,
+            density: [density_imp, density],
+            materials,
         })
     }
 }
@@ -231,27 +318,27 @@ impl Material {
     /// The material at particle diameter `sigma` with geometric sizing (eq. 12: eps = gamma
     /// sigma^3, kappa = lambda sigma), or at the reference diameter `sigma_ref` without it.
     fn sized(&self, sigma: f64, sigma_ref: f64) -> Result<SizedMaterial> {
+        let rcut = rcut_over_sigma("material.rcut_over_sigma", self.rcut_over_sigma)?;
+        let (gamma, lambda) = self.invariants(sigma_ref)?;
+        Ok(self.at_sigma(gamma, lambda, rcut, sigma, sigma_ref))
+    }
+
+    /// (gamma, lambda) as the sizing rule scales them: eps = gamma sigma^p, kappa = lambda
+    /// sigma, from (eps, kappa) at `sigma_ref` or given directly.
+    fn invariants(&self, sigma_ref: f64) -> Result<(f64, f64)> {
         let m = self;
-        let rcut_over_sigma = check_range(
-            "material.rcut_over_sigma",
-            m.rcut_over_sigma,
-            paper::r_eq_over_sigma(),
-            true,
-            10.0,
-            false,
-        )?;
         let p = m.sizing_rule.eps_power();
-        let (gamma, lambda) = match (m.eps_j, m.kappa_n_m, m.gamma_pa, m.lambda_pa) {
+        match (m.eps_j, m.kappa_n_m, m.gamma_pa, m.lambda_pa) {
             (eps, kappa, None, None) => {
                 let eps = keys::check("material.eps_j", require("material.eps_j", eps)?)?;
                 let kappa =
                     keys::check("material.kappa_n_m", require("material.kappa_n_m", kappa)?)?;
-                (eps / sigma_ref.powi(p), kappa / sigma_ref)
+                Ok((eps / sigma_ref.powi(p), kappa / sigma_ref))
             }
             (None, None, Some(_), _) | (None, None, _, Some(_))
                 if m.sizing_rule != SizingRule::Eq12 =>
             {
-                return Err(EngineError::Conflict(
+                Err(EngineError::Conflict(
                     "material.gamma_pa and material.lambda_pa are the constants of eq. 12; with \
                      material.sizing_rule = \"eqs5_6\" give material.eps_j and material.kappa_n_m"
                         .into(),
@@ -261,41 +348,104 @@ impl Material {
                 let gamma = keys::check("material.gamma_pa", require("material.gamma_pa", gamma)?)?;
                 let lambda =
                     keys::check("material.lambda_pa", require("material.lambda_pa", lambda)?)?;
-                (gamma, lambda)
+                Ok((gamma, lambda))
             }
-            _ => {
-                return Err(EngineError::Conflict(
-                    "give material.eps_j and material.kappa_n_m, or material.gamma_pa and \
-                     material.lambda_pa, not a mix"
-                        .into(),
-                ))
-            }
-        };
-        let (eps, kappa) = if m.sizing {
+            _ => Err(EngineError::Conflict(
+                "give material.eps_j and material.kappa_n_m, or material.gamma_pa and \
+                 material.lambda_pa, not a mix"
+                    .into(),
+            )),
+        }
+    }
+
+    /// The material of invariants (gamma, lambda) and break distance `rcut_over_sigma` at
+    /// `sigma`, under this material's sizing and contact form.
+    fn at_sigma(
+        &self,
+        gamma: f64,
+        lambda: f64,
+        rcut_over_sigma: f64,
+        sigma: f64,
+        sigma_ref: f64,
+    ) -> SizedMaterial {
+        let p = self.sizing_rule.eps_power();
+        let (eps, kappa) = if self.sizing {
             (gamma * sigma.powi(p), lambda * sigma)
         } else {
             // Without sizing the reference values are used at any sigma (Fig. 4, top panel).
             (gamma * sigma_ref.powi(p), lambda * sigma_ref)
         };
         // Under eqs. 5/6 eps / sigma^3 is not size-invariant; report it at this sigma.
-        let gamma = match m.sizing_rule {
+        let gamma = match self.sizing_rule {
             SizingRule::Eq12 => gamma,
             SizingRule::Eqs5And6 => eps / sigma.powi(3),
         };
-        let interaction = Interaction::new(sigma, eps, kappa, rcut_over_sigma * sigma, m.contact);
-        Ok(SizedMaterial {
+        let interaction =
+            Interaction::new(sigma, eps, kappa, rcut_over_sigma * sigma, self.contact);
+        SizedMaterial {
             gamma_pa: gamma,
             lambda_pa: lambda,
             eps_j: eps,
             kappa_n_m: kappa,
             interaction,
-        })
+        }
     }
 }
 
-/// Particle mass of the impactor and of the target, kg: each body's mass over its particle
-/// count (eq. 20), so each body's mass is exact whatever the lattice rounding.
-fn particle_masses_kg(geometry: &Geometry, layout: &Layout, density: f64) -> [f64; 2] {
+/// A break distance over sigma, checked against its interval (r_eq / sigma, 10].
+fn rcut_over_sigma(key: &str, value: f64) -> Result<f64> {
+    check_range(key, value, paper::r_eq_over_sigma(), true, 10.0, false)
+}
+
+impl ImpactorMaterial {
+    /// The impactor's own law at `sigma`: each constant it gives replaces the plate's
+    /// (`plate`), under the plate's sizing and contact form; `None` when it gives none (its
+    /// density alone does not change the law).
+    fn sized(&self, plate: &Material, sigma: f64, sigma_ref: f64) -> Result<Option<SizedMaterial>> {
+        let own = ImpactorMaterial {
+            density_kg_m3: None,
+            ..self.clone()
+        };
+        if own.is_empty() {
+            return Ok(None);
+        }
+        let (gamma, lambda) = plate.invariants(sigma_ref)?;
+        let p = plate.sizing_rule.eps_power();
+        let gamma = match (self.eps_j, self.gamma_pa) {
+            (Some(_), Some(_)) => return Err(both("impactor.eps_j", "impactor.gamma_pa")),
+            (Some(e), None) => keys::check("impactor.eps_j", e)? / sigma_ref.powi(p),
+            (None, Some(_)) if plate.sizing_rule != SizingRule::Eq12 => {
+                return Err(EngineError::Conflict(
+                    "impactor.gamma_pa is a constant of eq. 12; with material.sizing_rule = \
+                     \"eqs5_6\" give impactor.eps_j"
+                        .into(),
+                ));
+            }
+            (None, Some(g)) => keys::check("impactor.gamma_pa", g)?,
+            (None, None) => gamma,
+        };
+        let lambda = match (self.kappa_n_m, self.lambda_pa) {
+            (Some(_), Some(_)) => return Err(both("impactor.kappa_n_m", "impactor.lambda_pa")),
+            (Some(k), None) => keys::check("impactor.kappa_n_m", k)? / sigma_ref,
+            (None, Some(l)) => keys::check("impactor.lambda_pa", l)?,
+            (None, None) => lambda,
+        };
+        let rcut = match self.rcut_over_sigma {
+            Some(r) => rcut_over_sigma("impactor.rcut_over_sigma", r)?,
+            None => rcut_over_sigma("material.rcut_over_sigma", plate.rcut_over_sigma)?,
+        };
+        Ok(Some(plate.at_sigma(gamma, lambda, rcut, sigma, sigma_ref)))
+    }
+}
+
+/// The conflict of two keys that say the same thing.
+fn both(a: &str, b: &str) -> EngineError {
+    EngineError::Conflict(format!("give {a} or {b}, not both"))
+}
+
+/// Particle mass of the impactor and of the target, kg, from their `density` (impactor,
+/// target): each body's mass over its particle count (eq. 20), so each body's mass is exact whatever the lattice rounding.
+fn particle_masses_kg(geometry: &Geometry, layout: &Layout, density: [f64; 2]) -> [f64; 2] {
     let n_imp = layout.count(Body::Impactor);
     let n_tgt = layout.count(Body::Target);
     let (vol_imp, vol_tgt) = match *geometry {
@@ -318,8 +468,8 @@ fn particle_masses_kg(geometry: &Geometry, layout: &Layout, density: f64) -> [f6
             width_m * width_m * target_thickness_m,
         ),
     };
-    let mass_imp = density * vol_imp / n_imp as f64;
-    let mass_tgt = density * vol_tgt / n_tgt as f64;
+    let mass_imp = density[0] * vol_imp / n_imp as f64;
+    let mass_tgt = density[1] * vol_tgt / n_tgt as f64;
     [mass_imp, mass_tgt]
 }
 

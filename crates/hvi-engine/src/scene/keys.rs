@@ -88,6 +88,16 @@ const fn interval(lo: f64, lo_open: bool, hi: f64, hi_open: bool) -> Allowed {
 /// A number > 0.
 const POSITIVE: Allowed = interval(0.0, true, f64::INFINITY, true);
 
+/// The sections of a scene, in the order of docs/running.md: each key is `section.name`.
+pub const SECTIONS: [&str; 6] = [
+    "scene",
+    "resolution",
+    "material",
+    "impactor",
+    "run",
+    "analysis",
+];
+
 /// Every scene key, section by section, in the order of docs/running.md.
 pub const KEYS: &[Key] = &[
     Key {
@@ -122,7 +132,7 @@ pub const KEYS: &[Key] = &[
     },
     Key {
         name: "scene.density_kg_m3",
-        meaning: "density of both bodies",
+        meaning: "density of the plate, and of the impactor unless `impactor.density_kg_m3`",
         allowed: POSITIVE,
         default: "2700",
     },
@@ -212,6 +222,44 @@ pub const KEYS: &[Key] = &[
                   eps and kappa, not gamma and lambda",
         allowed: Allowed::Text("`eq12` or `eqs5_6`"),
         default: "`eq12`",
+    },
+    Key {
+        name: "impactor.density_kg_m3",
+        meaning: "the impactor's density where it differs from the plate's \
+                  (`scene.density_kg_m3`), e.g. 7850 for a steel sphere",
+        allowed: POSITIVE,
+        default: "the plate's",
+    },
+    Key {
+        name: "impactor.eps_j",
+        meaning: "the impactor's eps at the reference sigma; the contact between the bodies \
+                  takes sqrt(eps_impactor eps_plate)",
+        allowed: POSITIVE,
+        default: "the plate's",
+    },
+    Key {
+        name: "impactor.kappa_n_m",
+        meaning: "the impactor's kappa at the reference sigma",
+        allowed: POSITIVE,
+        default: "the plate's",
+    },
+    Key {
+        name: "impactor.gamma_pa",
+        meaning: "or the impactor's gamma = eps/sigma^3 (not with `impactor.eps_j`)",
+        allowed: POSITIVE,
+        default: "the plate's",
+    },
+    Key {
+        name: "impactor.lambda_pa",
+        meaning: "or the impactor's lambda = kappa/sigma (not with `impactor.kappa_n_m`)",
+        allowed: POSITIVE,
+        default: "the plate's",
+    },
+    Key {
+        name: "impactor.rcut_over_sigma",
+        meaning: "the impactor's bond break distance / sigma",
+        allowed: Allowed::Text("(2^(1/6), 10]"),
+        default: "the plate's",
     },
     Key {
         name: "run.end_time_s",
@@ -488,11 +536,7 @@ mod tests {
                 k.name
             );
             let section = k.name.split('.').next().expect("section");
-            assert!(
-                ["scene", "resolution", "material", "run", "analysis"].contains(&section),
-                "{}",
-                k.name
-            );
+            assert!(SECTIONS.contains(&section), "{}", k.name);
         }
     }
 

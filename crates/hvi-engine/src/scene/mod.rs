@@ -1,7 +1,7 @@
 //! Scene description (what a scene file says) and its validation into a ready-to-run setup.
 //!
 //! The spec types mirror the TOML scene files one to one (`[scene]`, `[resolution]`,
-//! `[material]`, `[run]`, `[analysis]`); their keys are the keys `hvi-study run --set` accepts.
+//! `[material]`, `[impactor]`, `[run]`, `[analysis]`); their keys are the keys `hvi-study run --set` accepts.
 //! [`SceneSpec::build`] validates every value (naming the key and the allowed range on error)
 //! and lays out the particles: simple cubic lattice at r_eq, nearest-neighbour bonds inside each
 //! body, mass m = M/N per body (eq. 20), seeded Maxwell-Boltzmann thermal velocities.
@@ -32,7 +32,7 @@ pub use resolution::{
     THICKNESS_TOLERANCE,
 };
 pub use spec::{
-    Geometry, Material, Resolution, RunSettings, SceneSpec, SizingRule, TimeStep,
+    Geometry, ImpactorMaterial, Material, Resolution, RunSettings, SceneSpec, SizingRule, TimeStep,
     DEFAULT_SKIN_OVER_SIGMA,
 };
 pub use validate::SUSPICIOUS_V0_M_S;

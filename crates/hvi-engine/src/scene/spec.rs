@@ -20,8 +20,14 @@ pub struct SceneSpec {
     pub scene: Geometry,
     /// How finely they are discretised.
     pub resolution: Resolution,
-    /// The model's material parameters.
+    /// The model's material parameters: the plate's, and the impactor's unless `impactor`
+    /// gives its own.
     pub material: Material,
+    /// The impactor's material where it differs from the plate's (docs/model.md section 3,
+    /// "Two materials"); empty for one material, and then left out of the scene's JSON so
+    /// that fingerprints of one-material scenes are unchanged.
+    #[serde(default, skip_serializing_if = "ImpactorMaterial::is_empty")]
+    pub impactor: ImpactorMaterial,
     /// Time integration and safety settings.
     #[serde(default)]
     pub run: RunSettings,
@@ -155,6 +161,40 @@ pub struct Material {
     /// (eps ~ sigma, as equations 5 and 6 of the paper's text print it); kappa ~ sigma in both.
     #[serde(default, skip_serializing_if = "SizingRule::is_default")]
     pub sizing_rule: SizingRule,
+}
+
+/// The impactor's own material (section `[impactor]`): every key left out is the plate's
+/// (`[material]`, and `scene.density_kg_m3`). Both bodies share the lattice (one sigma), the
+/// contact form and the sizing; the contact between them follows the combining rule of
+/// docs/model.md section 3.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImpactorMaterial {
+    /// The impactor's density, kg/m^3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub density_kg_m3: Option<f64>,
+    /// The impactor's repulsion strength eps at the reference sigma, J.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eps_j: Option<f64>,
+    /// The impactor's spring stiffness kappa at the reference sigma, N/m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kappa_n_m: Option<f64>,
+    /// The impactor's size-invariant repulsion strength gamma = eps / sigma^3, Pa.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gamma_pa: Option<f64>,
+    /// The impactor's size-invariant stiffness lambda = kappa / sigma, Pa.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lambda_pa: Option<f64>,
+    /// The impactor's bond break distance over sigma.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rcut_over_sigma: Option<f64>,
+}
+
+impl ImpactorMaterial {
+    /// Whether no key is given (the impactor is of the plate's material).
+    pub fn is_empty(&self) -> bool {
+        *self == ImpactorMaterial::default()
+    }
 }
 
 /// The scaling of eps with the particle diameter under geometric sizing (docs/model.md section 4).
@@ -372,6 +412,7 @@ impl SceneSpec {
     /// `end_time_s`.
     pub fn calibration(particles: f64, end_time_s: f64) -> SceneSpec {
         SceneSpec {
+            impactor: ImpactorMaterial::default(),
             scene: Geometry::SphereOnPlate {
                 diameter_m: paper::IMPACTOR_DIAMETER_M,
                 t_over_d: paper::CALIBRATION_T_OVER_D,

@@ -45,6 +45,7 @@ pub fn plates_scene(particles: f64, sizing: bool) -> SceneSpec {
             particles: Some(particles),
             particles_across_d: None,
         },
+        impactor: Default::default(),
         material: Material {
             sizing,
             ..Material::default()

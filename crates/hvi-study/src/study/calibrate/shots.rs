@@ -458,6 +458,16 @@ mod tests {
         // The filled study plans: its scene is the shot's impact.
         let scene = hvi_run::plan::validated_scene(&s, &s.set).expect("scene");
         assert_eq!(scene.scene.v0_m_s(), 5000.0);
+        // A steel sphere on the same plate: each body gets its own density.
+        let mut steel = t.clone();
+        steel.shot.impactor_density_kg_m3 = Some(7850.0);
+        steel.shot.plate_density_kg_m3 = Some(2700.0);
+        let s = study_for_shot(&study, None, &[], &steel).expect("two densities");
+        let scene = hvi_run::plan::validated_scene(&s, &s.set).expect("scene");
+        assert_eq!(scene.impactor.density_kg_m3, Some(7850.0));
+        let setup = scene.build().expect("builds");
+        assert_eq!(setup.derived.density_kg_m3, 2700.0);
+        assert_eq!(setup.derived.impactor_density_kg_m3(), 7850.0);
         std::fs::write(
             dir.join("s.toml"),
             study_text("[[axes]]\nkey = \"scene.v0_m_s\"\nvalues = [4000, 5000]\n"),
