@@ -987,7 +987,15 @@ fn the_largest_piece_of_the_impactor_is_reported_beside_the_clouds_largest_fragm
     let mut b = Builder::default();
     let (_, rim) = plate_with_rim(&mut b);
     // Beyond the face: a 4 x 4 x 2 spall of plate material (the cloud's largest fragment), a
-    // 2 x 2 x 1 piece of the impactor and six impactor loners (impactor: 10 particles).
+    // 2 x 2 x 1 piece of the impactor and six impactor loners; in front of the plate a
+    // 3 x 3 x 1 piece of the impactor that never got through (impactor: 19 particles).
+    b.block(
+        DVec3::new(-A, -A, -8.0 * A),
+        [3, 3, 1],
+        A,
+        Body::Impactor,
+        M_IMPACTOR,
+    );
     b.block(
         DVec3::new(-1.5 * A, -1.5 * A, 8.0 * A),
         [4, 4, 2],
@@ -1014,7 +1022,7 @@ fn the_largest_piece_of_the_impactor_is_reported_beside_the_clouds_largest_fragm
     let reference = CloudReference::new(&p, &derived, &rim);
     let members = find_cloud(&p, &reference);
     let m = measure(&p, &members, &reference, 0.995, Width::Side, 1.0, 1.0).measurement;
-    let impactor = 10.0 * M_IMPACTOR;
+    let impactor = 19.0 * M_IMPACTOR;
     let largest = m.largest_fragment_mass_fraction.expect("largest");
     assert!(
         (largest - 32.0 * M_TARGET / impactor).abs() < 1e-12,
@@ -1027,4 +1035,7 @@ fn the_largest_piece_of_the_impactor_is_reported_beside_the_clouds_largest_fragm
         (piece - 4.0 * M_IMPACTOR / impactor).abs() < 1e-12,
         "{piece}"
     );
+    // The onset reads the largest piece anywhere: the one in front of the plate.
+    let intact = m.impactor_intact_mass_fraction.expect("intact fraction");
+    assert!((intact - 9.0 / 19.0).abs() < 1e-12, "{intact}");
 }

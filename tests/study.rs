@@ -1097,6 +1097,21 @@ fn validity_map_draws_f_with_the_cutoff_contour_and_exports_the_boundary() {
     assert!(measured >= 4, "{rows:?}");
     let png = std::fs::read(out.join("validity_map.png")).expect("png");
     assert_eq!(&png[1..4], b"PNG");
+    check_onset(&out, &[0.3, 0.5]);
+    let o = bin()
+        .arg("validity-map")
+        .arg(&study)
+        .arg("--out")
+        .arg(&out)
+        .args(["--onset-threshold", "1.5"])
+        .output()
+        .expect("runs");
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("validity.onset.threshold"),
+        "{}",
+        stderr(&o)
+    );
     let o = bin()
         .arg("validity-map")
         .arg(&study)
@@ -1106,6 +1121,58 @@ fn validity_map_draws_f_with_the_cutoff_contour_and_exports_the_boundary() {
         .output()
         .expect("runs");
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+}
+
+/// The onset's files: one row per t/D with both relations and the model's bracket, and the
+/// bracket held by the runs: the seeds' mean intact fraction at its low end is at or above
+/// the threshold, at its high end below, and the two ends are within the tolerance.
+fn check_onset(out: &Path, ts: &[f64]) {
+    let csv = std::fs::read_to_string(out.join("onset.csv")).expect("onset.csv");
+    let header = csv.lines().next().expect("header");
+    for col in [
+        "t_over_d",
+        "onset_model_m_s",
+        "onset_model_lo_m_s",
+        "onset_model_hi_m_s",
+        "onset_piekutowski_2003_m_s",
+        "onset_reimerdes_2006_m_s",
+        "agreement_reimerdes_2006",
+        "cutoff_line_m_s",
+    ] {
+        assert!(
+            header.split(',').any(|c| c == col),
+            "{col} missing: {header}"
+        );
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("onset.json")).expect("json"))
+            .expect("onset.json");
+    let threshold = json["config"]["threshold"].as_f64().expect("threshold");
+    let tolerance = json["config"]["tolerance_m_s"].as_f64().expect("tolerance");
+    let rows = json["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), ts.len());
+    for (row, &t) in rows.iter().zip(ts) {
+        assert_eq!(row["t_over_d"].as_f64(), Some(t));
+        let runs: Vec<(f64, f64)> = row["runs"]
+            .as_array()
+            .expect("runs")
+            .iter()
+            .map(|r| (num(&r[0]), num(&r[1])))
+            .collect();
+        let at = |v: f64| runs.iter().find(|r| r.0 == v).expect("a run at the end").1;
+        let m = &row["model"];
+        match m["kind"].as_str() {
+            Some("between") => {
+                let (lo, hi) = (num(&m["lo"]), num(&m["hi"]));
+                assert!(lo < hi && hi - lo <= tolerance, "{m}");
+                assert!(at(lo) >= threshold && at(hi) < threshold, "{row}");
+            }
+            Some("above") => assert!(runs.iter().all(|r| r.1 >= threshold), "{row}"),
+            Some("below") => assert!(at(num(&m["v"])) < threshold, "{row}"),
+            k => panic!("kind {k:?}"),
+        }
+        assert_eq!(row["experiments"].as_array().map(Vec::len), Some(2));
+    }
 }
 
 #[test]

@@ -10,6 +10,7 @@ pub mod contour;
 pub mod decide;
 pub mod number;
 pub mod observable;
+pub mod onset;
 pub mod score;
 pub mod shot;
 pub mod surrogate;

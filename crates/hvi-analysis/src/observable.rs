@@ -55,6 +55,8 @@ pub enum Observable {
     LargestFragmentMassFraction,
     /// The impactor mass of the cloud fragment holding the most of it, over the impactor mass.
     ImpactorLargestFragmentMassFraction,
+    /// The impactor's largest piece anywhere, over the impactor mass (1: intact).
+    ImpactorIntactMassFraction,
     /// Largest fragment's volume-equivalent diameter.
     LargestFragmentDiameter,
     /// Mass-weighted mean fragment diameter.
@@ -117,7 +119,7 @@ const fn def(
 }
 
 /// Every observable, in table order (a plain table: the one place an observable is named).
-pub const DEFINITIONS: [Definition; 29] = {
+pub const DEFINITIONS: [Definition; 30] = {
     use Observable::*;
     [
         def(Particles, "particles", "N", "1", "particles in the run"),
@@ -218,6 +220,14 @@ pub const DEFINITIONS: [Definition; 29] = {
             "largest impactor piece",
             "1",
             "the impactor mass of the cloud fragment holding the most of it, over the impactor's",
+        ),
+        def(
+            ImpactorIntactMassFraction,
+            "impactor_intact_mass_fraction",
+            "impactor intact",
+            "1",
+            "the impactor's largest piece anywhere (cloud, crater or in front of the plate), over \
+             its mass: 1 for an intact impactor; the fragmentation onset is read from it",
         ),
         def(
             LargestFragmentDiameter,

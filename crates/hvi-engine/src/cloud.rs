@@ -484,6 +484,12 @@ pub struct CloudMeasurement {
     /// cloud's largest fragment can be a piece of the plate.
     #[serde(default)]
     pub impactor_largest_fragment_mass_fraction: Option<f64>,
+    /// The impactor's largest piece anywhere (in the cloud, in the plate's crater or in front
+    /// of it), over its mass: 1 for an intact impactor. Bonds never join the bodies, so a
+    /// piece is of impactor particles only. What the fragmentation onset is read from
+    /// (docs/model-decisions.md, "The fragmentation onset"); None without impactor particles.
+    #[serde(default)]
+    pub impactor_intact_mass_fraction: Option<f64>,
     /// Volume-equivalent diameter of the largest fragment, m.
     pub largest_fragment_diameter_m: Option<f64>,
     /// Particles in the largest fragment.
@@ -518,6 +524,24 @@ fn impactor_largest_piece_kg(
         .map(|&i| p.mass[i])?;
     let most = fragments.iter().map(|f| f.impactor_particles).max()?;
     Some(most as f64 * particle_kg)
+}
+
+/// The impactor mass of its largest piece anywhere (every particle, cloud or not), kg: the
+/// most impactor particles under one label times the impactor's particle mass (None without
+/// impactor particles).
+fn impactor_intact_kg(p: &Particles, labels: &[u32], order: &[usize]) -> Option<f64> {
+    let particle_kg = order
+        .iter()
+        .find(|&&i| p.body[i] == Body::Impactor)
+        .map(|&i| p.mass[i])?;
+    let mut count = vec![0u32; p.len()];
+    for &i in order {
+        if p.body[i] == Body::Impactor {
+            count[labels[i] as usize] += 1;
+        }
+    }
+    let most = count.iter().copied().max()?;
+    Some(f64::from(most) * particle_kg)
 }
 
 /// One fragment's sums while the cloud's particles are visited in id order.
@@ -625,6 +649,7 @@ pub fn measure(
         .sum();
     let largest = fragments.first();
     let impactor_largest = impactor_largest_piece_kg(p, &order, &fragments);
+    let impactor_intact = impactor_intact_kg(p, &members.labels, &order);
     let mean_fragment_diameter_m = (mass_kg > 0.0).then(|| {
         fragments
             .iter()
@@ -669,6 +694,7 @@ pub fn measure(
         largest_fragment_mass_kg: largest.map(|f| f.mass_kg),
         largest_fragment_mass_fraction: largest.map(|f| per_impactor(f.mass_kg)),
         impactor_largest_fragment_mass_fraction: impactor_largest.map(per_impactor),
+        impactor_intact_mass_fraction: impactor_intact.map(per_impactor),
         largest_fragment_diameter_m: largest.map(|f| f.diameter_m),
         largest_fragment_particles: largest.map_or(0, |f| f.particles),
         mean_fragment_diameter_m,

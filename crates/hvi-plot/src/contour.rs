@@ -43,6 +43,21 @@ pub struct Marker {
     pub cross: bool,
 }
 
+/// A curve over the map (an experiment's relation, a model's onset), in physical units.
+#[derive(Debug, Clone)]
+pub struct Curve {
+    /// The points, joined in order.
+    pub points: Vec<Point>,
+    /// Legend text.
+    pub label: String,
+    /// Colour.
+    pub color: RGBColor,
+    /// Dashed (true) or solid.
+    pub dashed: bool,
+    /// Per point, an interval in x drawn as a bar through it (a bracket), or none.
+    pub x_bars: Vec<Option<(f64, f64)>>,
+}
+
 /// A contour plot.
 #[derive(Debug, Clone)]
 pub struct ContourPlot {
@@ -77,6 +92,8 @@ pub struct ContourPlot {
     /// A box drawn dashed, with its legend text: (lowest corner, highest corner) in physical
     /// units (the calibration's confidence region).
     pub region: Option<(Point, Point, String)>,
+    /// Curves drawn over the map, each with its legend entry.
+    pub curves: Vec<Curve>,
     /// Colours and iso-lines over the field's bulk only (the median within 3 median absolute
     /// deviations, inside the field's range), for a field that a few outlying values would
     /// otherwise flatten into one colour: values beyond saturate at the colour bar's ends, and
@@ -232,6 +249,36 @@ struct MapFrame {
 }
 
 impl MapFrame {
+    /// The frame widened in x and y to hold every curve's points and bars (a curve is not
+    /// cut at the field's edge), with the same 4 % margin.
+    fn around_curves(mut self, p: &ContourPlot) -> Self {
+        let mut xs: Vec<f64> = Vec::new();
+        let mut ys: Vec<f64> = Vec::new();
+        for c in &p.curves {
+            for (k, &(x, y)) in c.points.iter().enumerate() {
+                xs.push(tx(x, p.x_log));
+                ys.push(tx(y, p.y_log));
+                if let Some(Some((a, b))) = c.x_bars.get(k) {
+                    xs.extend([tx(*a, p.x_log), tx(*b, p.x_log)]);
+                }
+            }
+        }
+        let widen = |(lo, hi): (f64, f64), v: &[f64]| {
+            let (a, b) = v
+                .iter()
+                .filter(|x| x.is_finite())
+                .fold((lo, hi), |(a, b), &x| (a.min(x), b.max(x)));
+            let d = 0.04 * (b - a);
+            (
+                if a < lo { a - d } else { lo },
+                if b > hi { b + d } else { hi },
+            )
+        };
+        self.x = widen(self.x, &xs);
+        self.y = widen(self.y, &ys);
+        self
+    }
+
     /// The frame of a field in drawn coordinates.
     fn of(field: &Field, bulk: bool) -> Self {
         let (x0, x1) = (field.x[0], field.x[field.x.len() - 1]);
@@ -309,13 +356,14 @@ where
 {
     root.fill(&WHITE)?;
     let field = drawn_field(p);
-    let frame = MapFrame::of(&field, p.bulk_colours);
+    let frame = MapFrame::of(&field, p.bulk_colours).around_curves(p);
     let (main, bar) = root.split_horizontally(root.dim_in_pixel().0 - 150);
     let mut chart = map_axes(&main, p, &frame)?;
     fill_field(&mut chart, &field, &frame, max_tiles)?;
     iso_lines(&mut chart, &field, p, &frame)?;
     run_points(&mut chart, &field, p)?;
     region_box(&mut chart, p)?;
+    curves(&mut chart, p)?;
     markers(&mut chart, p)?;
     series_legend(&mut chart, SeriesLabelPosition::UpperRight, MAP_LEGEND)?;
     subtitle(&main, &p.subtitle, 26)?;
@@ -544,6 +592,62 @@ where
     Ok(())
 }
 
+/// The curves over the map: a white casing under each line so it reads on any colour, dots
+/// at its points with their x bars, and its legend entry.
+fn curves<DB: DrawingBackend>(chart: &mut MapChart<'_, DB>, p: &ContourPlot) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    for c in &p.curves {
+        let pts: Vec<(f64, f64)> = c
+            .points
+            .iter()
+            .map(|&(x, y)| (tx(x, p.x_log), tx(y, p.y_log)))
+            .collect();
+        let color = c.color;
+        chart.draw_series(std::iter::once(PathElement::new(
+            pts.clone(),
+            WHITE.stroke_width(6),
+        )))?;
+        for (at, bar) in pts.iter().zip(&c.x_bars) {
+            if let Some((a, b)) = bar {
+                let (a, b) = (tx(*a, p.x_log), tx(*b, p.x_log));
+                chart.draw_series(std::iter::once(PathElement::new(
+                    vec![(a, at.1), (b, at.1)],
+                    color.stroke_width(3),
+                )))?;
+            }
+        }
+        if c.dashed {
+            chart
+                .draw_series(std::iter::once(DashedPathElement::new(
+                    pts.clone(),
+                    10,
+                    6,
+                    color.stroke_width(3),
+                )))?
+                .label(c.label.clone())
+                .legend(move |(x, y)| {
+                    DashedPathElement::new(vec![(x, y), (x + 20, y)], 5, 3, color.stroke_width(3))
+                });
+        } else {
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    pts.clone(),
+                    color.stroke_width(3),
+                )))?
+                .label(c.label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3))
+                });
+        }
+        if !c.x_bars.is_empty() {
+            chart.draw_series(pts.iter().map(|&at| Circle::new(at, 5, color.filled())))?;
+        }
+    }
+    Ok(())
+}
+
 /// The marked points, crosses or circles, each with its legend entry.
 fn markers<DB: DrawingBackend>(chart: &mut MapChart<'_, DB>, p: &ContourPlot) -> Result<()>
 where
@@ -764,6 +868,7 @@ mod tests {
                 color: RED,
                 cross: true,
             }],
+            curves: Vec::new(),
             region: Some(((0.03, 1.5e6), (0.2, 4e6), "confidence region".into())),
             bulk_colours: false,
         };
@@ -811,6 +916,7 @@ mod tests {
             samples: None,
             markers: vec![],
             region: None,
+            curves: Vec::new(),
             bulk_colours: false,
         };
         let dir = std::env::temp_dir().join(format!("hvi-plot-fine-{}", std::process::id()));

@@ -16,6 +16,7 @@
 //!     y_label: "kappa (N/m)".into(), x_log: true, y_log: true, field,
 //!     value_label: "R".into(), levels: 4, highlight: Some((1.55, "experiment".into())),
 //!     extra_points: Vec::new(), samples: None, markers: Vec::new(), region: None,
+//!     curves: Vec::new(),
 //!     bulk_colours: false,
 //! };
 //! let stem = std::env::temp_dir().join(format!("hvi-plot-doc-{}", std::process::id()));

@@ -333,6 +333,9 @@ impl Summary {
                 Observable::ImpactorLargestFragmentMassFraction => {
                     m.and_then(|m| m.impactor_largest_fragment_mass_fraction)
                 }
+                Observable::ImpactorIntactMassFraction => {
+                    m.and_then(|m| m.impactor_intact_mass_fraction)
+                }
                 Observable::LargestFragmentDiameter => {
                     m.and_then(|m| m.largest_fragment_diameter_m)
                 }

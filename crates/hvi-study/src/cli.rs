@@ -322,6 +322,13 @@ pub struct ValidityArgs {
     /// The cut-off of the observable (default: the study's, else the paper's F = 0.3).
     #[arg(long)]
     pub cutoff: Option<f64>,
+    /// Skip the fragmentation onset's search (onset.csv, the curves over the map).
+    #[arg(long)]
+    pub no_onset: bool,
+    /// The impactor's intact mass fraction below which it counts as fragmented (default: the
+    /// study's `[validity.onset] threshold`, else 0.8).
+    #[arg(long, value_name = "FRACTION")]
+    pub onset_threshold: Option<f64>,
 }
 
 impl ValidityArgs {
@@ -330,6 +337,8 @@ impl ValidityArgs {
         ValidityOptions {
             study: self.study.options(),
             cutoff: self.cutoff,
+            onset: !self.no_onset,
+            onset_threshold: self.onset_threshold,
         }
     }
 }

@@ -85,6 +85,14 @@ pub enum Geometry {
 }
 
 impl Geometry {
+    /// Plate thickness over sphere diameter, t/D (None for the flyer plate).
+    pub fn t_over_d(&self) -> Option<f64> {
+        match self {
+            Geometry::SphereOnPlate { t_over_d, .. } => Some(*t_over_d),
+            Geometry::FlyerPlate { .. } => None,
+        }
+    }
+
     /// Impact velocity v0, m/s.
     pub fn v0_m_s(&self) -> f64 {
         match self {

@@ -228,6 +228,7 @@ fn draw_maps(res: &FidelityResult, j: &Judged, out: &Path) -> Result<()> {
         extra_points: Vec::new(),
         samples: None,
         region: None,
+        curves: Vec::new(),
         bulk_colours: false,
         markers: markers(peak),
     };

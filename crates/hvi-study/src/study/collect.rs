@@ -11,7 +11,7 @@ use serde_json::Value;
 use super::calibrate::{score_table, CalibrateConfig};
 use super::options::StudyOptions;
 use super::sweep::print_failures;
-use super::validity::{validity_outputs, ValidityConfig};
+use super::validity::{validity_outputs, Cut, ValidityConfig};
 use hvi_analysis::observable::Observables;
 use hvi_run::plan::{describe_values, Plan, DIR_DIGITS};
 use hvi_run::slurm::{QueueView, TaskState};
@@ -410,7 +410,11 @@ pub fn collect(args: &CollectOptions) -> Result<()> {
         CollectAs::ValidityMap => {
             let cfg = ValidityConfig::of(&Study::load(&plan.study_file)?)?;
             let cutoff = cfg.cutoff(args.cutoff)?;
-            validity_outputs(&plan, &dir, cfg.observable, cutoff, table, &filled, quiet)?;
+            let cut = Cut {
+                observable: cfg.observable,
+                cutoff,
+            };
+            validity_outputs(&plan, &dir, cut, table, &filled, quiet, None)?;
         }
     }
     report_missing(&plan, &missing, quiet);

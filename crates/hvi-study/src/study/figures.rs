@@ -180,6 +180,7 @@ impl<'a> MapFrame<'a> {
             samples: None,
             markers: self.markers.clone(),
             region: self.region.clone(),
+            curves: Vec::new(),
             bulk_colours: false,
         }
     }

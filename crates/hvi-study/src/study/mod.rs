@@ -5,6 +5,7 @@ pub mod calibrate;
 pub mod collect;
 pub mod document;
 pub mod figures;
+pub mod onset;
 pub mod options;
 pub mod reanalyse;
 pub mod stability;

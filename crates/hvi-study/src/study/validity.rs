@@ -29,7 +29,13 @@ use hvi_run::plan::Plan;
 use hvi_run::store::{Record, RunStatus};
 use hvi_run::study::execute_plan;
 use hvi_run::table::Table;
-use plotters::style::{BLUE, RED};
+use plotters::style::{RGBColor, BLUE, RED};
+
+use super::onset::{
+    self, describe as describe_onset, find_onsets, write_onset, OnsetConfig, OnsetResult,
+};
+use hvi_analysis::onset::Onset;
+use hvi_plot::contour::Curve;
 
 /// The paper's cut-off of the validity region (section 5, Fig. 16): F = 0.3.
 pub const PAPER_CUTOFF: f64 = hvi_engine::paper::VALIDITY_FRAGMENTATION_CUTOFF;
@@ -51,6 +57,9 @@ pub struct ValidityConfig {
     /// The cut-off level (default 0.3).
     #[serde(default = "default_cutoff")]
     pub cutoff: f64,
+    /// The fragmentation onset's search (`[validity.onset]`, [`super::onset`]).
+    #[serde(default)]
+    pub onset: OnsetConfig,
 }
 
 impl ValidityConfig {
@@ -84,6 +93,7 @@ impl Default for ValidityConfig {
         ValidityConfig {
             observable: default_observable(),
             cutoff: default_cutoff(),
+            onset: OnsetConfig::default(),
         }
     }
 }
@@ -122,6 +132,10 @@ pub struct ValidityOptions {
     pub study: StudyOptions,
     /// The cut-off of the observable (None: the study's, else the paper's F = 0.3).
     pub cutoff: Option<f64>,
+    /// Find the fragmentation onset per t/D (when the study's `[validity.onset]` enables it).
+    pub onset: bool,
+    /// The onset's threshold, overriding the study's.
+    pub onset_threshold: Option<f64>,
 }
 
 /// `hvi-study validity-map`.
@@ -131,21 +145,69 @@ pub fn validity_map(args: &ValidityOptions) -> Result<ValidityMap> {
     let cfg = ValidityConfig::of(&study)?;
     let cutoff = cfg.cutoff(args.cutoff)?;
     map_axes(&plan)?;
+    let mut onset_cfg = cfg.onset.clone();
+    if let Some(t) = args.onset_threshold {
+        onset_cfg.threshold = t;
+    }
+    let find_onset = args.onset && onset_cfg.enabled;
+    if find_onset {
+        onset_cfg.check()?;
+        onset_cfg.relations(&study)?;
+    }
 
     let (table, report) = execute_plan(&plan, &out, &args.study.exec_options())?;
     if !args.study.quiet {
         eprintln!("{}", report.line());
     }
     print_failures(&report.records);
+    let cut = Cut {
+        observable: cfg.observable,
+        cutoff,
+    };
+    let onset = if find_onset {
+        let boundary = boundary_of(&plan, &report.records, cut)?;
+        let r = find_onsets(
+            &study,
+            &plan,
+            &out,
+            &onset_cfg,
+            &args.study.exec_options(),
+            &boundary,
+        )?;
+        write_onset(&out, &r)?;
+        if !args.study.quiet {
+            eprint!("{}", describe_onset(&r));
+            eprintln!("onset: {}", out.join("onset.csv").display());
+        }
+        Some(r)
+    } else {
+        None
+    };
     validity_outputs(
         &plan,
         &out,
-        cfg.observable,
-        cutoff,
+        cut,
         table,
         &report.records,
         args.study.quiet,
+        onset.as_ref(),
     )
+}
+
+/// The map's cut-off line in the plan's physical units (x, y as the map's axes).
+fn boundary_of(plan: &Plan, records: &[Record], cut: Cut) -> Result<Vec<Vec<Point>>> {
+    let axes = map_axes(plan)?;
+    let field = field_of(plan, records, axes, 0, |r| cut.value(r))?;
+    let lines = field.contour(cut.cutoff);
+    // The onset reads the line as (v0, t/D).
+    Ok(if plan.axes[axes.0].key == onset::T_OVER_D {
+        lines
+            .into_iter()
+            .map(|l| l.into_iter().map(|(x, y)| (y, x)).collect())
+            .collect()
+    } else {
+        lines
+    })
 }
 
 /// The validity map's files from a plan's results table and records (one per run, in plan
@@ -154,14 +216,14 @@ pub fn validity_map(args: &ValidityOptions) -> Result<ValidityMap> {
 pub fn validity_outputs(
     plan: &Plan,
     out: &Path,
-    observable: Observable,
-    cutoff: f64,
+    cut: Cut,
     mut table: Table,
     records: &[Record],
     quiet: bool,
+    onset: Option<&OnsetResult>,
 ) -> Result<ValidityMap> {
     let axes = map_axes(plan)?;
-    let cut = Cut { observable, cutoff };
+    let Cut { observable, cutoff } = cut;
     let (valid_col, valid, invalid) = valid_column(records, cut);
     table.push_column("valid", valid_col);
     table.write(out, "results")?;
@@ -173,7 +235,10 @@ pub fn validity_outputs(
     let stem = out.join("validity_map");
     contour_plot(
         &stem,
-        &map_plot(plan, axes, records, field, cut, (valid, invalid)),
+        &ContourPlot {
+            curves: onset.map_or_else(Vec::new, |o| onset_curves(plan, axes, o)),
+            ..map_plot(plan, axes, records, field, cut, (valid, invalid))
+        },
     )?;
     let snapshots = draw_snapshots(plan, out, axes, records, cut)?;
     if !quiet {
@@ -197,9 +262,11 @@ pub fn validity_outputs(
 
 /// The observable mapped and its cut-off: a run at or above it is valid.
 #[derive(Debug, Clone, Copy)]
-struct Cut {
-    observable: Observable,
-    cutoff: f64,
+pub struct Cut {
+    /// The observable.
+    pub observable: Observable,
+    /// Its cut-off.
+    pub cutoff: f64,
 }
 
 impl Cut {
@@ -272,9 +339,77 @@ fn map_plot(
         extra_points: Vec::new(),
         samples: None,
         region: None,
+        curves: Vec::new(),
         bulk_colours: false,
         markers: Vec::new(),
     }
+}
+
+/// The onset's curves over the map, in its shown units: each relation's onset over the map's
+/// t/D range (dashed), and the model's onset per t/D with its bracket (solid, dots and bars).
+fn onset_curves(plan: &Plan, axes: (usize, usize), o: &OnsetResult) -> Vec<Curve> {
+    let (ax, ay) = (&plan.axes[axes.0], &plan.axes[axes.1]);
+    let v_is_x = ax.key == onset::V0;
+    if !(v_is_x && ay.key == onset::T_OVER_D || ay.key == onset::V0 && ax.key == onset::T_OVER_D) {
+        return Vec::new();
+    }
+    let (fv, ft) = if v_is_x {
+        (shown_axis(ax).1, shown_axis(ay).1)
+    } else {
+        (shown_axis(ay).1, shown_axis(ax).1)
+    };
+    let at = |v: f64, t: f64| {
+        if v_is_x {
+            (v * fv, t * ft)
+        } else {
+            (t * ft, v * fv)
+        }
+    };
+    let ts: Vec<f64> = o.rows.iter().map(|r| r.t_over_d).collect();
+    let (t0, t1) = (ts[0], ts[ts.len() - 1]);
+    let colours = [RGBColor(0, 0, 0), RGBColor(120, 40, 160)];
+    let mut curves: Vec<Curve> = o
+        .relations
+        .relations
+        .iter()
+        .zip(colours.iter().cycle())
+        .map(|(rel, &color)| Curve {
+            points: (0..=60)
+                .map(|k| {
+                    let t = t0 * (t1 / t0).powf(k as f64 / 60.0);
+                    at(rel.onset_m_s(t), t)
+                })
+                .collect(),
+            label: format!("onset, {}", rel.name),
+            color,
+            dashed: true,
+            x_bars: Vec::new(),
+        })
+        .collect();
+    let found: Vec<_> = o
+        .rows
+        .iter()
+        .filter_map(|r| match r.model {
+            Onset::Between { lo, hi } => Some((r.t_over_d, lo, hi)),
+            _ => None,
+        })
+        .collect();
+    if !found.is_empty() {
+        curves.push(Curve {
+            points: found
+                .iter()
+                .map(|&(t, lo, hi)| at(0.5 * (lo + hi), t))
+                .collect(),
+            label: format!("onset, model (intact < {}, bracket)", o.config.threshold),
+            color: RGBColor(0, 130, 60),
+            dashed: false,
+            x_bars: found
+                .iter()
+                .map(|&(_, lo, hi)| v_is_x.then_some((lo * fv, hi * fv)))
+                .collect(),
+        });
+    }
+    curves
 }
 
 /// Fig. 17: the runs' side views, valid framed red, invalid blue. Returns the file.

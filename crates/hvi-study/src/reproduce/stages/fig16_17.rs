@@ -72,6 +72,10 @@ pub fn fig16_17(
     let map = validity_map(&ValidityOptions {
         study: ctx.study_options(study_path, sref, &dir),
         cutoff: Some(cutoff),
+        // The paper's Figs. 16 and 17 are the map; the onset against experiments is the
+        // validity-map study's own (reports/validity-vs-experiment).
+        onset: false,
+        onset_threshold: None,
     })?;
     // `validity_map` returns its map but not the runs' records: those are the store's.
     let records = plan_records(plan, &dir)?;
