@@ -16,7 +16,7 @@
 //! assert_eq!(p.onset_m_s(0.4), 2600.0);
 //! ```
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 /// The shipped relations file, `experiments_data/fragmentation-onset.toml`.
@@ -384,13 +384,6 @@ pub fn range_verdict(agreements: &[Agreement]) -> String {
             100.0 * AGREEMENT
         ),
     }
-}
-
-/// Reads a relations file from disk.
-pub fn load(path: &std::path::Path) -> Result<Relations> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| anyhow!("cannot read onset relations {}: {e}", path.display()))?;
-    Relations::parse(&text, &path.display().to_string())
 }
 
 #[cfg(test)]

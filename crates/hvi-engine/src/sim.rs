@@ -562,7 +562,7 @@ impl Simulation {
     ///   between builds;
     /// - the stiffness bound: m dt <= [`stiffness_step_s`] = [`crate::step::AUTO_STEP_SAFETY`]
     ///   x [`crate::step::MAX_STEP_OVER_SQRT_M_K`] x sqrt(m_min / k), k the stiffest pair law
-    ///   at the closest pair now ([`Interaction::stiffness_at`]);
+    ///   at the closest pair now ([`crate::potential::Materials::stiffness_at`]);
     /// - m is the largest whole number, at most `run.max_stride`, within the three bounds. It
     ///   drops at once when the bounds fall below it and rises by one only after they have
     ///   allowed more for [`STRIDE_RAISE_AFTER`] consecutive steps, so the step changes

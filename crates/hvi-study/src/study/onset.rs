@@ -124,8 +124,14 @@ impl OnsetConfig {
     pub fn relations(&self, study: &Study) -> Result<Relations> {
         match &self.relations {
             Some(p) => {
-                let base = study.path.parent().unwrap_or(Path::new("."));
-                hvi_analysis::onset::load(&base.join(p))
+                let path = study.path.parent().unwrap_or(Path::new(".")).join(p);
+                let text = std::fs::read_to_string(&path).map_err(|e| {
+                    anyhow!(
+                        "study key `validity.onset.relations`: cannot read {}: {e}",
+                        path.display()
+                    )
+                })?;
+                Relations::parse(&text, &path.display().to_string())
             }
             None => Relations::shipped(),
         }
