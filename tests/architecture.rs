@@ -404,6 +404,9 @@ fn prints(text: &str) -> Vec<(usize, String)> {
         concat!("print", "!("),
         concat!("eprint", "!("),
         concat!("dbg", "!("),
+        // Writing to the standard streams by hand is printing too.
+        concat!("stdout", "()"),
+        concat!("stderr", "().lock("),
     ];
     text.lines()
         .enumerate()
@@ -449,6 +452,12 @@ fn library_crates_never_print() {
         concat!("println", "!("),
     );
     assert_eq!(prints(&sample).len(), 1, "{sample}");
+    let by_hand = format!(
+        "fn f() {{\n    let mut e = std::io::{}; let _ = writeln!(e, \"x\");\n    let t = std::io::{}().is_terminal();\n}}\n",
+        concat!("stderr", "().lock()"),
+        "stderr",
+    );
+    assert_eq!(prints(&by_hand).len(), 1, "{by_hand}");
 }
 
 /// Every module of a crate's `src`, as its path under `src` without `.rs` or `/mod.rs`

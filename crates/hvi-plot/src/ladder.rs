@@ -56,6 +56,7 @@ const GREY: RGBColor = RGBColor(120, 120, 120);
 const GREEN: RGBColor = RGBColor(40, 160, 80);
 
 type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<KeyedAxis, KeyedAxis>>;
+type Area<'b> = DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>;
 
 /// A range around `vals` (already in plot coordinates), widened by a tenth each way (a unit
 /// around a single value).
@@ -141,24 +142,7 @@ pub fn ladder_plot(path: &Path, plot: &LadderPlot) -> Result<()> {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
         root.fill(&WHITE)?;
         let (top, body) = root.split_vertically(110);
-        top.draw(&Text::new(
-            plot.title.clone(),
-            (20, 12),
-            (FAMILY, 24).into_font(),
-        ))?;
-        let per_line = (w as usize - 40) / 9;
-        let mut lines = wrap(&plot.subtitle, per_line);
-        if lines.len() > 3 {
-            lines.truncate(3);
-            lines[2].push_str(" ...");
-        }
-        for (i, line) in lines.iter().enumerate() {
-            top.draw(&Text::new(
-                line.clone(),
-                (20, 44 + 20 * i as i32),
-                (FAMILY, 16).into_font().color(&GREY),
-            ))?;
-        }
+        header(&top, plot, w)?;
         let areas = body.split_evenly((1, n_panels));
         let ns: Vec<f64> = plot
             .objective
@@ -171,155 +155,192 @@ pub fn ladder_plot(path: &Path, plot: &LadderPlot) -> Result<()> {
         let hi = ns.iter().copied().fold(0.0, f64::max).log10();
         let x = (lo - 0.1, hi + 0.1);
         for (panel, area) in plot.panels.iter().zip(&areas) {
-            let ys = panel
-                .levels
-                .iter()
-                .flat_map(|(_, v, i, _)| {
-                    let (a, b) = i.unwrap_or((*v, *v));
-                    [*v, a, b]
-                })
-                .chain(panel.met.iter().flat_map(|(_, (a, b))| [*a, *b]))
-                .chain(panel.reference.as_ref().map(|r| r.0))
-                .map(|v| coord(v, panel.log));
-            let y = span(ys).unwrap_or((0.0, 1.0));
-            let mut chart = axes(area, &panel.label, x, y, panel.log)?;
-            if let Some((v, name)) = &panel.reference {
-                let u = coord(*v, panel.log);
-                chart
-                    .draw_series(std::iter::once(DashedPathElement::new(
-                        vec![(x.0, u), (x.1, u)],
-                        8,
-                        6,
-                        GREY.stroke_width(2),
-                    )))?
-                    .label(name.clone())
-                    .legend(|(px, py)| crate::theme::dashed_key(px, py, GREY));
-            }
-            let half = 0.018 * (x.1 - x.0);
-            for (k, &(n, (a, b))) in panel.met.iter().enumerate() {
-                // A band right of the level's mark, at least a few pixels tall.
-                let xn = n.log10() + 2.2 * half;
-                let (a, b) = (coord(a, panel.log), coord(b, panel.log));
-                let pad = 0.004 * (y.1 - y.0);
-                let band = chart.draw_series(std::iter::once(Rectangle::new(
-                    [(xn - half, a - pad), (xn + half, b + pad)],
-                    GREEN.mix(0.45).filled(),
-                )))?;
-                if k == 0 {
-                    band.label("where the runs meet every target")
-                        .legend(|(px, py)| {
-                            Rectangle::new(
-                                [(px + 6, py - 7), (px + 18, py + 7)],
-                                GREEN.mix(0.45).filled(),
-                            )
-                        });
-                }
-            }
-            for &(n, v, interval, interior) in &panel.levels {
-                let xn = n.log10();
-                if let Some((a, b)) = interval {
-                    let (a, b) = (coord(a, panel.log), coord(b, panel.log));
-                    chart.draw_series(std::iter::once(PathElement::new(
-                        vec![(xn, a), (xn, b)],
-                        BLUE.stroke_width(3),
-                    )))?;
-                    for end in [a, b] {
-                        chart.draw_series(std::iter::once(PathElement::new(
-                            vec![
-                                (xn - 0.02 * (x.1 - x.0), end),
-                                (xn + 0.02 * (x.1 - x.0), end),
-                            ],
-                            BLUE.stroke_width(3),
-                        )))?;
-                    }
-                }
-                let style = if interior {
-                    BLUE.filled()
-                } else {
-                    RED.stroke_width(3)
-                };
-                chart.draw_series(std::iter::once(Circle::new(
-                    (xn, coord(v, panel.log)),
-                    8,
-                    style,
-                )))?;
-            }
-            // The legend's keys for the markers (drawn off the chart, so only the key shows).
-            chart
-                .draw_series(std::iter::once(Circle::new((f64::NAN, f64::NAN), 0, BLUE)))?
-                .label("answer inside its box (bar: interval)")
-                .legend(|(px, py)| Circle::new((px + 12, py), 7, BLUE.filled()));
-            chart
-                .draw_series(std::iter::once(Circle::new((f64::NAN, f64::NAN), 0, RED)))?
-                .label("answer touches its box's side")
-                .legend(|(px, py)| Circle::new((px + 12, py), 7, RED.stroke_width(3)));
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperLeft)
-                .label_font((FAMILY, 15))
-                .background_style(WHITE.mix(0.85))
-                .border_style(GREY)
-                .draw()?;
+            parameter_panel(area, panel, x)?;
         }
         let area = areas
             .last()
             .expect("one area per panel and the objective's");
-        let js = plot
-            .objective
-            .iter()
-            .chain(plot.check.iter())
-            .chain(plot.reference_objective.iter().flat_map(|r| r.0.iter()))
-            .map(|p| p.1.max(1e-6).log10());
-        let y = span(js).unwrap_or((-1.0, 1.0));
-        let mut chart = axes(area, "objective J at the answer", x, y, true)?;
-        let pts: Vec<(f64, f64)> = plot
-            .objective
-            .iter()
-            .map(|p| (p.0.log10(), p.1.max(1e-6).log10()))
-            .collect();
-        chart.draw_series(LineSeries::new(pts.clone(), BLUE.stroke_width(2)))?;
-        chart
-            .draw_series(pts.iter().map(|&p| Circle::new(p, 7, BLUE.filled())))?
-            .label("J at the level's answer (its seeds)")
-            .legend(|(px, py)| Circle::new((px + 12, py), 7, BLUE.filled()));
-        if let Some((pts, name)) = &plot.reference_objective {
-            let pts: Vec<(f64, f64)> = pts
-                .iter()
-                .map(|p| (p.0.log10(), p.1.max(1e-6).log10()))
-                .collect();
-            chart.draw_series(LineSeries::new(pts.clone(), GREY.stroke_width(1)))?;
-            chart
-                .draw_series(pts.iter().map(|&p| {
-                    Rectangle::new(
-                        [
-                            (p.0 - 0.012 * (x.1 - x.0), p.1 - 0.012 * (y.1 - y.0)),
-                            (p.0 + 0.012 * (x.1 - x.0), p.1 + 0.012 * (y.1 - y.0)),
-                        ],
-                        GREY.filled(),
-                    )
-                }))?
-                .label(format!("J of {name} at each level"))
-                .legend(|(px, py)| {
-                    Rectangle::new([(px + 6, py - 6), (px + 18, py + 6)], GREY.filled())
-                });
-        }
-        if let Some((n, j)) = plot.check {
-            let p = (n.log10(), j.max(1e-6).log10());
-            chart
-                .draw_series(std::iter::once(TriangleMarker::new(p, 10, RED.filled())))?
-                .label("the last answer run at more particles")
-                .legend(|(px, py)| TriangleMarker::new((px + 12, py), 8, RED.filled()));
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font((FAMILY, 15))
-            .background_style(WHITE.mix(0.85))
-            .border_style(GREY)
-            .draw()?;
+        objective_panel(area, plot, x)?;
         root.present()?;
     }
     write_png(path, &rgb, w, h)
+}
+
+/// The title and up to three lines of subtitle.
+fn header(top: &Area<'_>, plot: &LadderPlot, w: u32) -> Result<()> {
+    top.draw(&Text::new(
+        plot.title.clone(),
+        (20, 12),
+        (FAMILY, 24).into_font(),
+    ))?;
+    let per_line = (w as usize - 40) / 9;
+    let mut lines = wrap(&plot.subtitle, per_line);
+    if lines.len() > 3 {
+        lines.truncate(3);
+        lines[2].push_str(" ...");
+    }
+    for (i, line) in lines.iter().enumerate() {
+        top.draw(&Text::new(
+            line.clone(),
+            (20, 44 + 20 * i as i32),
+            (FAMILY, 16).into_font().color(&GREY),
+        ))?;
+    }
+    Ok(())
+}
+
+/// One parameter over the levels: its answers, intervals, where the runs meet every target,
+/// and the reference.
+fn parameter_panel(area: &Area<'_>, panel: &LadderPanel, x: (f64, f64)) -> Result<()> {
+    let ys = panel
+        .levels
+        .iter()
+        .flat_map(|(_, v, i, _)| {
+            let (a, b) = i.unwrap_or((*v, *v));
+            [*v, a, b]
+        })
+        .chain(panel.met.iter().flat_map(|(_, (a, b))| [*a, *b]))
+        .chain(panel.reference.as_ref().map(|r| r.0))
+        .map(|v| coord(v, panel.log));
+    let y = span(ys).unwrap_or((0.0, 1.0));
+    let mut chart = axes(area, &panel.label, x, y, panel.log)?;
+    if let Some((v, name)) = &panel.reference {
+        let u = coord(*v, panel.log);
+        chart
+            .draw_series(std::iter::once(DashedPathElement::new(
+                vec![(x.0, u), (x.1, u)],
+                8,
+                6,
+                GREY.stroke_width(2),
+            )))?
+            .label(name.clone())
+            .legend(|(px, py)| crate::theme::dashed_key(px, py, GREY));
+    }
+    met_bands(&mut chart, panel, x, y)?;
+    for &(n, v, interval, interior) in &panel.levels {
+        let xn = n.log10();
+        if let Some((a, b)) = interval {
+            let (a, b) = (coord(a, panel.log), coord(b, panel.log));
+            let tick = 0.02 * (x.1 - x.0);
+            let bar = [
+                vec![(xn, a), (xn, b)],
+                vec![(xn - tick, a), (xn + tick, a)],
+                vec![(xn - tick, b), (xn + tick, b)],
+            ];
+            chart.draw_series(
+                bar.into_iter()
+                    .map(|p| PathElement::new(p, BLUE.stroke_width(3))),
+            )?;
+        }
+        let style = if interior {
+            BLUE.filled()
+        } else {
+            RED.stroke_width(3)
+        };
+        chart.draw_series(std::iter::once(Circle::new(
+            (xn, coord(v, panel.log)),
+            8,
+            style,
+        )))?;
+    }
+    // The legend's keys for the markers (drawn off the chart, so only the key shows).
+    chart
+        .draw_series(std::iter::once(Circle::new((f64::NAN, f64::NAN), 0, BLUE)))?
+        .label("answer inside its box (bar: interval)")
+        .legend(|(px, py)| Circle::new((px + 12, py), 7, BLUE.filled()));
+    chart
+        .draw_series(std::iter::once(Circle::new((f64::NAN, f64::NAN), 0, RED)))?
+        .label("answer touches its box's side")
+        .legend(|(px, py)| Circle::new((px + 12, py), 7, RED.stroke_width(3)));
+    legend(&mut chart)
+}
+
+/// Each level's band where the runs meet every target, right of the level's mark and at least
+/// a few pixels tall.
+fn met_bands(
+    chart: &mut Chart<'_, '_>,
+    panel: &LadderPanel,
+    x: (f64, f64),
+    y: (f64, f64),
+) -> Result<()> {
+    let half = 0.018 * (x.1 - x.0);
+    for (k, &(n, (a, b))) in panel.met.iter().enumerate() {
+        let xn = n.log10() + 2.2 * half;
+        let (a, b) = (coord(a, panel.log), coord(b, panel.log));
+        let pad = 0.004 * (y.1 - y.0);
+        let band = chart.draw_series(std::iter::once(Rectangle::new(
+            [(xn - half, a - pad), (xn + half, b + pad)],
+            GREEN.mix(0.45).filled(),
+        )))?;
+        if k == 0 {
+            band.label("where the runs meet every target")
+                .legend(|(px, py)| {
+                    Rectangle::new(
+                        [(px + 6, py - 7), (px + 18, py + 7)],
+                        GREEN.mix(0.45).filled(),
+                    )
+                });
+        }
+    }
+    Ok(())
+}
+
+/// The objective at each level's answer, the reference's, and the check at more particles.
+fn objective_panel(area: &Area<'_>, plot: &LadderPlot, x: (f64, f64)) -> Result<()> {
+    let js = plot
+        .objective
+        .iter()
+        .chain(plot.check.iter())
+        .chain(plot.reference_objective.iter().flat_map(|r| r.0.iter()))
+        .map(|p| p.1.max(1e-6).log10());
+    let y = span(js).unwrap_or((-1.0, 1.0));
+    let mut chart = axes(area, "objective J at the answer", x, y, true)?;
+    let pts: Vec<(f64, f64)> = plot
+        .objective
+        .iter()
+        .map(|p| (p.0.log10(), p.1.max(1e-6).log10()))
+        .collect();
+    chart.draw_series(LineSeries::new(pts.clone(), BLUE.stroke_width(2)))?;
+    chart
+        .draw_series(pts.iter().map(|&p| Circle::new(p, 7, BLUE.filled())))?
+        .label("J at the level's answer (its seeds)")
+        .legend(|(px, py)| Circle::new((px + 12, py), 7, BLUE.filled()));
+    if let Some((pts, name)) = &plot.reference_objective {
+        let pts: Vec<(f64, f64)> = pts
+            .iter()
+            .map(|p| (p.0.log10(), p.1.max(1e-6).log10()))
+            .collect();
+        chart.draw_series(LineSeries::new(pts.clone(), GREY.stroke_width(1)))?;
+        let (dx, dy) = (0.012 * (x.1 - x.0), 0.012 * (y.1 - y.0));
+        chart
+            .draw_series(pts.iter().map(|&p| {
+                Rectangle::new([(p.0 - dx, p.1 - dy), (p.0 + dx, p.1 + dy)], GREY.filled())
+            }))?
+            .label(format!("J of {name} at each level"))
+            .legend(|(px, py)| {
+                Rectangle::new([(px + 6, py - 6), (px + 18, py + 6)], GREY.filled())
+            });
+    }
+    if let Some((n, j)) = plot.check {
+        let p = (n.log10(), j.max(1e-6).log10());
+        chart
+            .draw_series(std::iter::once(TriangleMarker::new(p, 10, RED.filled())))?
+            .label("the last answer run at more particles")
+            .legend(|(px, py)| TriangleMarker::new((px + 12, py), 8, RED.filled()));
+    }
+    legend(&mut chart)
+}
+
+/// The series labels, upper left.
+fn legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .label_font((FAMILY, 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(GREY)
+        .draw()?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -5,7 +5,7 @@
 //! `state.bin` ([`crate::state`]) written atomically.
 
 use std::fmt::Write as _;
-use std::io::{IsTerminal, Write as _};
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -1538,12 +1538,10 @@ fn summarise(spec: &SceneSpec, sim: &Simulation, counts: Counts, m: Measured) ->
     }
 }
 
-/// The run's last lines on stderr: steps, throughput, bonds, drift, the cloud, the timing
-/// table.
+/// The run's last lines, through the log facade (the binary prints them): steps,
+/// throughput, bonds, drift, the cloud, the timing table.
 fn print_end(summary: &Summary, sim: &Simulation, table: &str) {
-    let mut err = std::io::stderr().lock();
-    let _ = writeln!(
-        err,
+    log::info!(
         "{} steps ({} of {:.3e} s, largest {:.3e} s), {} particles{} in {:.2} s: {:.3e} particle-steps/s; bonds broken {} of {}; energy drift {:.2e}; {} neighbour builds",
         sim.steps_taken,
         sim.step,
@@ -1563,9 +1561,9 @@ fn print_end(summary: &Summary, sim: &Simulation, table: &str) {
         summary.neighbour_builds
     );
     if let Some(c) = &summary.cloud {
-        let _ = writeln!(err, "{}", describe_cloud(c));
+        log::info!("{}", describe_cloud(c));
     }
-    let _ = write!(err, "{table}");
+    log::info!("{}", table.trim_end());
 }
 
 /// The lines a run prints about its debris cloud.

@@ -247,114 +247,17 @@ impl<'a> Cursor<'a> {
 /// The states held in the bytes of a state file. Errors say what is wrong (not a state file,
 /// another version, truncated, corrupt); [`read_state`] adds the file's name.
 pub fn decode(bytes: &[u8]) -> Result<KeptStates> {
-    let magic = bytes.len().min(MAGIC.len());
-    if bytes[..magic] != MAGIC[..magic] {
-        return Err(RunError::parse(
-            "not an hvi state file (no `HVISTATE` at its start)",
-        ));
-    }
-    if bytes.len() < 16 {
-        return Err(RunError::parse(format!(
-            "truncated: {} bytes, shorter than the header",
-            bytes.len()
-        )));
-    }
-    let mut c = Cursor { bytes, at: 8 };
-    let version = c.u32();
-    let header = match version {
-        1 => HEADER_BYTES_V1,
-        FORMAT_VERSION => HEADER_BYTES,
-        _ => {
-            return Err(RunError::parse(format!(
-                "state format version {version}; this hvi-study reads versions 1 to \
-                 {FORMAT_VERSION}: rerun the run with it"
-            )))
-        }
+    let layout = Layout::check(bytes)?;
+    let mut c = Cursor {
+        bytes,
+        at: layout.constants_at,
     };
-    let frames = c.u32();
-    if bytes.len() < header {
-        return Err(RunError::parse(format!(
-            "truncated: {} bytes, shorter than the header",
-            bytes.len()
-        )));
-    }
-    if !(1..=3).contains(&frames) {
-        return Err(RunError::parse(format!(
-            "corrupt: {frames} frames (a state file has 1 to 3)"
-        )));
-    }
-    let n64 = c.u64();
-    let expected = file_bytes_of(header, n64, u64::from(frames))
-        .filter(|_| n64 <= u64::from(u32::MAX))
-        .ok_or_else(|| RunError::parse(format!("corrupt: {n64} particles")))?;
-    if bytes.len() as u64 != expected {
-        return Err(RunError::parse(format!(
-            "truncated or corrupt: {} bytes, but {frames} frames of {n64} particles take \
-             {expected}",
-            bytes.len()
-        )));
-    }
-    let (body_bytes, checksum) = bytes.split_at(bytes.len() - CHECKSUM_BYTES);
-    if Sha256::digest(body_bytes).as_slice() != checksum {
-        return Err(RunError::parse(
-            "corrupt: its SHA-256 does not match its contents",
-        ));
-    }
-    let n = n64 as usize;
-    let plate_rear_z_m = c.f64();
-    let density_kg_m3 = c.f64();
-    let impactor_mass_kg = c.f64();
-    let v0_m_s = c.f64();
-    let masses = [c.f64(), c.f64()];
-    let impactor_density_kg_m3 = if version == 1 { density_kg_m3 } else { c.f64() };
+    let constants = Constants::read(&mut c, layout.version);
     let mut end = None;
     let mut front = [None, None];
-    for k in 0..frames {
+    for k in 0..layout.frames {
         let kind = c.u32();
-        let _reserved = c.u32();
-        let step = c.u64();
-        let time_s = c.f64();
-        let tau_s = c.f64();
-        let pos = c.vectors(n);
-        let vel = c.vectors(n);
-        let labels: Vec<u32> = c
-            .take(4 * n)
-            .chunks_exact(4)
-            .map(|x| u32::from_le_bytes([x[0], x[1], x[2], x[3]]))
-            .collect();
-        if let Some(l) = labels.iter().find(|&&l| l as usize >= n) {
-            return Err(RunError::parse(format!(
-                "corrupt: fragment label {l} of {n} particles"
-            )));
-        }
-        let flags = c.take(n);
-        let body: Vec<Body> = flags
-            .iter()
-            .map(|f| {
-                if f & TARGET_BIT != 0 {
-                    Body::Target
-                } else {
-                    Body::Impactor
-                }
-            })
-            .collect();
-        let state = CloudState {
-            step,
-            time_s,
-            tau_s,
-            plate_rear_z_m,
-            density_kg_m3,
-            impactor_density_kg_m3,
-            impactor_mass_kg,
-            v0_m_s,
-            pos,
-            vel,
-            mass: body.iter().map(|&b| masses[b as usize]).collect(),
-            body,
-            labels,
-            in_residual_plate: flags.iter().map(|f| f & RESIDUAL_PLATE_BIT != 0).collect(),
-            in_cloud: flags.iter().map(|f| f & CLOUD_BIT != 0).collect(),
-        };
+        let state = read_frame(&mut c, layout.particles, &constants)?;
         let slot = match (k, kind) {
             (0, 0) => &mut end,
             (k, 1 | 2) if k > 0 && front[kind as usize - 1].is_none() => {
@@ -370,6 +273,161 @@ pub fn decode(bytes: &[u8]) -> Result<KeptStates> {
     }
     let end = end.ok_or_else(|| RunError::parse("corrupt: no frame at the analysis time"))?;
     Ok(KeptStates { end, front })
+}
+
+/// A state file's header, checked against its length and checksum.
+struct Layout {
+    version: u32,
+    frames: u32,
+    particles: usize,
+    /// Where the run's constants start.
+    constants_at: usize,
+}
+
+impl Layout {
+    /// Reads and checks the header: the magic, a version this build reads, the frame and
+    /// particle counts against the file's length, and the SHA-256 of its contents.
+    fn check(bytes: &[u8]) -> Result<Layout> {
+        let magic = bytes.len().min(MAGIC.len());
+        if bytes[..magic] != MAGIC[..magic] {
+            return Err(RunError::parse(
+                "not an hvi state file (no `HVISTATE` at its start)",
+            ));
+        }
+        let truncated = || {
+            RunError::parse(format!(
+                "truncated: {} bytes, shorter than the header",
+                bytes.len()
+            ))
+        };
+        if bytes.len() < 16 {
+            return Err(truncated());
+        }
+        let mut c = Cursor { bytes, at: 8 };
+        let version = c.u32();
+        let header = match version {
+            1 => HEADER_BYTES_V1,
+            FORMAT_VERSION => HEADER_BYTES,
+            _ => {
+                return Err(RunError::parse(format!(
+                    "state format version {version}; this hvi-study reads versions 1 to \
+                     {FORMAT_VERSION}: rerun the run with it"
+                )))
+            }
+        };
+        let frames = c.u32();
+        if bytes.len() < header {
+            return Err(truncated());
+        }
+        if !(1..=3).contains(&frames) {
+            return Err(RunError::parse(format!(
+                "corrupt: {frames} frames (a state file has 1 to 3)"
+            )));
+        }
+        let n64 = c.u64();
+        let expected = file_bytes_of(header, n64, u64::from(frames))
+            .filter(|_| n64 <= u64::from(u32::MAX))
+            .ok_or_else(|| RunError::parse(format!("corrupt: {n64} particles")))?;
+        if bytes.len() as u64 != expected {
+            return Err(RunError::parse(format!(
+                "truncated or corrupt: {} bytes, but {frames} frames of {n64} particles take \
+                 {expected}",
+                bytes.len()
+            )));
+        }
+        let (body_bytes, checksum) = bytes.split_at(bytes.len() - CHECKSUM_BYTES);
+        if Sha256::digest(body_bytes).as_slice() != checksum {
+            return Err(RunError::parse(
+                "corrupt: its SHA-256 does not match its contents",
+            ));
+        }
+        Ok(Layout {
+            version,
+            frames,
+            particles: n64 as usize,
+            constants_at: c.at,
+        })
+    }
+}
+
+/// The run's constants every frame shares.
+struct Constants {
+    plate_rear_z_m: f64,
+    density_kg_m3: f64,
+    impactor_density_kg_m3: f64,
+    impactor_mass_kg: f64,
+    v0_m_s: f64,
+    /// A particle's mass by body (impactor, target).
+    masses: [f64; 2],
+}
+
+impl Constants {
+    fn read(c: &mut Cursor, version: u32) -> Constants {
+        let plate_rear_z_m = c.f64();
+        let density_kg_m3 = c.f64();
+        let impactor_mass_kg = c.f64();
+        let v0_m_s = c.f64();
+        let masses = [c.f64(), c.f64()];
+        // Version 1 had one density for both bodies.
+        let impactor_density_kg_m3 = if version == 1 { density_kg_m3 } else { c.f64() };
+        Constants {
+            plate_rear_z_m,
+            density_kg_m3,
+            impactor_density_kg_m3,
+            impactor_mass_kg,
+            v0_m_s,
+            masses,
+        }
+    }
+}
+
+/// One frame after its kind: its step and times, positions, velocities, fragment labels and
+/// each particle's flags.
+fn read_frame(c: &mut Cursor, n: usize, k: &Constants) -> Result<CloudState> {
+    let _reserved = c.u32();
+    let step = c.u64();
+    let time_s = c.f64();
+    let tau_s = c.f64();
+    let pos = c.vectors(n);
+    let vel = c.vectors(n);
+    let labels: Vec<u32> = c
+        .take(4 * n)
+        .chunks_exact(4)
+        .map(|x| u32::from_le_bytes([x[0], x[1], x[2], x[3]]))
+        .collect();
+    if let Some(l) = labels.iter().find(|&&l| l as usize >= n) {
+        return Err(RunError::parse(format!(
+            "corrupt: fragment label {l} of {n} particles"
+        )));
+    }
+    let flags = c.take(n);
+    let body: Vec<Body> = flags
+        .iter()
+        .map(|f| {
+            if f & TARGET_BIT != 0 {
+                Body::Target
+            } else {
+                Body::Impactor
+            }
+        })
+        .collect();
+    Ok(CloudState {
+        step,
+        time_s,
+        tau_s,
+        plate_rear_z_m: k.plate_rear_z_m,
+        density_kg_m3: k.density_kg_m3,
+        impactor_density_kg_m3: k.impactor_density_kg_m3,
+        impactor_mass_kg: k.impactor_mass_kg,
+        v0_m_s: k.v0_m_s,
+        pos,
+        vel,
+        mass: body.iter().map(|&b| k.masses[b as usize]).collect(),
+        body,
+        labels,
+        in_residual_plate: flags.iter().map(|f| f & RESIDUAL_PLATE_BIT != 0).collect(),
+        in_cloud: flags.iter().map(|f| f & CLOUD_BIT != 0).collect(),
+    })
 }
 
 /// Writes `kept` as `path`, atomically.

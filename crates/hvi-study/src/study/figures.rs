@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, Result};
 use plotters::style::RGBColor;
 
+use super::calibrate::result::EvalStage;
 use super::calibrate::result::{CalibrationResult, Evaluation};
 use hvi_analysis::contour::{Field, Point};
 use hvi_analysis::score::{objective, Target};
@@ -307,7 +308,7 @@ fn searched_lattice_field(f: &MapFrame, observable: Observable) -> Option<(Field
         .result
         .refinement
         .iter()
-        .filter(|e| e.stage == "grid-seeds" || e.stage.starts_with("extend-"))
+        .filter(|e| e.stage == EvalStage::GridSeeds || e.stage.is_extension())
         .filter(|e| on_slice(e))
         .filter_map(|e| Some((*e.params.get(kx)?, *e.params.get(ky)?, e.mean(observable)?)))
         .collect();
@@ -318,7 +319,7 @@ fn searched_lattice_field(f: &MapFrame, observable: Observable) -> Option<(Field
         .result
         .refinement
         .iter()
-        .find(|e| e.stage == "grid-seeds")
+        .find(|e| e.stage == EvalStage::GridSeeds)
         .map(|e| e.seeds.clone())?;
     let axis = |pick: fn(&(f64, f64, f64)) -> f64| {
         let mut v: Vec<f64> = points.iter().map(pick).collect();
@@ -398,7 +399,7 @@ fn seed_mean_field(f: &MapFrame) -> Result<Option<(Field, Vec<u64>)>> {
         .result
         .refinement
         .iter()
-        .filter(|e| e.stage == "grid-seeds" && e.score.is_some() && e.objective.is_finite())
+        .filter(|e| e.stage == EvalStage::GridSeeds && e.score.is_some() && e.objective.is_finite())
         .collect();
     let Some(seeds) = evals.first().map(|e| e.seeds.clone()) else {
         return Ok(None);
@@ -486,7 +487,7 @@ fn objective_map(f: &MapFrame) -> Result<ContourPlot> {
         extra_points: result
             .refinement
             .iter()
-            .filter(|e| e.score.is_some() && e.stage != "grid-seeds")
+            .filter(|e| e.score.is_some() && e.stage != EvalStage::GridSeeds)
             .filter_map(|e| point_of(f.plan, f.axes, e))
             .collect(),
         samples,

@@ -30,7 +30,8 @@ use hvi_analysis::surrogate::{
 };
 use hvi_run::store::{Job, Record, RunStatus};
 
-use super::problem::{fmt_params, Refinement};
+use super::problem::{fmt_params, Dim, Refinement};
+use super::result::EvalStage;
 use super::result::{observed_means, shot_means, Evaluation, ParamRegion, Spread, Surface};
 
 /// The search's settings (`[calibrate]`).
@@ -121,7 +122,12 @@ pub(super) fn seeded_grid(
     let grid_points: Vec<BTreeMap<String, f64>> = scored_grid
         .map(|(e, _)| refined(problem, &e.params))
         .collect();
-    run_points(problem, "grid-seeds", &grid_points, &seed_list(settings))
+    run_points(
+        problem,
+        EvalStage::GridSeeds,
+        &grid_points,
+        &seed_list(settings),
+    )
 }
 
 /// Runs the search over the problem's box from the observations so far (`evaluations`, each
@@ -132,7 +138,7 @@ pub(super) fn search(
     mut evaluations: Vec<Scored>,
     first_batch: usize,
 ) -> Result<EgoOutcome> {
-    let space = SearchBox::new(problem.dims.iter().map(|d| (d.2, d.3)).collect())?;
+    let space = SearchBox::new(problem.dims.iter().map(|d| (d.lo, d.hi)).collect())?;
     let seeds = seed_list(settings);
     let mut runs = 0;
     let mut batch = 0;
@@ -201,8 +207,8 @@ pub(super) fn search(
         }
         let points: Vec<BTreeMap<String, f64>> =
             proposal.points.iter().map(|x| problem.values(x)).collect();
-        let label = format!("ego-{}", first_batch + batch);
-        let (evs, n) = run_points(problem, &label, &points, &seeds)?;
+        let label = EvalStage::Search(first_batch + batch);
+        let (evs, n) = run_points(problem, label, &points, &seeds)?;
         if problem.progress {
             for (e, _) in &evs {
                 eprintln!("{label}: {}  J = {:.4}", fmt_params(&e.params), e.objective);
@@ -272,7 +278,18 @@ const SURFACE_POINTS: usize = 33;
 /// The [`Surface`] of the final model (None with fewer than two searched axes, or when the
 /// prediction fails).
 fn surface(problem: &Refinement, model: &Surrogate, at: &[f64]) -> Option<Surface> {
-    let [(kx, logx, x0, x1), (ky, logy, y0, y1)] = problem.dims.get(..2)? else {
+    let [Dim {
+        key: kx,
+        log: logx,
+        lo: x0,
+        hi: x1,
+    }, Dim {
+        key: ky,
+        log: logy,
+        lo: y0,
+        hi: y1,
+    }] = problem.dims.get(..2)?
+    else {
         return None;
     };
     let axis = |lo: f64, hi: f64| -> Vec<f64> {
@@ -312,7 +329,7 @@ fn refined(problem: &Refinement, params: &BTreeMap<String, f64>) -> BTreeMap<Str
     problem
         .dims
         .iter()
-        .filter_map(|d| params.get(&d.0).map(|v| (d.0.clone(), *v)))
+        .filter_map(|d| params.get(&d.key).map(|v| (d.key.clone(), *v)))
         .collect()
 }
 
@@ -321,7 +338,7 @@ pub(super) fn coords(problem: &Refinement, params: &BTreeMap<String, f64>) -> Op
     problem
         .dims
         .iter()
-        .map(|(k, log, _, _)| params.get(k).map(|&v| if *log { v.log10() } else { v }))
+        .map(|Dim { key: k, log, .. }| params.get(k).map(|&v| if *log { v.log10() } else { v }))
         .collect()
 }
 
@@ -384,7 +401,7 @@ fn noise_of(evaluations: &[Scored], floor: f64) -> (f64, String) {
 /// observables) and the runs simulated.
 pub(super) fn run_points(
     problem: &Refinement,
-    stage: &str,
+    stage: EvalStage,
     points: &[BTreeMap<String, f64>],
     seeds: &[Option<u64>],
 ) -> Result<(Vec<Scored>, usize)> {
@@ -423,7 +440,7 @@ pub(super) fn run_points(
         problem.plan,
         &jobs,
         &describe,
-        stage,
+        &stage.to_string(),
     )?;
     let mut records = report.records.into_iter();
     let mut stored = stored.into_iter();
@@ -485,7 +502,7 @@ struct PointRecords {
 /// completed); `cached` when every run was in the store before.
 fn scored(
     problem: &Refinement,
-    stage: &str,
+    stage: EvalStage,
     step: usize,
     params: BTreeMap<String, f64>,
     seeds: &[Option<u64>],
@@ -529,7 +546,7 @@ fn scored(
         }
     };
     let e = Evaluation {
-        stage: stage.into(),
+        stage,
         step,
         params,
         objective: score.as_ref().map_or(f64::NAN, |s| s.objective),
@@ -574,7 +591,7 @@ fn param_region(problem: &Refinement, r: &surrogate::Region) -> ParamRegion {
     let mut at_boundary = BTreeMap::new();
     let mut sides = BTreeMap::new();
     let mut predicted_minimum = BTreeMap::new();
-    for (k, (key, log, _, _)) in problem.dims.iter().enumerate() {
+    for (k, Dim { key, log, .. }) in problem.dims.iter().enumerate() {
         let (lo, hi) = r.intervals[k];
         intervals.insert(key.clone(), (value(*log, lo), value(*log, hi)));
         at_boundary.insert(key.clone(), r.at_boundary[k]);

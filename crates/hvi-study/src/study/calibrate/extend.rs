@@ -29,10 +29,17 @@ pub struct ExtendRule {
 /// The box in the parameters' units.
 pub(super) fn bounds_of(dims: &[Dim]) -> BTreeMap<String, (f64, f64)> {
     dims.iter()
-        .map(|(k, log, lo, hi)| {
-            let v = |u: f64| round_sig(if *log { 10f64.powf(u) } else { u }, 6);
-            (k.clone(), (v(*lo), v(*hi)))
-        })
+        .map(
+            |Dim {
+                 key: k,
+                 log,
+                 lo,
+                 hi,
+             }| {
+                let v = |u: f64| round_sig(if *log { 10f64.powf(u) } else { u }, 6);
+                (k.clone(), (v(*lo), v(*hi)))
+            },
+        )
         .collect()
 }
 
@@ -44,7 +51,7 @@ pub(super) fn edges_of(
     region_sides: Option<&BTreeMap<String, (bool, bool)>>,
 ) -> Vec<Edge> {
     let mut edges = Vec::new();
-    for (k, (key, log, lo, hi)) in dims.iter().enumerate() {
+    for (k, Dim { key, log, lo, hi }) in dims.iter().enumerate() {
         let tol = 1e-9 * (hi - lo).abs().max(1.0);
         let at = best.and_then(|b| b.get(k)).copied();
         let region = region_sides.and_then(|s| s.get(key)).copied();
@@ -84,7 +91,7 @@ pub(super) fn edges_of(
 /// The grid's values of each searched axis, in the search's coordinates, ascending.
 pub(super) fn grid_coords(plan: &Plan, dims: &[Dim]) -> Result<Vec<Vec<f64>>> {
     dims.iter()
-        .map(|(key, log, _, _)| {
+        .map(|Dim { key, log, .. }| {
             let axis = plan.axes.iter().find(|a| &a.key == key);
             let mut v: Vec<f64> = match axis {
                 Some(a) => a
@@ -139,7 +146,7 @@ pub(super) fn extend(
             edge.limit = Some("not extended (--no-extend)".into());
             continue;
         }
-        let Some(k) = dims.iter().position(|d| d.0 == edge.key) else {
+        let Some(k) = dims.iter().position(|d| d.key == edge.key) else {
             continue;
         };
         let done = moved.entry((edge.key.clone(), edge.side)).or_insert(0);
@@ -150,7 +157,7 @@ pub(super) fn extend(
             ));
             continue;
         }
-        let (_, log, lo, hi) = dims[k].clone();
+        let Dim { log, lo, hi, .. } = dims[k].clone();
         let Some(step) = step_of(log, &values[k], edge.side) else {
             edge.limit = Some("the axis has one grid value: no step to extend by".into());
             continue;
@@ -161,13 +168,13 @@ pub(super) fn extend(
         };
         // The new value must make a valid scene (with the other axes at the chosen point's).
         let mut probe = dims.to_vec();
-        probe[k].2 = probe[k].2.min(u);
-        probe[k].3 = probe[k].3.max(u);
+        probe[k].lo = probe[k].lo.min(u);
+        probe[k].hi = probe[k].hi.max(u);
         let params: BTreeMap<String, f64> = {
             let x: Vec<f64> = probe
                 .iter()
                 .enumerate()
-                .map(|(a, d)| if a == k { u } else { 0.5 * (d.2 + d.3) })
+                .map(|(a, d)| if a == k { u } else { 0.5 * (d.lo + d.hi) })
                 .collect();
             problem.values_in(&probe, &x)
         };
@@ -255,8 +262,8 @@ mod tests {
 
     fn dims() -> Vec<Dim> {
         vec![
-            ("material.eps_j".into(), true, -2.0, 0.0),
-            ("material.kappa_n_m".into(), true, 6.0, 7.0),
+            Dim::new("material.eps_j", true, -2.0, 0.0),
+            Dim::new("material.kappa_n_m", true, 6.0, 7.0),
         ]
     }
 

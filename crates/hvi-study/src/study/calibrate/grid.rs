@@ -15,6 +15,7 @@ use hvi_run::table::{results_table, Table};
 use serde_json::Value;
 
 use super::problem::describe_eval;
+use super::result::EvalStage;
 use super::result::{shot_means, Evaluation};
 use crate::study::sweep::print_failures;
 
@@ -184,7 +185,7 @@ pub(super) fn grid_evaluations(
             let completed = recs.iter().all(|r| r.status == RunStatus::Completed);
             let per_shot: Vec<_> = recs.iter().map(|r| vec![r.observables]).collect();
             Evaluation {
-                stage: "grid".into(),
+                stage: EvalStage::Grid,
                 step: run.index,
                 params,
                 objective: score.objective,

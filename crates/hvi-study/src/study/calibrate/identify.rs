@@ -94,10 +94,10 @@ pub(super) fn settle_flat_sides(
     scored: &[Scored],
 ) {
     for edge in edges.iter_mut() {
-        let Some(k) = dims.iter().position(|d| d.0 == edge.key) else {
+        let Some(k) = dims.iter().position(|d| d.key == edge.key) else {
             continue;
         };
-        let (_, log, _, _) = &dims[k];
+        let Dim { log, .. } = &dims[k];
         let value = |u: f64| if *log { 10f64.powf(u) } else { u };
         let axis = &values[k];
         let inner = match edge.side {
@@ -216,7 +216,7 @@ mod tests {
 
     fn scored(eps: f64, terms: &[f64]) -> Scored {
         let e = Evaluation {
-            stage: "extend-0".into(),
+            stage: super::super::result::EvalStage::Extend(0),
             step: 0,
             params: BTreeMap::from([("material.eps_j".to_string(), eps)]),
             score: Some(Score {
@@ -244,7 +244,7 @@ mod tests {
 
     #[test]
     fn a_side_is_settled_when_the_targets_are_met_there_and_a_step_inside() {
-        let dims: Vec<Dim> = vec![("material.eps_j".into(), true, -3.0, 0.0)];
+        let dims: Vec<Dim> = vec![Dim::new("material.eps_j", true, -3.0, 0.0)];
         let values = vec![vec![-3.0, -2.0, -1.0, 0.0]];
         let mut e = vec![Edge {
             limit: None,

@@ -35,6 +35,7 @@ use serde::{Deserialize, Serialize};
 
 use super::config::{CalibrateConfig, Method};
 use super::problem::{fixed_overrides, refined_axes, Dim, Stage, PAPER_BEST};
+use super::result::EvalStage;
 use super::result::{fmt_bounds, fmt_value, CalibrationResult, Edge, TargetsMet};
 use super::shots::plans_of;
 use super::{calibrate_plan, ego, runner_of, CalibrateOptions, Coarse};
@@ -338,7 +339,7 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
 
 /// A value in the search's coordinate of `dim` (log10 on a log axis).
 fn to_coord(dim: &Dim, v: f64) -> f64 {
-    if dim.1 {
+    if dim.log {
         v.log10()
     } else {
         v
@@ -347,7 +348,7 @@ fn to_coord(dim: &Dim, v: f64) -> f64 {
 
 /// A search coordinate of `dim` back to the parameter's value.
 fn from_coord(dim: &Dim, u: f64) -> f64 {
-    if dim.1 {
+    if dim.log {
         10f64.powf(u)
     } else {
         u
@@ -357,13 +358,13 @@ fn from_coord(dim: &Dim, u: f64) -> f64 {
 /// The narrowest first box a steered level gets on `dim`, in its coordinate: half a decade on
 /// a log axis, the study grid's smallest step on a linear one (none with a single value).
 fn min_width(study: &Study, dim: &Dim) -> f64 {
-    if dim.1 {
+    if dim.log {
         return 0.5;
     }
     let mut vals: Vec<f64> = study
         .axes
         .iter()
-        .find(|a| a.key == dim.0)
+        .find(|a| a.key == dim.key)
         .map(|a| a.values.iter().filter_map(|v| v.as_f64()).collect())
         .unwrap_or_default();
     vals.sort_by(f64::total_cmp);
@@ -395,28 +396,28 @@ fn steer(
     for dim in dims {
         let best = prev
             .best
-            .get(&dim.0)
+            .get(&dim.key)
             .copied()
-            .ok_or_else(|| anyhow!("level {} has no answer for {}", prev.particles, dim.0))?;
+            .ok_or_else(|| anyhow!("level {} has no answer for {}", prev.particles, dim.key))?;
         let c = to_coord(dim, best);
         let (mut lo, mut hi) = prev
             .intervals
-            .get(&dim.0)
+            .get(&dim.key)
             .map_or((c, c), |&(a, b)| (to_coord(dim, a), to_coord(dim, b)));
         lo = lo.min(c);
         hi = hi.max(c);
         // The trend of the last two answers, per decade of N, carried to this level's N; only
         // between answers inside their boxes on this axis (an answer on a side says where the
         // box ended, not where the optimum is).
-        let interior = |l: &LadderLevel| !l.edges.iter().any(|e| e.key == dim.0);
+        let interior = |l: &LadderLevel| !l.edges.iter().any(|e| e.key == dim.key);
         if let Some(b) = before.filter(|b| !(interior(b) && interior(prev))) {
             unmoved.push(format!(
                 "{} (the {} or {} answer is on a side of its box)",
-                dim.0, b.particles, prev.particles
+                dim.key, b.particles, prev.particles
             ));
         }
         if let Some(b) = before.filter(|b| interior(b) && interior(prev)) {
-            if let Some(&v) = b.best.get(&dim.0) {
+            if let Some(&v) = b.best.get(&dim.key) {
                 let slope = (c - to_coord(dim, v)) / (prev.particles.log10() - b.particles.log10());
                 let shift = slope * (n.log10() - prev.particles.log10());
                 if shift.is_finite() && shift != 0.0 {
@@ -426,9 +427,9 @@ fn steer(
                     hi = hi.max(hi + shift);
                     shifts.push(format!(
                         "{} {:+.3}{}",
-                        dim.0,
+                        dim.key,
                         shift,
-                        if dim.1 { " decades" } else { "" }
+                        if dim.log { " decades" } else { "" }
                     ));
                 }
             }
@@ -449,8 +450,8 @@ fn steer(
         let axis: &mut Axis = out
             .axes
             .iter_mut()
-            .find(|a| a.key == dim.0)
-            .ok_or_else(|| anyhow!("`{}` is not an axis of the study", dim.0))?;
+            .find(|a| a.key == dim.key)
+            .ok_or_else(|| anyhow!("`{}` is not an axis of the study", dim.key))?;
         axis.values = values.into_iter().map(|v| serde_json::json!(v)).collect();
     }
     let mut why = format!(
@@ -501,7 +502,7 @@ fn check_run(
         .ok_or_else(|| anyhow!("the check needs a level"))?;
     let params: BTreeMap<String, f64> = dims
         .iter()
-        .filter_map(|d| last.best.params.get(&d.0).map(|&v| (d.0.clone(), v)))
+        .filter_map(|d| last.best.params.get(&d.key).map(|&v| (d.key.clone(), v)))
         .collect();
     let mut one = study.clone();
     for a in one.axes.iter_mut() {
@@ -546,7 +547,12 @@ fn check_run(
     } else {
         cfg.seeds.iter().copied().map(Some).collect()
     };
-    let (mut evs, _) = ego::run_points(&problem, "check", std::slice::from_ref(&params), &seeds)?;
+    let (mut evs, _) = ego::run_points(
+        &problem,
+        EvalStage::Check,
+        std::slice::from_ref(&params),
+        &seeds,
+    )?;
     let (ev, _) = evs
         .pop()
         .ok_or_else(|| anyhow!("the check has no evaluation"))?;
@@ -605,9 +611,9 @@ fn targets_met_overlap(
     }
     dims.iter()
         .map(|dim| {
-            let (sa, sb) = (ma.spans.get(&dim.0)?, mb.spans.get(&dim.0)?);
+            let (sa, sb) = (ma.spans.get(&dim.key)?, mb.spans.get(&dim.key)?);
             let (lo, hi) = (sa.0.max(sb.0), sa.1.min(sb.1));
-            (lo <= hi).then(|| (dim.0.clone(), (lo, hi)))
+            (lo <= hi).then(|| (dim.key.clone(), (lo, hi)))
         })
         .collect()
 }
@@ -630,19 +636,19 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
     let decades = b.particles.log10() - a.particles.log10();
     let mut apart = Vec::new();
     for dim in dims {
-        let (Some(&va), Some(&vb)) = (a.best.get(&dim.0), b.best.get(&dim.0)) else {
+        let (Some(&va), Some(&vb)) = (a.best.get(&dim.key), b.best.get(&dim.key)) else {
             continue;
         };
         trend.insert(
-            dim.0.clone(),
+            dim.key.clone(),
             (to_coord(dim, vb) - to_coord(dim, va)) / decades,
         );
-        match (a.intervals.get(&dim.0), b.intervals.get(&dim.0)) {
+        match (a.intervals.get(&dim.key), b.intervals.get(&dim.key)) {
             (Some(&(lo_a, hi_a)), Some(&(lo_b, hi_b))) => {
                 if hi_a < lo_b || hi_b < lo_a {
                     apart.push(format!(
                         "{} [{}, {}] at {} and [{}, {}] at {} do not overlap",
-                        dim.0,
+                        dim.key,
                         fmt_value(lo_a),
                         fmt_value(hi_a),
                         fmt_value(a.particles),
@@ -654,7 +660,7 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
             }
             _ => apart.push(format!(
                 "{} has no interval at one of the last two levels",
-                dim.0
+                dim.key
             )),
         }
     }
@@ -681,13 +687,13 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
             let span = |l: &LadderLevel| {
                 l.targets_met
                     .as_ref()
-                    .and_then(|m| m.spans.get(&dim.0).copied())
+                    .and_then(|m| m.spans.get(&dim.key).copied())
             };
             let (sa, sb) = (span(a)?, span(b)?);
             let meet = !(sa.1 < sb.0 || sb.1 < sa.0);
             Some(format!(
                 "{} {} to {} and {} to {} ({})",
-                dim.0,
+                dim.key,
                 fmt_value(sa.0),
                 fmt_value(sa.1),
                 fmt_value(sb.0),
@@ -707,7 +713,7 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
     let trend_words = trend
         .iter()
         .map(|(k, v)| {
-            let log = dims.iter().any(|d| &d.0 == k && d.1);
+            let log = dims.iter().any(|d| &d.key == k && d.log);
             if log {
                 format!("{k} moves {v:+.3} decades per decade of N")
             } else {
@@ -847,7 +853,7 @@ fn report(r: &LadderResult, dims: &[Dim]) -> Document {
     }
     let trend = doc.section("Trend between the last two levels");
     for (k, v) in &r.trend_per_decade {
-        let log = dims.iter().any(|d| &d.0 == k && d.1);
+        let log = dims.iter().any(|d| &d.key == k && d.log);
         trend.fact(
             format!("trend of {k}"),
             format!(
@@ -891,18 +897,18 @@ fn draw(path: &Path, r: &LadderResult, dims: &[Dim]) -> Result<()> {
     let panels = dims
         .iter()
         .map(|d| LadderPanel {
-            label: d.0.clone(),
-            log: d.1,
+            label: d.key.clone(),
+            log: d.log,
             levels: r
                 .levels
                 .iter()
                 .filter_map(|l| {
-                    l.best.get(&d.0).map(|&v| {
+                    l.best.get(&d.key).map(|&v| {
                         (
                             l.particles_run.unwrap_or(l.particles),
                             v,
-                            l.intervals.get(&d.0).copied(),
-                            l.edges.iter().all(|e| e.key != d.0),
+                            l.intervals.get(&d.key).copied(),
+                            l.edges.iter().all(|e| e.key != d.key),
                         )
                     })
                 })
@@ -911,13 +917,13 @@ fn draw(path: &Path, r: &LadderResult, dims: &[Dim]) -> Result<()> {
                 .levels
                 .iter()
                 .filter_map(|l| {
-                    let span = l.targets_met.as_ref()?.spans.get(&d.0)?;
+                    let span = l.targets_met.as_ref()?.spans.get(&d.key)?;
                     Some((l.particles_run.unwrap_or(l.particles), *span))
                 })
                 .collect(),
             reference: PAPER_BEST
                 .iter()
-                .find(|(k, _)| *k == d.0)
+                .find(|(k, _)| *k == d.key)
                 .map(|(_, v)| (*v, "the paper's fit".to_string())),
         })
         .collect();
@@ -970,7 +976,7 @@ mod tests {
     }
 
     fn eps_dim() -> Dim {
-        ("material.eps_j".to_string(), true, -2.0, 0.0)
+        Dim::new("material.eps_j", true, -2.0, 0.0)
     }
 
     #[test]
@@ -1066,10 +1072,7 @@ mod tests {
         far[1].targets_met = met(0, &[]);
         assert_eq!(verdict(&dims, &far).region, None);
         // A searched key without a span at one level (it did not vary there): no region.
-        let two = [
-            eps_dim(),
-            ("material.kappa_n_m".to_string(), true, 6.0, 7.0),
-        ];
+        let two = [eps_dim(), Dim::new("material.kappa_n_m", true, 6.0, 7.0)];
         far[0].targets_met = met(5, &[("material.eps_j", 7.5e-4, 1e-2)]);
         far[1].targets_met = met(9, &[("material.eps_j", 1.4e-3, 3.3e-2)]);
         assert_eq!(verdict(&two, &far).region, None);

@@ -8,6 +8,7 @@
 //! - [`result`]: what `calibration.json` holds;
 //! - [`shots`]: the shot's impact, checked against the study's scene and filled into it.
 
+mod boxes;
 pub mod config;
 pub mod ego;
 pub mod extend;
@@ -27,26 +28,25 @@ use anyhow::Result;
 use hvi_run::exec::thread_split;
 use hvi_run::runner::{Runner, SlurmBatches};
 use hvi_run::slurm::SlurmOptions;
-use hvi_run::store::Record;
 
 pub use config::{CalibrateConfig, Method};
 pub use grid::score_table;
 pub use report::report;
-pub use result::{CalibrationResult, Evaluation, ParamRegion, Spread, Surface, TargetsMet};
+pub use result::{
+    CalibrationResult, EvalStage, Evaluation, ParamRegion, Spread, Surface, TargetsMet,
+};
 pub use shots::ShotPlan;
 
 use super::options::StudyOptions;
-use extend::{
-    bounds_of, edges_of, extend, grid_coords, limit_line, new_lattice_points, Edge, ExtendRule,
-    SearchedBox,
-};
+use boxes::ego_boxes;
+use extend::{bounds_of, edges_of, limit_line, Edge, SearchedBox};
 use grid::{grid_stage, Grid};
 use nelder_mead::refine_stage;
 use problem::{
     best_of, fixed_overrides, particles_of, refined_axes, Refinement, Stage, PAPER_BEST,
 };
 use report::{archive, draw_figures, write_outputs};
-use result::{fmt_bounds, PriorUse};
+use result::PriorUse;
 
 /// What `calibrate` takes: the study's options and the search's, as the command line or a
 /// library caller gives them.
@@ -162,9 +162,8 @@ pub(crate) fn calibrate_plan(
     let (calibrated, held_out): (Vec<&ShotPlan>, Vec<&ShotPlan>) = shots
         .iter()
         .partition(|s| args.hold_out.as_deref() != Some(s.targets.shot.id.as_str()));
-    let targets: Vec<hvi_analysis::score::Targets> =
-        calibrated.iter().map(|s| s.targets.clone()).collect();
-    let plans: Vec<&hvi_run::plan::Plan> = calibrated.iter().map(|s| &s.plan).collect();
+    let targets: Vec<_> = calibrated.iter().map(|s| s.targets.clone()).collect();
+    let plans: Vec<_> = calibrated.iter().map(|s| &s.plan).collect();
     let plan = plans[0];
     let progress = !args.study.quiet;
     announce(study, shots, progress)?;
@@ -172,9 +171,7 @@ pub(crate) fn calibrate_plan(
     let runner = runner_of(args)?;
 
     let grid = grid_stage(&plans, out, &runner, &targets, progress)?;
-    let best_grid = grid.evaluations[grid.best].clone();
     let best_run = plan.run(grid.best)?;
-    let (_, threads) = thread_split(args.study.threads.unwrap_or(0), None, 1);
     let fixed = fixed_overrides(&plans, &best_run.values, |k| refine_keys.contains(k))?;
     let store = runner.store(out)?;
     let stage = Stage {
@@ -183,7 +180,7 @@ pub(crate) fn calibrate_plan(
         plans: &plans,
         store: &store,
         targets: &targets,
-        threads,
+        threads: thread_split(args.study.threads.unwrap_or(0), None, 1).1,
         runner: &runner,
         out,
         progress,
@@ -194,13 +191,8 @@ pub(crate) fn calibrate_plan(
     // The paper's point is scored over the seeds the answer will be (like with like), before
     // the search: a better point outside the box pulls the box out towards it.
     let searched = !args.no_refine && !problem.dims.is_empty() && method == Method::Ego;
-    let search_seeds = if searched {
-        cfg.seeds.clone()
-    } else {
-        Vec::new()
-    };
-    let (paper_params, paper, paper_runs, paper_scored) =
-        paper_point(&stage, &best_run.values, &search_seeds)?;
+    let search_seeds = if searched { &cfg.seeds[..] } else { &[] };
+    let paper = paper_point(&stage, &best_run.values, search_seeds)?;
     let search = search_stage(
         &stage,
         &problem,
@@ -209,93 +201,161 @@ pub(crate) fn calibrate_plan(
         method,
         &grid,
         &refine_keys,
-        paper_scored,
+        paper.3.clone(),
     )?;
-    // With seeds, the best grid point is the grid's best over those seeds too.
-    let best_grid = search
-        .evaluations
-        .iter()
-        .filter(|e| e.stage == "grid-seeds" && e.score.is_some() && e.objective.is_finite())
-        .min_by(|a, b| a.objective.total_cmp(&b.objective))
-        .cloned()
-        .unwrap_or(best_grid);
-
-    let best = search
-        .best
-        .clone()
-        .unwrap_or_else(|| best_of(&best_grid, &search.evaluations));
-    let ratio_to_paper = best
-        .params
-        .iter()
-        .filter_map(|(k, v)| paper_params.get(k).map(|p| (k.clone(), v / p)))
-        .collect();
-    let label = label_of(&cfg, args, method, &search, &first_box)?;
-    // The grid's own runs count where the answer is at the scene's seed (no search at seeds).
-    let targets_met = TargetsMet::of(
-        grid.evaluations
-            .iter()
-            .chain(&search.evaluations)
-            .chain(std::iter::once(&paper)),
-        &best.seeds,
-    );
-    let identified = identify::identify(
-        &search.boxes,
-        search.region.as_ref(),
-        targets_met.as_ref(),
-        &search.edges,
-    );
-    let result = CalibrationResult {
-        study: plan.study.clone(),
-        label,
-        tier: plan.tier.clone(),
-        particles: particles_of(out, &best),
-        particles_asked: args.study.particles,
-        targets_file: targets[0].path.clone(),
-        targets: hvi_analysis::score::combined_targets(&targets),
-        gaps: targets.iter().flat_map(|t| t.gaps.clone()).collect(),
-        shots: targets.iter().map(result::ShotUse::of).collect(),
-        held_out: match held_out.first() {
-            Some(h) => {
-                let fixed =
-                    fixed_overrides(&[&h.plan], &best_run.values, |k| refine_keys.contains(k))?;
-                Some(shots::predict_held_out(&stage, h, fixed, &best)?)
-            }
-            None => None,
-        },
-        best,
-        best_grid,
-        paper,
-        ratio_to_paper,
-        termination: search.termination,
-        refinement_runs: search.runs,
-        refinement: search.evaluations,
-        method: search.method.into(),
-        converged: search.converged,
-        boxes: search.boxes,
-        edges: search.edges,
-        limit: search.limit,
-        noise: search.noise,
-        noise_source: search.noise_source,
-        surface: search.surface,
-        region: search.region,
-        best_spread: search.spread,
-        runs_made: grid.ran + search.runs + paper_runs,
-        wall_seconds: t0.elapsed().as_secs_f64(),
-        prior: args
-            .coarse
-            .as_ref()
-            .filter(|_| search.method == Method::Ego.name())
-            .map(|c| PriorUse {
-                particles: c.particles,
-                points: c.points.len(),
-                weight: search.prior_weight,
-            }),
-        targets_met,
-        identified,
-        bounded: search.bounded,
+    let answer = Answer::of(&grid, &search, &paper.1);
+    let held_out = match held_out.first() {
+        Some(h) => Some(shots::predict_held_out(
+            &stage,
+            h,
+            &best_run.values,
+            &refine_keys,
+            &answer.best,
+        )?),
+        None => None,
     };
+    let found = Found {
+        args,
+        plan,
+        targets: &targets,
+        out,
+        label: label_of(&cfg, args, method, &search, &first_box)?,
+        held_out,
+        grid_runs: grid.ran,
+        paper,
+        search,
+        answer,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    };
+    let result = found.into_result();
     publish(out, plan, &grid, &result, &cfg, progress)?;
     Ok(result)
+}
+
+/// The answer drawn from the evaluations: the best point, the best grid point, which points
+/// meet every target and what the targets identify.
+struct Answer {
+    best: Evaluation,
+    best_grid: Evaluation,
+    targets_met: Option<TargetsMet>,
+    identified: BTreeMap<String, result::Identified>,
+}
+
+impl Answer {
+    fn of(grid: &Grid, search: &SearchOutcome, paper: &Evaluation) -> Answer {
+        // With seeds, the best grid point is the grid's best over those seeds too.
+        let best_grid = search
+            .evaluations
+            .iter()
+            .filter(|e| {
+                e.stage == EvalStage::GridSeeds && e.score.is_some() && e.objective.is_finite()
+            })
+            .min_by(|a, b| a.objective.total_cmp(&b.objective))
+            .cloned()
+            .unwrap_or_else(|| grid.evaluations[grid.best].clone());
+        let best = search
+            .best
+            .clone()
+            .unwrap_or_else(|| best_of(&best_grid, &search.evaluations));
+        // The grid's own runs count where the answer is at the scene's seed (no search at
+        // seeds).
+        let targets_met = TargetsMet::of(
+            grid.evaluations
+                .iter()
+                .chain(&search.evaluations)
+                .chain(std::iter::once(paper)),
+            &best.seeds,
+        );
+        let identified = identify::identify(
+            &search.boxes,
+            search.region.as_ref(),
+            targets_met.as_ref(),
+            &search.edges,
+        );
+        Answer {
+            best,
+            best_grid,
+            targets_met,
+            identified,
+        }
+    }
+}
+
+/// Everything a calibration found, before it becomes its result.
+struct Found<'a> {
+    args: &'a CalibrateOptions,
+    plan: &'a hvi_run::plan::Plan,
+    targets: &'a [hvi_analysis::score::Targets],
+    out: &'a Path,
+    label: String,
+    held_out: Option<result::HeldOut>,
+    grid_runs: usize,
+    paper: PaperPoint,
+    search: SearchOutcome,
+    answer: Answer,
+    wall_seconds: f64,
+}
+
+impl Found<'_> {
+    fn into_result(self) -> CalibrationResult {
+        let (paper_params, paper, paper_runs, _) = self.paper;
+        let Answer {
+            best,
+            best_grid,
+            targets_met,
+            identified,
+        } = self.answer;
+        let search = self.search;
+        let targets = self.targets;
+        CalibrationResult {
+            study: self.plan.study.clone(),
+            label: self.label,
+            tier: self.plan.tier.clone(),
+            particles: particles_of(self.out, &best),
+            particles_asked: self.args.study.particles,
+            targets_file: targets[0].path.clone(),
+            targets: hvi_analysis::score::combined_targets(targets),
+            gaps: targets.iter().flat_map(|t| t.gaps.clone()).collect(),
+            shots: targets.iter().map(result::ShotUse::of).collect(),
+            held_out: self.held_out,
+            ratio_to_paper: best
+                .params
+                .iter()
+                .filter_map(|(k, v)| paper_params.get(k).map(|p| (k.clone(), v / p)))
+                .collect(),
+            best,
+            best_grid,
+            paper,
+            termination: search.termination,
+            refinement_runs: search.runs,
+            refinement: search.evaluations,
+            method: search.method.into(),
+            converged: search.converged,
+            boxes: search.boxes,
+            edges: search.edges,
+            limit: search.limit,
+            noise: search.noise,
+            noise_source: search.noise_source,
+            surface: search.surface,
+            region: search.region,
+            best_spread: search.spread,
+            runs_made: self.grid_runs + search.runs + paper_runs,
+            wall_seconds: self.wall_seconds,
+            prior: self
+                .args
+                .coarse
+                .as_ref()
+                .filter(|_| search.method == Method::Ego.name())
+                .map(|c| PriorUse {
+                    particles: c.particles,
+                    points: c.points.len(),
+                    weight: search.prior_weight,
+                }),
+            targets_met,
+            identified,
+            bounded: search.bounded,
+        }
+    }
 }
 
 /// The study's `[calibrate]`, with the command line's seeds.
@@ -427,7 +487,8 @@ fn search_stage(
     match method {
         Method::NelderMead => {
             let best_grid = &grid.evaluations[grid.best];
-            let termination = refine_stage(problem, cfg, args.max_iters, best_grid, refine_keys)?;
+            let refined = refine_stage(problem, cfg, args.max_iters, best_grid, refine_keys)?;
+            let termination = refined.termination;
             let evaluations = problem.log.take();
             let best = best_of(best_grid, &evaluations);
             let at = ego::coords(problem, &best.params);
@@ -437,7 +498,7 @@ fn search_stage(
                     "Nelder-Mead searches the grid's box only (the ego search extends it)".into(),
                 );
             }
-            let converged = termination.starts_with("Solver converged") && edges.is_empty();
+            let converged = refined.converged && edges.is_empty();
             Ok(SearchOutcome {
                 method: method.name(),
                 evaluations,
@@ -464,322 +525,6 @@ fn search_stage(
         }
         Method::Ego => ego_boxes(stage, problem, cfg, args, grid, refine_keys, anchor),
     }
-}
-
-/// The surrogate search, box after box: in the grid's box first, then, while the answer
-/// touches a side, in the box extended past it (its new grid points run first), until the
-/// answer is interior or every touched side is at its limit. A scored point outside the box
-/// (`anchor`, the paper's fit at the search's seeds) that beats the box's answer moves the
-/// sides between them out the same way, and joins the search once the box holds it.
-fn ego_boxes(
-    stage: &Stage,
-    first: &Refinement,
-    cfg: &CalibrateConfig,
-    args: &CalibrateOptions,
-    grid: &Grid,
-    refine_keys: &[String],
-    mut anchor: Option<ego::Scored>,
-) -> Result<SearchOutcome> {
-    let settings = ego::EgoSettings {
-        batch: cfg.batch,
-        seeds: cfg.seeds.clone(),
-        max_batches: args.max_batches.unwrap_or(cfg.max_batches),
-        noise_floor: cfg.noise_floor,
-        prior: match &args.coarse {
-            Some(c) => Some(ego::prior_of(first, c)?),
-            None => None,
-        },
-    };
-    let rule = ExtendRule {
-        extend: args.extend,
-        max_extensions: cfg.max_extensions,
-    };
-    if first.progress {
-        eprintln!(
-            "search: efficient global optimisation over {} (log10 for {:?}), batches of {} at seeds {:?}, at most {} batches a box, noise floor {}; {}",
-            refine_keys.join(", "),
-            first.dims.iter().filter(|d| d.1).map(|d| d.0.as_str()).collect::<Vec<_>>(),
-            settings.batch,
-            settings.seeds,
-            settings.max_batches,
-            settings.noise_floor,
-            if rule.extend {
-                format!("a side the answer touches moves out, up to {} steps", rule.max_extensions)
-            } else {
-                "the box is kept (--no-extend)".to_string()
-            }
-        );
-    }
-    let pairs: Vec<(Evaluation, Vec<Record>)> = grid
-        .evaluations
-        .iter()
-        .cloned()
-        .zip(grid.shot_records.iter().cloned())
-        .collect();
-    let (mut scored, mut runs) = ego::seeded_grid(first, &settings, &pairs)?;
-    let seeds = ego::seed_list(&settings);
-    // A coarser level's answer runs beside the grid (unless the grid holds it).
-    if let Some(c) = &args.coarse {
-        let at: BTreeMap<String, f64> = first
-            .dims
-            .iter()
-            .filter_map(|d| c.best.get(&d.0).map(|v| (d.0.clone(), *v)))
-            .collect();
-        let coords = ego::coords(first, &at);
-        let seen = scored
-            .iter()
-            .any(|(e, _)| ego::coords(first, &e.params) == coords);
-        if coords.is_some() && !seen {
-            let (evs, n) = ego::run_points(first, "coarse-answer", &[at], &seeds)?;
-            scored.extend(evs);
-            runs += n;
-        }
-    }
-    let mut dims = first.dims.clone();
-    let mut values = grid_coords(first.plan, &dims)?;
-    let mut moved = BTreeMap::new();
-    let mut boxes = Vec::new();
-    let mut batches = 0;
-    let mut extension = 0;
-    loop {
-        let problem = stage.problem(first.fixed.clone(), dims.clone());
-        // The anchor joins the observations once the box holds it (unless a scored point
-        // sits there already: the paper's fit is often a grid point).
-        if anchor
-            .as_ref()
-            .is_some_and(|a| outside_sides(&dims, &problem, &a.0).is_empty())
-        {
-            let a = anchor.take();
-            let at = a.as_ref().and_then(|a| ego::coords(&problem, &a.0.params));
-            let seen = scored
-                .iter()
-                .any(|(e, _)| ego::coords(&problem, &e.params) == at);
-            if !seen {
-                scored.extend(a);
-            }
-        }
-        // Where the points scored so far put the answer: on a side, the box moves out before
-        // any batch is spent inside it.
-        if rule.extend {
-            let probe = ego::EgoSettings {
-                max_batches: 0,
-                ..settings.clone()
-            };
-            // Quiet: the search in this box, if it runs, reports the same numbers.
-            let mut quiet = stage.problem(first.fixed.clone(), dims.clone());
-            quiet.progress = false;
-            let p = ego::search(&quiet, &probe, scored.clone(), batches)?;
-            let at = ego::coords(&problem, &p.best.params);
-            let mut edges = edges_of(&dims, at.as_deref(), p.region.as_ref().map(|r| &r.sides));
-            identify::settle_flat_sides(&mut edges, &dims, &values, &scored);
-            let before = bounds_of(&dims);
-            if !edges.is_empty()
-                && extend(
-                    &problem,
-                    &mut dims,
-                    &mut values,
-                    &mut edges,
-                    &mut moved,
-                    rule,
-                )?
-            {
-                if problem.progress {
-                    for e in &edges {
-                        eprintln!(
-                            "edge: {} (before this box's batches){}",
-                            e.describe(),
-                            e.limit.as_ref().map_or(String::new(), |l| format!(": {l}"))
-                        );
-                    }
-                }
-                boxes.push(SearchedBox {
-                    bounds: before,
-                    termination: "extended before its batches: the answer from the points \
-                                  scored so far touches a side"
-                        .into(),
-                    edges,
-                });
-                let (evs, n) =
-                    extension_points(stage, first, &dims, &values, &scored, &seeds, extension)?;
-                scored.extend(evs);
-                runs += n;
-                extension += 1;
-                continue;
-            }
-        }
-        let o = ego::search(&problem, &settings, scored, batches)?;
-        runs += o.runs;
-        batches += o.batches;
-        let at = ego::coords(&problem, &o.best.params);
-        let mut edges = edges_of(&dims, at.as_deref(), o.region.as_ref().map(|r| &r.sides));
-        // A better point outside the box pulls the sides between them out.
-        if let Some((a, _)) = anchor.as_ref().filter(|a| a.0.objective < o.best.objective) {
-            for (key, side, value) in outside_sides(&dims, &problem, a) {
-                if !edges.iter().any(|e| e.key == key && e.side == side) {
-                    edges.push(Edge {
-                        key,
-                        side,
-                        value,
-                        touched_by: format!(
-                            "a better point beyond it (the paper's fit, J = {:.4} against {:.4})",
-                            a.objective, o.best.objective
-                        ),
-                        limit: None,
-                        targets_met: false,
-                    });
-                }
-            }
-        }
-        identify::settle_flat_sides(&mut edges, &dims, &values, &o.evaluations);
-        let moved_now = !edges.is_empty()
-            && extend(
-                &problem,
-                &mut dims,
-                &mut values,
-                &mut edges,
-                &mut moved,
-                rule,
-            )?;
-        boxes.push(SearchedBox {
-            bounds: bounds_of(&problem.dims),
-            termination: o.termination.clone(),
-            edges: edges.clone(),
-        });
-        if problem.progress {
-            for e in &edges {
-                eprintln!(
-                    "edge: {}{}",
-                    e.describe(),
-                    e.limit.as_ref().map_or(String::new(), |l| format!(": {l}"))
-                );
-            }
-        }
-        scored = o.evaluations;
-        if !moved_now {
-            let limit = limit_line(&edges);
-            let (termination, converged, bounded) =
-                verdict_of(o.converged, &o.termination, &edges, limit.as_deref());
-            return Ok(SearchOutcome {
-                method: Method::Ego.name(),
-                evaluations: scored
-                    .into_iter()
-                    .map(|(e, _)| e)
-                    .filter(|e| e.stage != "grid" && e.stage != "paper")
-                    .collect(),
-                best: Some(o.best),
-                termination,
-                converged,
-                bounded,
-                noise: Some(o.noise),
-                noise_source: Some(o.noise_source),
-                surface: o.surface,
-                region: o.region,
-                spread: o.spread,
-                runs,
-                boxes,
-                edges,
-                limit,
-                seeds: settings.seeds.clone(),
-                prior_weight: o.prior_weight,
-            });
-        }
-        let (evs, n) = extension_points(stage, first, &dims, &values, &scored, &seeds, extension)?;
-        scored.extend(evs);
-        runs += n;
-        extension += 1;
-    }
-}
-
-/// The search's termination in words, whether it converged (the stopping rule held with the
-/// answer inside the box) and whether the answer is a bound (the rule held, and every target
-/// is met on each side the answer touches).
-fn verdict_of(
-    rule_held: bool,
-    why: &str,
-    edges: &[Edge],
-    limit: Option<&str>,
-) -> (String, bool, bool) {
-    let sides =
-        |f: &dyn Fn(&Edge) -> String, sep: &str| edges.iter().map(f).collect::<Vec<_>>().join(sep);
-    let bounded = rule_held && !edges.is_empty() && edges.iter().all(|e| e.targets_met);
-    let termination =
-        if edges.is_empty() && rule_held {
-            format!("converged: {why}")
-        } else if edges.is_empty() {
-            why.to_string()
-        } else if bounded {
-            format!(
-            "bounded: every target is met on the side{} the answer touches ({}), so the targets \
-             bound it from the other side only; {why}",
-            if edges.len() > 1 { "s" } else { "" },
-            sides(&|e| format!("the {} side of {}", e.side.name(), e.key), ", ")
-        )
-        } else {
-            format!(
-                "not converged: the answer touches {}; {}",
-                sides(&Edge::describe, " and "),
-                limit.unwrap_or_default()
-            )
-        };
-    (termination, rule_held && edges.is_empty(), bounded)
-}
-
-/// The sides of the box `dims` that a point lies beyond: (key, side, the side's value).
-fn outside_sides(
-    dims: &[problem::Dim],
-    problem: &Refinement,
-    e: &Evaluation,
-) -> Vec<(String, result::Side, f64)> {
-    let Some(x) = ego::coords(problem, &e.params) else {
-        return Vec::new();
-    };
-    let tol = 1e-9;
-    dims.iter()
-        .zip(x)
-        .filter_map(|((k, log, lo, hi), u)| {
-            let value = |c: f64| if *log { 10f64.powf(c) } else { c };
-            if u < lo - tol {
-                Some((k.clone(), result::Side::Low, value(*lo)))
-            } else if u > hi + tol {
-                Some((k.clone(), result::Side::High, value(*hi)))
-            } else {
-                None
-            }
-        })
-        .collect()
-}
-
-/// Runs the new grid points of an extended box (`dims`, its grid values `values`): those of
-/// the lattice of `values` not scored yet, at every seed of the search. Returns their
-/// evaluations and the runs simulated.
-fn extension_points(
-    stage: &Stage,
-    first: &Refinement,
-    dims: &[problem::Dim],
-    values: &[Vec<f64>],
-    scored: &[ego::Scored],
-    seeds: &[Option<u64>],
-    extension: usize,
-) -> Result<(Vec<ego::Scored>, usize)> {
-    let problem = stage.problem(first.fixed.clone(), dims.to_vec());
-    let seen: Vec<Vec<f64>> = scored
-        .iter()
-        .filter_map(|(e, _)| ego::coords(&problem, &e.params))
-        .collect();
-    let points: Vec<BTreeMap<String, f64>> = new_lattice_points(values, &seen)
-        .iter()
-        .map(|x| problem.values(x))
-        .collect();
-    let label = format!("extend-{extension}");
-    if problem.progress {
-        eprintln!(
-            "{label}: the box is now {}; {} new grid point(s) at {} seed(s)",
-            fmt_bounds(&bounds_of(dims)),
-            points.len(),
-            seeds.len()
-        );
-    }
-    ego::run_points(&problem, &label, &points, seeds)
 }
 
 /// The paper's fit: its parameters, its evaluation, the runs simulated for it and, at seeds,
@@ -809,14 +554,14 @@ fn paper_point(
     let fixed = fixed_overrides(stage.plans, best_values, |k| paper_params.contains_key(k))?;
     let problem = stage.problem(fixed, Vec::new());
     if seeds.is_empty() {
-        let paper = problem.evaluate("paper", &paper_params)?;
+        let paper = problem.evaluate(EvalStage::Paper, &paper_params)?;
         let ran = usize::from(!paper.cached && paper.dir.is_some());
         return Ok((paper_params, paper, ran, None));
     }
     let seeds: Vec<Option<u64>> = seeds.iter().copied().map(Some).collect();
     let (mut evs, ran) = ego::run_points(
         &problem,
-        "paper",
+        EvalStage::Paper,
         std::slice::from_ref(&paper_params),
         &seeds,
     )?;

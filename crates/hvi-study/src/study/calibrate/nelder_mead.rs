@@ -5,12 +5,13 @@
 //! rejects, costs [`OUTSIDE_COST`] without a run.
 
 use anyhow::{anyhow, Result};
-use argmin::core::{CostFunction, Executor, State};
+use argmin::core::{CostFunction, Executor, State, TerminationReason, TerminationStatus};
 use argmin::solver::neldermead::NelderMead;
 use hvi_run::plan::Plan;
 
 use super::config::CalibrateConfig;
 use super::problem::{fmt_params, Dim, Refinement, OUTSIDE_COST};
+use super::result::EvalStage;
 use super::result::Evaluation;
 
 /// Argmin's executor owns its problem; this lends it the refinement.
@@ -33,18 +34,18 @@ impl Refinement<'_> {
             .dims
             .iter()
             .zip(x)
-            .all(|((_, _, lo, hi), &u)| u >= lo - 1e-9 && u <= hi + 1e-9);
+            .all(|(Dim { lo, hi, .. }, &u)| u >= lo - 1e-9 && u <= hi + 1e-9);
         let e = if inside {
-            self.evaluate("refine", &params)?
+            self.evaluate(EvalStage::Refine, &params)?
         } else {
             let step = self
                 .log
                 .borrow()
                 .iter()
-                .filter(|e| e.stage == "refine")
+                .filter(|e| e.stage == EvalStage::Refine)
                 .count();
             Evaluation {
-                stage: "refine".into(),
+                stage: EvalStage::Refine,
                 step,
                 params: params.clone(),
                 score: None,
@@ -78,6 +79,15 @@ impl Refinement<'_> {
     }
 }
 
+/// Why Nelder-Mead stopped, in words, and whether its own stopping rule (the simplex's sd
+/// tolerance) ended it, read from the solver's state.
+pub(super) struct Refined {
+    /// The solver's termination and its iteration count, in words.
+    pub termination: String,
+    /// The solver converged (argmin's `TerminationReason::SolverConverged`).
+    pub converged: bool,
+}
+
 /// Stage 2: Nelder-Mead from the best grid point (unless skipped). Returns why it stopped;
 /// the evaluations stay in the problem's log.
 pub(super) fn refine_stage(
@@ -86,14 +96,18 @@ pub(super) fn refine_stage(
     max_iters: Option<u64>,
     best_grid: &Evaluation,
     refine_keys: &[String],
-) -> Result<String> {
+) -> Result<Refined> {
     let dims = &problem.dims;
     let max_iters = max_iters.unwrap_or(cfg.max_iters);
     if dims.is_empty() || max_iters == 0 {
-        return Ok(if dims.is_empty() {
-            "skipped: no axis to refine".to_string()
+        let why = if dims.is_empty() {
+            "skipped: no axis to refine"
         } else {
-            "skipped (max_iters = 0)".to_string()
+            "skipped (max_iters = 0)"
+        };
+        return Ok(Refined {
+            termination: why.to_string(),
+            converged: false,
         });
     }
     let simplex = start_simplex(problem.plan, dims, best_grid);
@@ -101,7 +115,7 @@ pub(super) fn refine_stage(
         eprintln!(
             "refinement: Nelder-Mead over {} (log10 for {:?}), at most {max_iters} iterations, sd tolerance {}",
             refine_keys.join(", "),
-            dims.iter().filter(|d| d.1).map(|d| d.0.as_str()).collect::<Vec<_>>(),
+            dims.iter().filter(|d| d.log).map(|d| d.key.as_str()).collect::<Vec<_>>(),
             cfg.sd_tolerance
         );
     }
@@ -113,11 +127,17 @@ pub(super) fn refine_stage(
         .run()
         .map_err(|e| anyhow!("refinement: {e:#}"))?;
     let st = res.state();
-    Ok(format!(
-        "{} after {} iterations",
-        st.get_termination_status(),
-        st.get_iter()
-    ))
+    Ok(Refined {
+        termination: format!(
+            "{} after {} iterations",
+            st.get_termination_status(),
+            st.get_iter()
+        ),
+        converged: matches!(
+            st.get_termination_status(),
+            TerminationStatus::Terminated(TerminationReason::SolverConverged)
+        ),
+    })
 }
 
 /// The start simplex: the best grid point and one step along each refined axis (half the
@@ -125,7 +145,7 @@ pub(super) fn refine_stage(
 pub(super) fn start_simplex(plan: &Plan, dims: &[Dim], best_grid: &Evaluation) -> Vec<Vec<f64>> {
     let x0: Vec<f64> = dims
         .iter()
-        .map(|(k, log, _, _)| {
+        .map(|Dim { key: k, log, .. }| {
             let x = best_grid.params.get(k).copied().unwrap_or(f64::NAN);
             if *log {
                 x.log10()
@@ -135,7 +155,7 @@ pub(super) fn start_simplex(plan: &Plan, dims: &[Dim], best_grid: &Evaluation) -
         })
         .collect();
     let mut simplex = vec![x0.clone()];
-    for (d, (k, _, lo, hi)) in dims.iter().enumerate() {
+    for (d, Dim { key: k, lo, hi, .. }) in dims.iter().enumerate() {
         let n = plan
             .axes
             .iter()

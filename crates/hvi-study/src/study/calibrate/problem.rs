@@ -18,6 +18,7 @@ use serde_json::Value;
 
 use super::config::CalibrateConfig;
 pub use super::result::fmt_term;
+use super::result::EvalStage;
 use super::result::{shot_means, Evaluation};
 
 /// The cost of a point outside the grid's box or with an invalid scene (no run is made).
@@ -73,7 +74,7 @@ impl Refinement<'_> {
     pub(super) fn values_in(&self, dims: &[Dim], x: &[f64]) -> BTreeMap<String, f64> {
         dims.iter()
             .zip(x)
-            .map(|((k, log, _, _), &u)| {
+            .map(|(Dim { key: k, log, .. }, &u)| {
                 let v = if *log { 10f64.powf(u) } else { u };
                 (k.clone(), round_sig(v, 6))
             })
@@ -142,7 +143,7 @@ impl Refinement<'_> {
     /// store lacks.
     pub(super) fn evaluate(
         &self,
-        stage: &str,
+        stage: EvalStage,
         params: &BTreeMap<String, f64>,
     ) -> Result<Evaluation> {
         let step = self
@@ -174,7 +175,7 @@ impl Refinement<'_> {
             .collect();
         let per_shot: Vec<_> = records.iter().map(|r| vec![r.observables]).collect();
         Ok(Evaluation {
-            stage: stage.into(),
+            stage,
             step,
             params: params.clone(),
             objective: score.objective,
@@ -195,7 +196,7 @@ impl Refinement<'_> {
     /// A run's record from the store, or run (here or on Slurm); whether it was stored.
     fn record_of(
         &self,
-        stage: &str,
+        stage: EvalStage,
         params: &BTreeMap<String, f64>,
         job: &Job,
     ) -> Result<(Record, bool)> {
@@ -214,7 +215,7 @@ impl Refinement<'_> {
                     self.plan,
                     std::slice::from_ref(job),
                     &describe,
-                    stage,
+                    &stage.to_string(),
                 )?;
                 report
                     .records
@@ -233,9 +234,14 @@ impl Refinement<'_> {
 
 /// A point that is not run: outside the box, or a scene the engine rejects (`status` says
 /// which).
-fn outside(stage: &str, step: usize, params: &BTreeMap<String, f64>, status: String) -> Evaluation {
+fn outside(
+    stage: EvalStage,
+    step: usize,
+    params: &BTreeMap<String, f64>,
+    status: String,
+) -> Evaluation {
     Evaluation {
-        stage: stage.into(),
+        stage,
         step,
         params: params.clone(),
         score: None,
@@ -272,9 +278,31 @@ pub(super) fn describe_eval(e: &Evaluation) -> String {
     s
 }
 
-/// A refined axis: its key, whether it is refined in log10, and the grid's box on it in
-/// those coordinates (lowest, highest).
-pub(super) type Dim = (String, bool, f64, f64);
+/// A refined axis and the grid's box on it, in the coordinates the search moves in.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Dim {
+    /// The axis's scene key.
+    pub(super) key: String,
+    /// Refined in log10 of the value (else in the value).
+    pub(super) log: bool,
+    /// The box's lowest coordinate.
+    pub(super) lo: f64,
+    /// The box's highest coordinate.
+    pub(super) hi: f64,
+}
+
+impl Dim {
+    /// The axis `key` over the box [lo, hi] in its coordinates (log10 when `log`).
+    #[cfg(test)]
+    pub(super) fn new(key: &str, log: bool, lo: f64, hi: f64) -> Self {
+        Dim {
+            key: key.to_string(),
+            log,
+            lo,
+            hi,
+        }
+    }
+}
 
 /// The axes the refinement moves (`calibrate.refine`, default every axis with more than one
 /// value) and their coordinates.
@@ -307,7 +335,12 @@ pub(super) fn refined_axes(plan: &Plan, cfg: &CalibrateConfig) -> Result<(Vec<St
             lo = lo.min(u);
             hi = hi.max(u);
         }
-        dims.push((k.clone(), log, lo, hi));
+        dims.push(Dim {
+            key: k.clone(),
+            log,
+            lo,
+            hi,
+        });
     }
     Ok((refine_keys, dims))
 }

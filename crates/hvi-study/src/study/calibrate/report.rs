@@ -12,6 +12,7 @@ use hvi_run::plan::Plan;
 use hvi_run::store::Record;
 
 use super::problem::describe_eval;
+use super::result::EvalStage;
 use super::result::{fmt_value, CalibrationResult, Evaluation, FloorPoint, Surface};
 use crate::study::document::{Document, Section};
 
@@ -181,18 +182,18 @@ pub fn report(r: &CalibrationResult) -> Document {
 /// the grid (the grid at the search's seeds, the extended boxes' grid points, 1 search
 /// batch(es)); 27 points evaluated after the grid; wall time 46.5 s`.
 fn cost_line(r: &CalibrationResult) -> String {
-    let mut batches: Vec<&str> = r
+    let mut batches: Vec<EvalStage> = r
         .refinement
         .iter()
-        .map(|e| e.stage.as_str())
-        .filter(|s| s.starts_with("ego-"))
+        .map(|e| e.stage)
+        .filter(|s| s.is_search())
         .collect();
     batches.dedup();
     let mut after = Vec::new();
-    if r.refinement.iter().any(|e| e.stage == "grid-seeds") {
+    if r.refinement.iter().any(|e| e.stage == EvalStage::GridSeeds) {
         after.push("the grid at the search's seeds".to_string());
     }
-    if r.refinement.iter().any(|e| e.stage.starts_with("extend-")) {
+    if r.refinement.iter().any(|e| e.stage.is_extension()) {
         after.push("the extended boxes' grid points".to_string());
     }
     match (r.method.as_str(), batches.len()) {
@@ -512,7 +513,7 @@ pub(super) fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluatio
             .chain(&r.refinement)
             .chain(std::iter::once(&r.paper))
         {
-            let mut row = vec![e.stage.clone(), e.step.to_string()];
+            let mut row = vec![e.stage.to_string(), e.step.to_string()];
             row.extend(
                 keys.iter()
                     .map(|k| e.params.get(k).map_or(String::new(), |v| v.to_string())),

@@ -8,12 +8,99 @@ use hvi_analysis::observable::{Observable, Observables};
 use hvi_analysis::score::{Score, Target, Targets, MISSING_TERM};
 use serde::{Deserialize, Serialize};
 
+/// The stage of a calibration that evaluated a point. Written as its label: `grid`,
+/// `grid-seeds`, `ego-<batch>`, `extend-<box>`, `refine`, `paper`, `check`, `coarse-answer`
+/// or `held-out`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(into = "String", try_from = "String")]
+pub enum EvalStage {
+    /// A grid run at the scene's seed.
+    Grid,
+    /// A grid point at the search's seeds.
+    GridSeeds,
+    /// A batch of the surrogate (ego) search, numbered over the whole calibration.
+    Search(usize),
+    /// The grid points of an extended box, numbered by extension.
+    Extend(usize),
+    /// A Nelder-Mead step.
+    Refine,
+    /// The paper's fit, scored beside the answer.
+    Paper,
+    /// A coarser level's answer checked at this level (the ladder).
+    Check,
+    /// A coarser level's answer run at the search's seeds before the search (the ladder).
+    CoarseAnswer,
+    /// The held-out shot at the calibrated point.
+    HeldOut,
+}
+
+impl std::fmt::Display for EvalStage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            EvalStage::Grid => f.write_str("grid"),
+            EvalStage::GridSeeds => f.write_str("grid-seeds"),
+            EvalStage::Search(n) => write!(f, "ego-{n}"),
+            EvalStage::Extend(n) => write!(f, "extend-{n}"),
+            EvalStage::Refine => f.write_str("refine"),
+            EvalStage::Paper => f.write_str("paper"),
+            EvalStage::Check => f.write_str("check"),
+            EvalStage::CoarseAnswer => f.write_str("coarse-answer"),
+            EvalStage::HeldOut => f.write_str("held-out"),
+        }
+    }
+}
+
+impl From<EvalStage> for String {
+    fn from(s: EvalStage) -> String {
+        s.to_string()
+    }
+}
+
+impl TryFrom<String> for EvalStage {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        let numbered = |prefix: &str| s.strip_prefix(prefix).and_then(|n| n.parse().ok());
+        Ok(match s.as_str() {
+            "grid" => EvalStage::Grid,
+            "grid-seeds" => EvalStage::GridSeeds,
+            "refine" => EvalStage::Refine,
+            "paper" => EvalStage::Paper,
+            "check" => EvalStage::Check,
+            "coarse-answer" => EvalStage::CoarseAnswer,
+            "held-out" => EvalStage::HeldOut,
+            _ => {
+                if let Some(n) = numbered("ego-") {
+                    EvalStage::Search(n)
+                } else if let Some(n) = numbered("extend-") {
+                    EvalStage::Extend(n)
+                } else {
+                    return Err(format!(
+                        "unknown calibration stage `{s}` (allowed: grid, grid-seeds, ego-<n>, \
+                         extend-<n>, refine, paper, check, coarse-answer, held-out)"
+                    ));
+                }
+            }
+        })
+    }
+}
+
+impl EvalStage {
+    /// A batch of the surrogate search.
+    pub fn is_search(self) -> bool {
+        matches!(self, EvalStage::Search(_))
+    }
+
+    /// An extended box's grid point.
+    pub fn is_extension(self) -> bool {
+        matches!(self, EvalStage::Extend(_))
+    }
+}
+
 /// One evaluated point: a grid run or a refinement step.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Evaluation {
-    /// `grid`, `grid-seeds` (a grid point at the search's seeds), `ego-<batch>`, `refine`
-    /// (Nelder-Mead) or `paper`.
-    pub stage: String,
+    /// The stage that evaluated it.
+    pub stage: EvalStage,
     /// Sequence number within the stage.
     pub step: usize,
     /// Parameter values by key.
@@ -689,6 +776,37 @@ mod tests {
     use super::*;
     use hvi_analysis::score::Term;
 
+    /// calibration.json keeps its stage labels: every stage reads back from what it writes,
+    /// and an unknown label is refused with the allowed ones.
+    #[test]
+    fn stage_labels_round_trip() {
+        let all = [
+            EvalStage::Grid,
+            EvalStage::GridSeeds,
+            EvalStage::Search(12),
+            EvalStage::Extend(3),
+            EvalStage::Refine,
+            EvalStage::Paper,
+            EvalStage::Check,
+            EvalStage::CoarseAnswer,
+            EvalStage::HeldOut,
+        ];
+        for s in all {
+            let json = serde_json::to_string(&s).expect("a stage writes");
+            assert_eq!(
+                serde_json::from_str::<EvalStage>(&json).expect("a stage reads back"),
+                s,
+                "{json}"
+            );
+        }
+        assert_eq!(
+            serde_json::to_string(&EvalStage::Search(2)).expect("a stage writes"),
+            "\"ego-2\""
+        );
+        let err = serde_json::from_str::<EvalStage>("\"ego-x\"").expect_err("not a stage");
+        assert!(err.to_string().contains("allowed: grid"), "{err}");
+    }
+
     #[test]
     fn a_mean_is_over_every_seed_or_absent() {
         let run = |r: Option<f64>, va: f64| {
@@ -719,7 +837,7 @@ mod tests {
             })
             .collect();
         Evaluation {
-            stage: "ego-0".into(),
+            stage: EvalStage::Search(0),
             step: 0,
             params: BTreeMap::from([
                 ("eps".to_string(), eps),

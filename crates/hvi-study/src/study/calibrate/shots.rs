@@ -17,7 +17,8 @@ use hvi_run::plan::Plan;
 use hvi_run::scene_file::apply_overrides;
 use hvi_run::spec::{json_to_override, override_key, Study};
 
-use super::problem::Stage;
+use super::problem::{fixed_overrides, Stage};
+use super::result::EvalStage;
 use super::result::{Evaluation, HeldOut, ShotUse};
 use crate::study::options::StudyOptions;
 
@@ -140,14 +141,17 @@ pub fn plans_of(
     Ok((plans, out))
 }
 
-/// Runs the held-out shot at the calibrated point (`fixed`: its overrides beside the searched
-/// parameters) at the answer's seeds and scores it against its own targets.
+/// Runs the held-out shot at the calibrated point (the best grid run's values beside the
+/// searched parameters `refine_keys`) at the answer's seeds and scores it against its own
+/// targets.
 pub(super) fn predict_held_out(
     stage: &Stage,
     held: &ShotPlan,
-    fixed: Vec<Vec<String>>,
+    best_values: &[serde_json::Value],
+    refine_keys: &[String],
     best: &Evaluation,
 ) -> Result<HeldOut> {
+    let fixed = fixed_overrides(&[&held.plan], best_values, |k| refine_keys.contains(k))?;
     let targets = [held.targets.clone()];
     let plans = [&held.plan];
     let own = Stage {
@@ -176,7 +180,7 @@ pub(super) fn predict_held_out(
     }
     let (mut evs, _) = super::ego::run_points(
         &problem,
-        "held-out",
+        EvalStage::HeldOut,
         std::slice::from_ref(&best.params),
         &seeds,
     )?;
