@@ -190,108 +190,24 @@ fn check_counts(particles: &[f64], check: Option<f64>) -> Result<()> {
 /// ladder.md and ladder.png.
 pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderResult> {
     let t0 = std::time::Instant::now();
-    if args.study.particles.is_some() {
-        bail!("--ladder sets the particle count of each level: leave out --particles");
-    }
-    if args.hold_out.is_some() {
-        bail!("--ladder holds out no shot: leave out --hold-out (or give it to a calibration at one count)");
-    }
-    if args.no_refine {
-        bail!("--ladder needs the search after the grid (each level's confidence region steers the next): leave out --no-refine");
-    }
     let study = args.study.load_study()?;
     let cfg = CalibrateConfig::of(&study)?;
-    if args.method.unwrap_or(cfg.method) != Method::Ego {
-        bail!("--ladder needs `--method ego` (its confidence region steers the next level; Nelder-Mead gives none)");
-    }
+    refuse_options(args, &cfg)?;
     let check_n = opts.check.or(cfg.ladder_check);
     check_counts(&opts.particles, check_n)?;
     let root = ladder_root(args, &study)?;
     std::fs::create_dir_all(&root)
         .with_context(|| format!("cannot create the ladder's directory {}", root.display()))?;
-    let progress = !args.study.quiet;
-
-    let mut levels: Vec<LadderLevel> = Vec::new();
-    let mut results: Vec<CalibrationResult> = Vec::new();
-    let mut keys: Vec<Dim> = Vec::new();
-    let mut coarse: Option<Coarse> = None;
+    let mut walk = Levels::default();
     for (k, &n) in opts.particles.iter().enumerate() {
-        let t_level = std::time::Instant::now();
-        let dir = level_dir(n);
-        let mut level_args = args.clone();
-        level_args.study.particles = Some(n);
-        level_args.study.out = Some(root.join(&dir));
-        let (level_study, mut steered_by) = if k == 0 {
-            (study.clone(), "the study's grid".to_string())
-        } else {
-            steer(&study, &cfg, &keys, &levels, n)?
-        };
-        if cfg.ladder_prior {
-            if let Some(c) = coarse.clone() {
-                steered_by.push_str(&format!(
-                    "; searched as the difference from the {} level's model ({} scored points{})",
-                    c.particles,
-                    c.points.len(),
-                    if c.prior.is_some() {
-                        ", itself on the levels below"
-                    } else {
-                        ""
-                    }
-                ));
-                level_args.coarse = Some(c);
-            }
-        }
-        if progress {
-            eprintln!(
-                "ladder level {}/{}: {} particles, first box from {steered_by}",
-                k + 1,
-                opts.particles.len(),
-                n
-            );
-        }
-        let (shots, out) = plans_of(
-            &level_args.study,
-            &level_study,
-            cfg.load_shots(&study)?,
-            None,
-        )?;
-        if k == 0 {
-            keys = refined_axes(&shots[0].plan, &cfg)?.1;
-        }
-        let r = calibrate_plan(&level_args, &level_study, &shots, &out)?;
-        let (runs, core) = store_cost(&out)?;
-        levels.push(LadderLevel {
-            particles: n,
-            particles_run: r.particles,
-            dir,
-            steered_by,
-            first_box: r
-                .boxes
-                .first()
-                .map(|b| b.bounds.clone())
-                .unwrap_or_default(),
-            best: r.best.params.clone(),
-            objective: r.best.objective,
-            intervals: r
-                .region
-                .as_ref()
-                .map(|g| g.intervals.clone())
-                .unwrap_or_default(),
-            converged: r.converged,
-            edges: r.edges.clone(),
-            paper_objective: r.paper.objective,
-            runs,
-            run_core_seconds: core,
-            runs_made: r.runs_made,
-            wall_seconds: t_level.elapsed().as_secs_f64(),
-            targets_met: r.targets_met.clone(),
-        });
-        // The next level's prior: this level's points, on this level's own prior.
-        let below = level_args.coarse.take();
-        coarse = Some(Coarse::of(&r, n, cfg.noise_floor, below));
-        results.push(r);
+        walk.level(args, &study, &cfg, &root, (k, opts.particles.len()), n)?;
     }
-
+    let Levels {
+        levels,
+        results,
+        keys,
+        ..
+    } = walk;
     let check = match check_n {
         Some(n) => Some(check_run(args, &study, &cfg, &keys, &root, n, &results)?),
         None => None,
@@ -319,13 +235,36 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
         run_core_seconds,
         wall_seconds: t0.elapsed().as_secs_f64(),
     };
+    publish(&root, &result, &keys, !args.study.quiet)?;
+    Ok(result)
+}
+
+/// The options a ladder cannot take, refused with the reason.
+fn refuse_options(args: &CalibrateOptions, cfg: &CalibrateConfig) -> Result<()> {
+    if args.study.particles.is_some() {
+        bail!("--ladder sets the particle count of each level: leave out --particles");
+    }
+    if args.hold_out.is_some() {
+        bail!("--ladder holds out no shot: leave out --hold-out (or give it to a calibration at one count)");
+    }
+    if args.no_refine {
+        bail!("--ladder needs the search after the grid (each level's confidence region steers the next): leave out --no-refine");
+    }
+    if args.method.unwrap_or(cfg.method) != Method::Ego {
+        bail!("--ladder needs `--method ego` (its confidence region steers the next level; Nelder-Mead gives none)");
+    }
+    Ok(())
+}
+
+/// Writes ladder.json, ladder.md and ladder.png, and prints the report.
+fn publish(root: &Path, result: &LadderResult, keys: &[Dim], progress: bool) -> Result<()> {
     write_atomic_bytes(
         &root.join("ladder.json"),
-        serde_json::to_string_pretty(&result)?.as_bytes(),
+        serde_json::to_string_pretty(result)?.as_bytes(),
     )?;
-    let doc = report(&result, &keys);
+    let doc = report(result, keys);
     write_atomic_bytes(&root.join("ladder.md"), doc.markdown().as_bytes())?;
-    match draw(&root.join("ladder.png"), &result, &keys) {
+    match draw(&root.join("ladder.png"), result, keys) {
         Ok(()) if progress => eprintln!("plot: {}", root.join("ladder.png").display()),
         Ok(()) => {}
         Err(e) => eprintln!("no ladder figure drawn: {e:#}"),
@@ -334,7 +273,115 @@ pub fn ladder(args: &CalibrateOptions, opts: &LadderOptions) -> Result<LadderRes
         eprint!("{}", doc.text());
     }
     println!("{}", root.join("ladder.json").display());
-    Ok(result)
+    Ok(())
+}
+
+impl LadderLevel {
+    /// Level `n`'s summary of its calibration `r` (its runs, core and wall time left at 0).
+    fn of(r: &CalibrationResult, n: f64, dir: PathBuf, steered_by: String) -> LadderLevel {
+        LadderLevel {
+            particles: n,
+            particles_run: r.particles,
+            dir,
+            steered_by,
+            first_box: r
+                .boxes
+                .first()
+                .map(|b| b.bounds.clone())
+                .unwrap_or_default(),
+            best: r.best.params.clone(),
+            objective: r.best.objective,
+            intervals: r
+                .region
+                .as_ref()
+                .map(|g| g.intervals.clone())
+                .unwrap_or_default(),
+            converged: r.converged,
+            edges: r.edges.clone(),
+            paper_objective: r.paper.objective,
+            runs: 0,
+            run_core_seconds: 0.0,
+            runs_made: r.runs_made,
+            wall_seconds: 0.0,
+            targets_met: r.targets_met.clone(),
+        }
+    }
+}
+
+/// The levels calibrated so far.
+#[derive(Default)]
+struct Levels {
+    levels: Vec<LadderLevel>,
+    results: Vec<CalibrationResult>,
+    /// The searched axes (the first level's).
+    keys: Vec<Dim>,
+    /// The last level's points, the next level's prior.
+    coarse: Option<Coarse>,
+}
+
+impl Levels {
+    /// Calibrates level `k` of `of` at `n` particles, its first box steered by the levels
+    /// below.
+    fn level(
+        &mut self,
+        args: &CalibrateOptions,
+        study: &Study,
+        cfg: &CalibrateConfig,
+        root: &Path,
+        (k, of): (usize, usize),
+        n: f64,
+    ) -> Result<()> {
+        let t_level = std::time::Instant::now();
+        let dir = level_dir(n);
+        let mut level_args = args.clone();
+        level_args.study.particles = Some(n);
+        level_args.study.out = Some(root.join(&dir));
+        let (level_study, mut steered_by) = if k == 0 {
+            (study.clone(), "the study's grid".to_string())
+        } else {
+            steer(study, cfg, &self.keys, &self.levels, n)?
+        };
+        if cfg.ladder_prior {
+            if let Some(c) = self.coarse.clone() {
+                steered_by.push_str(&format!(
+                    "; searched as the difference from the {} level's model ({} scored points{})",
+                    c.particles,
+                    c.points.len(),
+                    if c.prior.is_some() {
+                        ", itself on the levels below"
+                    } else {
+                        ""
+                    }
+                ));
+                level_args.coarse = Some(c);
+            }
+        }
+        if !args.study.quiet {
+            eprintln!(
+                "ladder level {}/{of}: {n} particles, first box from {steered_by}",
+                k + 1
+            );
+        }
+        let (shots, out) = plans_of(
+            &level_args.study,
+            &level_study,
+            cfg.load_shots(study)?,
+            None,
+        )?;
+        if k == 0 {
+            self.keys = refined_axes(&shots[0].plan, cfg)?.1;
+        }
+        let r = calibrate_plan(&level_args, &level_study, &shots, &out)?;
+        let mut level = LadderLevel::of(&r, n, dir, steered_by);
+        (level.runs, level.run_core_seconds) = store_cost(&out)?;
+        level.wall_seconds = t_level.elapsed().as_secs_f64();
+        self.levels.push(level);
+        // The next level's prior: this level's points, on this level's own prior.
+        let below = level_args.coarse.take();
+        self.coarse = Some(Coarse::of(&r, n, cfg.noise_floor, below));
+        self.results.push(r);
+        Ok(())
+    }
 }
 
 /// A value in the search's coordinate of `dim` (log10 on a log axis).
@@ -621,7 +668,6 @@ fn targets_met_overlap(
 /// Converged in N or not, the region that meets the targets at the last two levels, the trend
 /// per decade of N between them, and the verdict in words.
 fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
-    let mut trend = BTreeMap::new();
     let (Some(a), Some(b)) = (
         levels.len().checked_sub(2).map(|i| &levels[i]),
         levels.last(),
@@ -629,11 +675,52 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
         return InN {
             converged: false,
             region: None,
-            trend,
+            trend: BTreeMap::new(),
             words: "one level: no verdict in N".into(),
         };
     };
+    let (trend, apart) = trends_and_gaps(dims, a, b);
+    let edges = edge_words(a, b);
+    let converged = apart.is_empty() && edges.is_empty();
+    let region = targets_met_overlap(dims, a, b);
+    let tail = format!(
+        "{}{}{}",
+        met_words(dims, a, b),
+        paper_warning(b),
+        region_words(region.as_ref())
+    );
+    let trend_words = trend_words(dims, &trend);
+    let words = if converged {
+        format!(
+            "CONVERGED IN N: the intervals at {} and {} particles overlap on every parameter ({trend_words}){tail}",
+            fmt_value(a.particles),
+            fmt_value(b.particles)
+        )
+    } else {
+        let mut why = apart;
+        why.extend(edges);
+        format!(
+            "NOT CONVERGED IN N: {}; {trend_words}{tail}",
+            why.join("; ")
+        )
+    };
+    InN {
+        converged,
+        region,
+        trend,
+        words,
+    }
+}
+
+/// Per searched key, the answer's change per decade of N from level `a` to `b`, and the keys
+/// whose intervals at the two levels are apart (or missing), in words.
+fn trends_and_gaps(
+    dims: &[Dim],
+    a: &LadderLevel,
+    b: &LadderLevel,
+) -> (BTreeMap<String, f64>, Vec<String>) {
     let decades = b.particles.log10() - a.particles.log10();
+    let mut trend = BTreeMap::new();
     let mut apart = Vec::new();
     for dim in dims {
         let (Some(&va), Some(&vb)) = (a.best.get(&dim.key), b.best.get(&dim.key)) else {
@@ -664,7 +751,12 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
             )),
         }
     }
-    let edges: Vec<String> = [a, b]
+    (trend, apart)
+}
+
+/// The sides each of the two levels' answers touches, in words.
+fn edge_words(a: &LadderLevel, b: &LadderLevel) -> Vec<String> {
+    [a, b]
         .iter()
         .filter(|l| !l.edges.is_empty())
         .map(|l| {
@@ -678,10 +770,13 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
                     .join(" and ")
             )
         })
-        .collect();
-    // How far along the valley each level's runs meet the targets (no model): read beside
-    // the intervals, which are each search's around its own minimum.
-    let met_words = dims
+        .collect()
+}
+
+/// How far along the valley each level's runs meet the targets (no model): read beside the
+/// intervals, which are each search's around its own minimum.
+fn met_words(dims: &[Dim], a: &LadderLevel, b: &LadderLevel) -> String {
+    let words = dims
         .iter()
         .filter_map(|dim| {
             let span = |l: &LadderLevel| {
@@ -702,15 +797,19 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
             ))
         })
         .collect::<Vec<_>>();
-    let met_words = if met_words.is_empty() {
+    if words.is_empty() {
         String::new()
     } else {
         format!(
             "; the points that meet every target span {}",
-            met_words.join(", ")
+            words.join(", ")
         )
-    };
-    let trend_words = trend
+    }
+}
+
+/// Each key's trend per decade of N, in words (decades for a log axis).
+fn trend_words(dims: &[Dim], trend: &BTreeMap<String, f64>) -> String {
+    trend
         .iter()
         .map(|(k, v)| {
             let log = dims.iter().any(|d| &d.key == k && d.log);
@@ -721,9 +820,12 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
             }
         })
         .collect::<Vec<_>>()
-        .join(", ");
-    // A known point that beats the answer at the last level: the search's box missed it.
-    let warning = if b.paper_objective < b.objective {
+        .join(", ")
+}
+
+/// A known point that beats the answer at the last level: the search's box missed it.
+fn paper_warning(b: &LadderLevel) -> String {
+    if b.paper_objective < b.objective {
         format!(
             "; at {} particles the paper's fit scores J = {:.4}, below the answer's {:.4}: the level's box may have missed a better valley",
             fmt_value(b.particles),
@@ -732,10 +834,12 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
         )
     } else {
         String::new()
-    };
-    let converged = apart.is_empty() && edges.is_empty();
-    let region = targets_met_overlap(dims, a, b);
-    let region_words = match &region {
+    }
+}
+
+/// The region to carry across resolutions, in words.
+fn region_words(region: Option<&BTreeMap<String, (f64, f64)>>) -> String {
+    match region {
         Some(r) => format!(
             ". The region to carry across resolutions: the points that meet every target at \
              both levels overlap in {}",
@@ -745,26 +849,6 @@ fn verdict(dims: &[Dim], levels: &[LadderLevel]) -> InN {
                 .join(", ")
         ),
         None => ". No region meets every target at both levels".into(),
-    };
-    let verdict = if converged {
-        format!(
-            "CONVERGED IN N: the intervals at {} and {} particles overlap on every parameter ({trend_words}){met_words}{warning}{region_words}",
-            fmt_value(a.particles),
-            fmt_value(b.particles)
-        )
-    } else {
-        let mut why = apart;
-        why.extend(edges);
-        format!(
-            "NOT CONVERGED IN N: {}; {trend_words}{met_words}{warning}{region_words}",
-            why.join("; ")
-        )
-    };
-    InN {
-        converged,
-        region,
-        trend,
-        words: verdict,
     }
 }
 
