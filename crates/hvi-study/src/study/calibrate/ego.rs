@@ -26,7 +26,7 @@ use std::collections::BTreeMap;
 use anyhow::{anyhow, Result};
 use hvi_analysis::observable::{Observable, Observables};
 use hvi_analysis::surrogate::{
-    self, seed_mean_noise, step, Observation, Prior, SearchBox, Surrogate,
+    self, seed_mean_noise, step, Observation, Prior, SearchBox, Step, Surrogate,
 };
 use hvi_run::store::{Job, Record, RunStatus};
 
@@ -140,10 +140,12 @@ pub(super) fn search(
 ) -> Result<EgoOutcome> {
     let space = SearchBox::new(problem.dims.iter().map(|d| (d.lo, d.hi)).collect())?;
     let seeds = seed_list(settings);
-    let mut runs = 0;
-    let mut batch = 0;
-    let started = std::time::Instant::now();
-    let (converged_now, termination, noise, noise_source) = loop {
+    let mut progress = Progress {
+        runs: 0,
+        batch: 0,
+        started: std::time::Instant::now(),
+    };
+    let (converged, termination, noise, noise_source) = loop {
         let obs = observations(problem, &evaluations);
         let (noise, noise_source) = noise_of(&evaluations, settings.noise_floor);
         if obs.len() < 2 {
@@ -153,61 +155,19 @@ pub(super) fn search(
             ));
         }
         let next = step(&space, &obs, noise, settings.batch, settings.prior.as_ref())?;
-        let ei = next.expected_improvement;
-        let own = match next.own_expected_improvement {
-            Some(own) => format!(
-                ", without the prior {own:.4}{}",
-                if next.converged {
-                    ""
-                } else {
-                    " (the batch is that model's)"
-                }
-            ),
-            None => String::new(),
-        };
         if problem.progress {
-            // What is left at most: the batches not yet run, at this search's wall time per
-            // run so far (the search can stop sooner).
-            let left = settings.max_batches.saturating_sub(batch) * settings.batch * seeds.len();
-            let bound = if runs > 0 && !next.converged {
-                let per_run = started.elapsed().as_secs_f64() / runs as f64;
-                format!(
-                    "; batch {} of at most {}, at most {left} runs (about {}) left",
-                    batch + 1,
-                    settings.max_batches,
-                    hvi_analysis::number::fmt_duration(per_run * left as f64)
-                )
-            } else {
-                String::new()
-            };
-            eprintln!(
-                "ego: {} points scored, noise {noise:.4}, largest expected improvement {ei:.4}{own}{bound}",
-                obs.len()
-            );
+            progress.report(settings, seeds.len(), &next, obs.len(), noise);
         }
-        if next.converged {
-            let why = match next.own_expected_improvement {
-                Some(own) => format!("the largest expected improvement left is below the noise of log10 J ({noise:.3e}) on the prior ({ei:.3e}) and without it ({own:.3e})"),
-                None => format!("the largest expected improvement left ({ei:.3e}) is below the noise of log10 J ({noise:.3e})"),
-            };
-            break (
-                true,
-                format!("the stopping rule held after {batch} batch(es): {why}"),
-                noise,
-                noise_source,
-            );
+        if let Some((converged, why)) = stop(settings, &next, progress.batch, noise) {
+            break (converged, why, noise, noise_source);
         }
-        let proposal = next.proposal;
-        let ei = proposal.max_expected_improvement;
-        if proposal.points.is_empty() {
-            break (false, format!("not converged: no candidate left after {batch} batch(es) (largest expected improvement {ei:.3e}, noise {noise:.3e})"), noise, noise_source);
-        }
-        if batch >= settings.max_batches {
-            break (false, format!("not converged: max_batches = {} reached; the largest expected improvement left ({ei:.3e}) is above the noise of log10 J ({noise:.3e}): raise calibrate.max_batches and run again (finished runs are reused)", settings.max_batches), noise, noise_source);
-        }
-        let points: Vec<BTreeMap<String, f64>> =
-            proposal.points.iter().map(|x| problem.values(x)).collect();
-        let label = EvalStage::Search(first_batch + batch);
+        let points: Vec<BTreeMap<String, f64>> = next
+            .proposal
+            .points
+            .iter()
+            .map(|x| problem.values(x))
+            .collect();
+        let label = EvalStage::Search(first_batch + progress.batch);
         let (evs, n) = run_points(problem, label, &points, &seeds)?;
         if problem.progress {
             for (e, _) in &evs {
@@ -215,8 +175,8 @@ pub(super) fn search(
             }
         }
         evaluations.extend(evs);
-        runs += n;
-        batch += 1;
+        progress.runs += n;
+        progress.batch += 1;
     };
     let obs = observations(problem, &evaluations);
     let model = Surrogate::fit_on(&space, &obs, noise, settings.prior.as_ref())?;
@@ -229,18 +189,84 @@ pub(super) fn search(
     let surface = coords(problem, &best.params).and_then(|at| surface(problem, &model, &at));
     Ok(EgoOutcome {
         evaluations,
-        batches: batch,
+        batches: progress.batch,
         best,
-        converged: converged_now,
+        converged,
         termination,
         noise,
         noise_source,
         region,
         spread,
         surface,
-        runs,
+        runs: progress.runs,
         prior_weight: model.prior_weight(),
     })
+}
+
+/// How far a search has come: its runs and batches, and when it started.
+struct Progress {
+    runs: usize,
+    batch: usize,
+    started: std::time::Instant,
+}
+
+impl Progress {
+    /// The batch's line on the console: points scored, noise, the largest expected
+    /// improvement (with and without the prior) and at most how much is left.
+    fn report(&self, settings: &EgoSettings, seeds: usize, next: &Step, scored: usize, noise: f64) {
+        let ei = next.expected_improvement;
+        let own = match next.own_expected_improvement {
+            Some(own) => format!(
+                ", without the prior {own:.4}{}",
+                if next.converged {
+                    ""
+                } else {
+                    " (the batch is that model's)"
+                }
+            ),
+            None => String::new(),
+        };
+        // What is left at most: the batches not yet run, at this search's wall time per run
+        // so far (the search can stop sooner).
+        let left = settings.max_batches.saturating_sub(self.batch) * settings.batch * seeds;
+        let bound = if self.runs > 0 && !next.converged {
+            let per_run = self.started.elapsed().as_secs_f64() / self.runs as f64;
+            format!(
+                "; batch {} of at most {}, at most {left} runs (about {}) left",
+                self.batch + 1,
+                settings.max_batches,
+                hvi_analysis::number::fmt_duration(per_run * left as f64)
+            )
+        } else {
+            String::new()
+        };
+        eprintln!(
+            "ego: {scored} points scored, noise {noise:.4}, largest expected improvement {ei:.4}{own}{bound}"
+        );
+    }
+}
+
+/// Whether the search stops before batch `batch`, and why: (converged, the reason in words).
+fn stop(settings: &EgoSettings, next: &Step, batch: usize, noise: f64) -> Option<(bool, String)> {
+    let ei = next.expected_improvement;
+    if next.converged {
+        let why = match next.own_expected_improvement {
+            Some(own) => format!("the largest expected improvement left is below the noise of log10 J ({noise:.3e}) on the prior ({ei:.3e}) and without it ({own:.3e})"),
+            None => format!("the largest expected improvement left ({ei:.3e}) is below the noise of log10 J ({noise:.3e})"),
+        };
+        return Some((
+            true,
+            format!("the stopping rule held after {batch} batch(es): {why}"),
+        ));
+    }
+    let ei = next.proposal.max_expected_improvement;
+    if next.proposal.points.is_empty() {
+        return Some((false, format!("not converged: no candidate left after {batch} batch(es) (largest expected improvement {ei:.3e}, noise {noise:.3e})")));
+    }
+    if batch >= settings.max_batches {
+        return Some((false, format!("not converged: max_batches = {} reached; the largest expected improvement left ({ei:.3e}) is above the noise of log10 J ({noise:.3e}): raise calibrate.max_batches and run again (finished runs are reused)", settings.max_batches)));
+    }
+    None
 }
 
 /// The model of a coarser calibration's scored points in this problem's coordinates, the
