@@ -17,7 +17,7 @@
 
 use hvi_analysis::observable::Observable;
 use std::io::IsTerminal;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -188,8 +188,6 @@ pub fn execute(
         .collect();
     let (phases, costs) = order_runs(jobs, &pending, &to_measure, opts);
     let total_cost: f64 = costs.values().sum();
-    // (cost run in this process, cost of the finished runs)
-    let done_cost = std::sync::Mutex::new((0.0f64, 0.0f64));
     let bar = progress_bar(opts, pending.len(), cached);
     let say = |line: String| {
         if opts.progress {
@@ -207,59 +205,20 @@ pub fn execute(
             &phases,
         ));
     }
-    let done = AtomicUsize::new(0);
-    let failed_now = AtomicUsize::new(0);
-    // After a store error (a full disk, an unwritable directory) no further run starts: it
-    // would fail the same way.
-    let store_failed = std::sync::atomic::AtomicBool::new(false);
-    // `None`: a run not started because an earlier run hit a store error.
-    let run_one = |i: usize, per_run: usize| -> Option<Result<Record>> {
-        // After Ctrl-C or SIGTERM no run starts, and a stopped run is no failure.
-        if let Err(e) = crate::interrupt::check() {
-            return Some(Err(e));
-        }
-        if store_failed.load(Ordering::Relaxed) {
-            return None;
-        }
-        let r = store.execute(&jobs[i], per_run);
-        if r.as_ref()
-            .err()
-            .and_then(|e| crate::interrupt::of(e))
-            .is_some()
-        {
-            return Some(r);
-        }
-        if r.is_err() {
-            store_failed.store(true, Ordering::Relaxed);
-        }
-        if !matches!(&r, Ok(rec) if rec.status == RunStatus::Completed) {
-            failed_now.fetch_add(1, Ordering::Relaxed);
-        }
-        // One finished run at a time: its count, the work done and its line together, so the
-        // lines come out in the order of their counts when two runs end at once.
-        {
-            let mut c = done_cost.lock().unwrap_or_else(|p| p.into_inner());
-            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-            // A run resumed from a checkpoint ran only its rest in this process's time.
-            let cost = costs.get(&i).copied().unwrap_or(0.0);
-            c.0 += cost * (1.0 - store.resumed_share(&jobs[i].fingerprint));
-            c.1 += cost;
-            let eta = time_left(
-                t0.elapsed().as_secs_f64(),
-                (n, pending.len()),
-                (c.0, c.1, total_cost),
-            );
-            say(finished_line(n, pending.len(), i, &r, describe) + &eta);
-        }
-        if let Some(b) = &bar {
-            b.inc(1);
-            b.set_message(format!(
-                "cached {cached}, failed {}",
-                failed_now.load(Ordering::Relaxed)
-            ));
-        }
-        Some(r)
+    let tally = Tally {
+        store,
+        jobs,
+        t0,
+        pending: pending.len(),
+        cached,
+        costs: &costs,
+        total_cost,
+        done: AtomicUsize::new(0),
+        failed_now: AtomicUsize::new(0),
+        store_failed: AtomicBool::new(false),
+        done_cost: std::sync::Mutex::new((0.0, 0.0)),
     };
+    let run_one = |i: usize, per_run: usize| tally.run(i, per_run, describe, &say, bar.as_ref());
     let results = run_phases(&phases, &run_one);
     if let Some(b) = &bar {
         b.finish_and_clear();
@@ -284,6 +243,97 @@ pub fn execute(
         failed,
         wall_seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// The runs of one [`execute`] as they finish: their count, the failures, the work done (for
+/// the time left) and each one's line.
+struct Tally<'a> {
+    store: &'a Store,
+    jobs: &'a [Job],
+    t0: Instant,
+    /// Runs to do in all.
+    pending: usize,
+    /// Runs found in the store.
+    cached: usize,
+    /// Each pending run's estimated cost.
+    costs: &'a std::collections::HashMap<usize, f64>,
+    total_cost: f64,
+    done: AtomicUsize,
+    failed_now: AtomicUsize,
+    /// After a store error (a full disk, an unwritable directory) no further run starts: it
+    /// would fail the same way.
+    store_failed: AtomicBool,
+    /// (cost run in this process, cost of the finished runs)
+    done_cost: std::sync::Mutex<(f64, f64)>,
+}
+
+impl Tally<'_> {
+    /// Runs job `i` on `per_run` threads and counts it. `None`: not started, because an
+    /// earlier run hit a store error.
+    fn run(
+        &self,
+        i: usize,
+        per_run: usize,
+        describe: &(dyn Fn(usize) -> String + Sync),
+        say: &(dyn Fn(String) + Sync),
+        bar: Option<&ProgressBar>,
+    ) -> Option<Result<Record>> {
+        // After Ctrl-C or SIGTERM no run starts, and a stopped run is no failure.
+        if let Err(e) = crate::interrupt::check() {
+            return Some(Err(e));
+        }
+        if self.store_failed.load(Ordering::Relaxed) {
+            return None;
+        }
+        let r = self.store.execute(&self.jobs[i], per_run);
+        if r.as_ref()
+            .err()
+            .and_then(|e| crate::interrupt::of(e))
+            .is_some()
+        {
+            return Some(r);
+        }
+        if r.is_err() {
+            self.store_failed.store(true, Ordering::Relaxed);
+        }
+        if !matches!(&r, Ok(rec) if rec.status == RunStatus::Completed) {
+            self.failed_now.fetch_add(1, Ordering::Relaxed);
+        }
+        self.finished(i, &r, describe, say);
+        if let Some(b) = bar {
+            b.inc(1);
+            b.set_message(format!(
+                "cached {}, failed {}",
+                self.cached,
+                self.failed_now.load(Ordering::Relaxed)
+            ));
+        }
+        Some(r)
+    }
+
+    /// Counts a finished run and says its line. One finished run at a time: its count, the
+    /// work done and its line together (under one lock), so the lines come out in the order
+    /// of their counts when two runs end at once.
+    fn finished(
+        &self,
+        i: usize,
+        r: &Result<Record>,
+        describe: &(dyn Fn(usize) -> String + Sync),
+        say: &(dyn Fn(String) + Sync),
+    ) {
+        let mut c = self.done_cost.lock().unwrap_or_else(|p| p.into_inner());
+        let n = self.done.fetch_add(1, Ordering::Relaxed) + 1;
+        // A run resumed from a checkpoint ran only its rest in this process's time.
+        let cost = self.costs.get(&i).copied().unwrap_or(0.0);
+        c.0 += cost * (1.0 - self.store.resumed_share(&self.jobs[i].fingerprint));
+        c.1 += cost;
+        let eta = time_left(
+            self.t0.elapsed().as_secs_f64(),
+            (n, self.pending),
+            (c.0, c.1, self.total_cost),
+        );
+        say(finished_line(n, self.pending, i, r, describe) + &eta);
+    }
 }
 
 /// Each job's completed record from the store (None where there is none), and the jobs to

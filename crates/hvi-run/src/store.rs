@@ -709,6 +709,34 @@ impl Store {
                 run_scene(&job.scene, &opts).map(|o| (o.resumed_from_step, o.sim.derived.steps))
             })
         }));
+        let error = self.error_of(job, &tmp, outcome)?;
+        // Only a running run has progress to show.
+        let _ = fs::remove_file(tmp.join(crate::run::PROGRESS_FILE));
+        let summary = read_summary(&tmp);
+        let observables = summary
+            .as_ref()
+            .map(Summary::observables)
+            .unwrap_or_default();
+        let record = Record::of(
+            job,
+            error,
+            observables,
+            t0.elapsed().as_secs_f64(),
+            threads.max(1),
+        );
+        self.seal_and_install(record, &tmp)
+    }
+
+    /// What a run's outcome leaves in its record: None when it completed, else its error or
+    /// panic in words. A run resumed from its checkpoint is noted; a panic's checkpoint is
+    /// removed (it may hold the cause); a run stopped by a signal keeps nothing and returns the
+    /// stop as the error.
+    fn error_of(
+        &self,
+        job: &Job,
+        tmp: &Path,
+        outcome: std::thread::Result<Result<(Option<u64>, u64)>>,
+    ) -> Result<Option<String>> {
         if let Ok(Ok((Some(step), steps))) = &outcome {
             log::info!(
                 "run store: run {} resumed from its checkpoint at base step {step}",
@@ -729,11 +757,11 @@ impl Store {
             if let Some(stop) = crate::interrupt::of(e) {
                 // Stopped by a signal: nothing of it is kept, and it is not a failure (the
                 // study runs it again when resumed).
-                let _ = fs::remove_dir_all(&tmp);
+                let _ = fs::remove_dir_all(tmp);
                 return Err(stop.into());
             }
         }
-        let error = match outcome {
+        Ok(match outcome {
             Ok(Ok(_)) => None,
             // The run wrote into the temporary directory; its message names the final one.
             Ok(Err(e)) => Some(format!("{e:#}").replace(
@@ -748,22 +776,7 @@ impl Store {
                     .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
                     .unwrap_or_else(|| "(no message)".into())
             )),
-        };
-        // Only a running run has progress to show.
-        let _ = fs::remove_file(tmp.join(crate::run::PROGRESS_FILE));
-        let summary = read_summary(&tmp);
-        let observables = summary
-            .as_ref()
-            .map(Summary::observables)
-            .unwrap_or_default();
-        let record = Record::of(
-            job,
-            error,
-            observables,
-            t0.elapsed().as_secs_f64(),
-            threads.max(1),
-        );
-        self.seal_and_install(record, &tmp)
+        })
     }
 
     /// Measures `job` from the kept state of `source` ([`crate::remeasured`]) in the temporary
