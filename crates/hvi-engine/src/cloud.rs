@@ -625,6 +625,19 @@ fn cloud_fragments(
     (fragments, crossing)
 }
 
+/// One particle's diameter, m: the smallest particle volume present (the finer body), as the
+/// mass of plate material that fills it (0 without particles).
+fn particle_diameter_m(p: &Particles, reference: &CloudReference) -> f64 {
+    let particle_mass = (0..p.len())
+        .map(|i| reference.plate_equivalent_kg(p.body[i], p.mass[i]))
+        .fold(f64::INFINITY, f64::min);
+    if particle_mass.is_finite() {
+        equivalent_diameter_m(particle_mass, reference.density_kg_m3)
+    } else {
+        0.0
+    }
+}
+
 /// Measures the cloud marked in `members` (see the module's definitions). Sums run in id order.
 pub fn measure(
     p: &Particles,
@@ -657,11 +670,6 @@ pub fn measure(
             .sum::<f64>()
             / mass_kg
     });
-    // One particle's diameter: the smallest particle volume present (the finer body), as the
-    // mass of plate material that fills it.
-    let particle_mass = (0..p.len())
-        .map(|i| reference.plate_equivalent_kg(p.body[i], p.mass[i]))
-        .fold(f64::INFINITY, f64::min);
     let per_impactor = |m: f64| {
         if reference.impactor_mass_kg > 0.0 {
             m / reference.impactor_mass_kg
@@ -698,11 +706,7 @@ pub fn measure(
         largest_fragment_diameter_m: largest.map(|f| f.diameter_m),
         largest_fragment_particles: largest.map_or(0, |f| f.particles),
         mean_fragment_diameter_m,
-        particle_diameter_m: if particle_mass.is_finite() {
-            equivalent_diameter_m(particle_mass, reference.density_kg_m3)
-        } else {
-            0.0
-        },
+        particle_diameter_m: particle_diameter_m(p, reference),
         fragments_crossing_rear_face,
     };
     CloudAnalysis {

