@@ -290,7 +290,16 @@ pub fn status(args: &StatusOptions) -> Result<()> {
             }
         }
     }
-    let q = &survey.queue;
+    slurm_lines(&mut s, &survey.queue);
+    if args.verbose {
+        run_lines(&mut s, &plan, &survey);
+    }
+    print!("{s}");
+    Ok(())
+}
+
+/// The Slurm jobs of a study, a line each, and the queue's note.
+fn slurm_lines(s: &mut String, q: &QueueView) {
     for sub in &q.submissions {
         let mut n = (0, 0, 0);
         for r in &sub.runs {
@@ -318,33 +327,33 @@ pub fn status(args: &StatusOptions) -> Result<()> {
             "note: {note}; running runs are those in progress in the store"
         );
     }
-    if args.verbose {
-        for (run, (rec, state)) in plan.runs.iter().zip(&survey.runs) {
-            let detail = match state {
-                RunState::Done => rec
-                    .as_ref()
-                    .map(|r| format!("{:.1} s", r.wall_seconds))
-                    .unwrap_or_default(),
-                RunState::Failed(e) => e.clone(),
-                RunState::Running(w) => w.clone(),
-                RunState::Pending { queued, note } => queued
-                    .clone()
-                    .or_else(|| note.clone())
-                    .unwrap_or_else(|| "not started".into()),
-            };
-            let _ = writeln!(
-                s,
-                "{:>5}  {:<8} {}  {}  {}",
-                run.index,
-                state.word(),
-                run.dir,
-                describe_values(&plan.axes, &run.values),
-                detail
-            );
-        }
+}
+
+/// One line per run of the plan: index, state, directory, values and the state's detail.
+fn run_lines(s: &mut String, plan: &Plan, survey: &Survey) {
+    for (run, (rec, state)) in plan.runs.iter().zip(&survey.runs) {
+        let detail = match state {
+            RunState::Done => rec
+                .as_ref()
+                .map(|r| format!("{:.1} s", r.wall_seconds))
+                .unwrap_or_default(),
+            RunState::Failed(e) => e.clone(),
+            RunState::Running(w) => w.clone(),
+            RunState::Pending { queued, note } => queued
+                .clone()
+                .or_else(|| note.clone())
+                .unwrap_or_else(|| "not started".into()),
+        };
+        let _ = writeln!(
+            s,
+            "{:>5}  {:<8} {}  {}  {}",
+            run.index,
+            state.word(),
+            run.dir,
+            describe_values(&plan.axes, &run.values),
+            detail
+        );
     }
-    print!("{s}");
-    Ok(())
 }
 
 /// A stand-in record for a run without a result, so the figures draw a gap there.
