@@ -169,24 +169,9 @@ pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
         } else if let Some(r) = &record {
             RunState::Failed(r.error.clone().unwrap_or_default())
         } else {
-            let checkpoint = hvi_run::checkpoint::header_of(
-                &store.checkpoint_path(&run.fingerprint),
-            )
-            .map(|(_, step)| {
-                format!("stopped mid-way; resumes from its checkpoint at base step {step}")
-            });
-            let ended = queue.ended_task(&run.fingerprint).map(|(job, task, log)| {
-                format!(
-                    "Slurm job {job} task {task} ended without a result: see {}",
-                    log.display()
-                )
-            });
             RunState::Pending {
                 queued: None,
-                note: match (ended, checkpoint) {
-                    (Some(e), Some(c)) => Some(format!("{e}; {c}")),
-                    (e, c) => e.or(c),
-                },
+                note: pending_note(&store, &queue, &run.fingerprint),
             }
         };
         runs.push((record, state));
@@ -197,6 +182,25 @@ pub fn survey(plan: &Plan, dir: &Path) -> Result<Survey> {
         beyond_plan,
         running_beyond,
     })
+}
+
+/// Why a run that is neither done, failed, running nor queued has not finished, if known: a
+/// Slurm task that ended without a result, a checkpoint it resumes from.
+fn pending_note(store: &Store, queue: &QueueView, fingerprint: &str) -> Option<String> {
+    let checkpoint =
+        hvi_run::checkpoint::header_of(&store.checkpoint_path(fingerprint)).map(|(_, step)| {
+            format!("stopped mid-way; resumes from its checkpoint at base step {step}")
+        });
+    let ended = queue.ended_task(fingerprint).map(|(job, task, log)| {
+        format!(
+            "Slurm job {job} task {task} ended without a result: see {}",
+            log.display()
+        )
+    });
+    match (ended, checkpoint) {
+        (Some(e), Some(c)) => Some(format!("{e}; {c}")),
+        (e, c) => e.or(c),
+    }
 }
 
 /// A run in progress in the store: where, and how far (from its progress file).
