@@ -91,10 +91,15 @@ struct PointRuns {
 
 /// The seeds a point runs at (`None`: the scene's own).
 pub(super) fn seed_list(settings: &EgoSettings) -> Vec<Option<u64>> {
-    if settings.seeds.is_empty() {
+    seeds_of(&settings.seeds)
+}
+
+/// Each point's run seeds: `seeds`, or the scene's own seed (None) when empty.
+pub(super) fn seeds_of(seeds: &[u64]) -> Vec<Option<u64>> {
+    if seeds.is_empty() {
         vec![None]
     } else {
-        settings.seeds.iter().copied().map(Some).collect()
+        seeds.iter().copied().map(Some).collect()
     }
 }
 

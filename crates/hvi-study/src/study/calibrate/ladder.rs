@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 use super::config::{CalibrateConfig, Method};
 use super::problem::{fixed_overrides, refined_axes, Dim, Stage, PAPER_BEST};
 use super::result::EvalStage;
-use super::result::{fmt_bounds, fmt_value, CalibrationResult, Edge, TargetsMet};
+use super::result::{fmt_bounds, fmt_value, CalibrationResult, Edge, Evaluation, TargetsMet};
 use super::shots::plans_of;
 use super::{calibrate_plan, ego, runner_of, CalibrateOptions, Coarse};
 use crate::study::document::Document;
@@ -481,19 +481,7 @@ fn steer(
                 }
             }
         }
-        let w = hi - lo;
-        let pad = (0.25 * w).max(0.5 * (min_width(study, dim) - w)).max(0.0);
-        let (lo, hi) = (lo - pad, hi + pad);
-        let m = cfg.ladder_values;
-        let mut values: Vec<f64> = (0..m)
-            .map(|i| {
-                round_sig(
-                    from_coord(dim, lo + (hi - lo) * i as f64 / (m - 1) as f64),
-                    3,
-                )
-            })
-            .collect();
-        values.dedup();
+        let values = padded_values(study, cfg, dim, (lo, hi));
         let axis: &mut Axis = out
             .axes
             .iter_mut()
@@ -515,6 +503,31 @@ fn steer(
         why.push_str(&format!(", no trend on {}", unmoved.join(", ")));
     }
     Ok((out, why))
+}
+
+/// `calibrate.ladder_values` values over the span (lo, hi) of `dim`'s coordinate, padded by a
+/// quarter of its width each side and to at least the axis's smallest width, at 3 significant
+/// digits.
+fn padded_values(
+    study: &Study,
+    cfg: &CalibrateConfig,
+    dim: &Dim,
+    (lo, hi): (f64, f64),
+) -> Vec<f64> {
+    let w = hi - lo;
+    let pad = (0.25 * w).max(0.5 * (min_width(study, dim) - w)).max(0.0);
+    let (lo, hi) = (lo - pad, hi + pad);
+    let m = cfg.ladder_values;
+    let mut values: Vec<f64> = (0..m)
+        .map(|i| {
+            round_sig(
+                from_coord(dim, lo + (hi - lo) * i as f64 / (m - 1) as f64),
+                3,
+            )
+        })
+        .collect();
+    values.dedup();
+    values
 }
 
 /// Runs in a study directory's store and their cost (wall time times threads, summed).
@@ -589,11 +602,7 @@ fn check_run(
     let first = plan.run(0)?;
     let fixed = fixed_overrides(&plans, &first.values, |k| params.contains_key(k))?;
     let problem = stage.problem(fixed, Vec::new());
-    let seeds: Vec<Option<u64>> = if cfg.seeds.is_empty() {
-        vec![None]
-    } else {
-        cfg.seeds.iter().copied().map(Some).collect()
-    };
+    let seeds = ego::seeds_of(&cfg.seeds);
     let (mut evs, _) = ego::run_points(
         &problem,
         EvalStage::Check,
@@ -603,9 +612,26 @@ fn check_run(
     let (ev, _) = evs
         .pop()
         .ok_or_else(|| anyhow!("the check has no evaluation"))?;
-    let level_terms = last.best.score.as_ref().map(|s| &s.terms);
-    let observed = ev
-        .score
+    let (runs, core) = store_cost(&out)?;
+    Ok(LadderCheck {
+        particles: n,
+        dir,
+        params,
+        objective: ev.objective,
+        observed: observed_beside(&ev, &last.best),
+        runs,
+        run_core_seconds: core,
+    })
+}
+
+/// Each target's observed value in the check `ev` beside the level's answer `best`'s:
+/// name -> (at the check, at the level).
+fn observed_beside(
+    ev: &Evaluation,
+    best: &Evaluation,
+) -> BTreeMap<String, (Option<f64>, Option<f64>)> {
+    let level_terms = best.score.as_ref().map(|s| &s.terms);
+    ev.score
         .as_ref()
         .map(|s| {
             s.terms
@@ -618,17 +644,7 @@ fn check_run(
                 })
                 .collect()
         })
-        .unwrap_or_default();
-    let (runs, core) = store_cost(&out)?;
-    Ok(LadderCheck {
-        particles: n,
-        dir,
-        params,
-        objective: ev.objective,
-        observed,
-        runs,
-        run_core_seconds: core,
-    })
+        .unwrap_or_default()
 }
 
 /// The verdict in N ([`verdict`]).
@@ -865,8 +881,36 @@ fn report(r: &LadderResult, dims: &[Dim]) -> Document {
         verdict: r.verdict.clone(),
         sections: Vec::new(),
     };
-    let rows = r
-        .levels
+    levels_section(&mut doc, &r.levels);
+    if let Some(c) = &r.check {
+        check_section(&mut doc, c);
+    }
+    let trend = doc.section("Trend between the last two levels");
+    for (k, v) in &r.trend_per_decade {
+        let log = dims.iter().any(|d| &d.key == k && d.log);
+        trend.fact(
+            format!("trend of {k}"),
+            format!(
+                "{v:+.3} {} per decade of N",
+                if log { "decades" } else { "(its unit)" }
+            ),
+        );
+    }
+    doc.section("Cost")
+        .fact(
+            "runs",
+            format!(
+                "{} in all ({:.0} core-seconds of simulation); this invocation took {:.0} s",
+                r.runs, r.run_core_seconds, r.wall_seconds
+            ),
+        )
+        .note("Each level's calibration.md is in its directory (`n<N>/`).");
+    doc
+}
+
+/// The report's table of levels.
+fn levels_section(doc: &mut Document, levels: &[LadderLevel]) {
+    let rows = levels
         .iter()
         .map(|l| {
             vec![
@@ -908,54 +952,35 @@ fn report(r: &LadderResult, dims: &[Dim]) -> Document {
         ],
         rows,
     );
-    if let Some(c) = &r.check {
-        let f = |v: &Option<f64>| v.map_or("n/a".to_string(), |x| format!("{x:.4}"));
-        let rows = c
-            .observed
-            .iter()
-            .map(|(name, (at_check, at_level))| vec![name.clone(), f(at_check), f(at_level)])
-            .collect();
-        let params: Vec<String> = c
-            .params
-            .iter()
-            .map(|(k, v)| format!("{k} = {}", fmt_value(*v)))
-            .collect();
-        doc.section(format!("Check at {} particles", fmt_value(c.particles)))
-            .fact(
-                "check",
-                format!(
-                    "the last level's answer ({}) run at {} particles at the same seeds: J = {:.4}",
-                    params.join(", "),
-                    fmt_value(c.particles),
-                    c.objective
-                ),
-            )
-            .table(
-                &["target", "observed at the check", "at the last level"],
-                rows,
-            );
-    }
-    let trend = doc.section("Trend between the last two levels");
-    for (k, v) in &r.trend_per_decade {
-        let log = dims.iter().any(|d| &d.key == k && d.log);
-        trend.fact(
-            format!("trend of {k}"),
-            format!(
-                "{v:+.3} {} per decade of N",
-                if log { "decades" } else { "(its unit)" }
-            ),
-        );
-    }
-    doc.section("Cost")
+}
+
+/// The check at more particles: the answer's J and each target beside the last level's.
+fn check_section(doc: &mut Document, c: &LadderCheck) {
+    let f = |v: &Option<f64>| v.map_or("n/a".to_string(), |x| format!("{x:.4}"));
+    let rows = c
+        .observed
+        .iter()
+        .map(|(name, (at_check, at_level))| vec![name.clone(), f(at_check), f(at_level)])
+        .collect();
+    let params: Vec<String> = c
+        .params
+        .iter()
+        .map(|(k, v)| format!("{k} = {}", fmt_value(*v)))
+        .collect();
+    doc.section(format!("Check at {} particles", fmt_value(c.particles)))
         .fact(
-            "runs",
+            "check",
             format!(
-                "{} in all ({:.0} core-seconds of simulation); this invocation took {:.0} s",
-                r.runs, r.run_core_seconds, r.wall_seconds
+                "the last level's answer ({}) run at {} particles at the same seeds: J = {:.4}",
+                params.join(", "),
+                fmt_value(c.particles),
+                c.objective
             ),
         )
-        .note("Each level's calibration.md is in its directory (`n<N>/`).");
-    doc
+        .table(
+            &["target", "observed at the check", "at the last level"],
+            rows,
+        );
 }
 
 /// A level's answer: `material.eps_j = 0.016 [0.01, 0.03], ...`.

@@ -166,11 +166,7 @@ pub(super) fn predict_held_out(
         progress: stage.progress,
     };
     let problem = own.problem(fixed, Vec::new());
-    let seeds: Vec<Option<u64>> = if best.seeds.is_empty() {
-        vec![None]
-    } else {
-        best.seeds.iter().copied().map(Some).collect()
-    };
+    let seeds = super::ego::seeds_of(&best.seeds);
     if stage.progress {
         eprintln!(
             "held out: shot {} at the calibrated point ({})",
