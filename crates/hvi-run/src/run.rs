@@ -831,11 +831,15 @@ impl Gathered {
             checkpoint::remove(&path)?;
             Ok(false)
         };
-        // What killed processes left half-written beside the checkpoint.
+        // What killed processes left half-written beside the checkpoint, and the run's own
+        // files (dumps, pictures, tables, the continuation): gone whether the run resumes or
+        // starts over.
         if let Some(parent) = path.parent() {
             let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
             crate::files::remove_stale_partials(parent, name.as_deref())?;
         }
+        crate::files::remove_stale_partials(&opts.out_dir, None)?;
+        crate::files::remove_stale_partials(&opts.out_dir.join(crate::output::VTK_DIR), None)?;
         let (step, saved) = match checkpoint::read::<Saved>(&path, &c.key)? {
             Found::Nothing => return Ok(false),
             Found::OtherRun => {
@@ -940,9 +944,6 @@ impl Gathered {
         if let Err(e) = sim.restore_state(saved.sim) {
             return Ok(Some(e.to_string()));
         }
-        // The run's own files that a kill left half-written (dumps, pictures, tables).
-        crate::files::remove_stale_partials(&opts.out_dir, None)?;
-        crate::files::remove_stale_partials(&opts.out_dir.join(crate::output::VTK_DIR), None)?;
         if let Some(c) = self.checkpoint.as_mut() {
             if let Every::Steps(k) = c.opts.every {
                 c.next_step = next_multiple(step, k);
