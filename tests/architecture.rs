@@ -14,7 +14,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-mod common;
+use crate::common;
 use common::repo;
 
 /// A module path (segments below the crate root) and the file that holds it.
@@ -236,7 +236,9 @@ fn no_module_imports_one_that_imports_it_back() {
         );
         checked += 1;
     }
-    assert_eq!(checked, 5, "the workspace's five crates");
+    let crates = library_crates().len() + 1;
+    assert!(crates >= 9, "only {crates} crates found");
+    assert_eq!(checked, crates, "every crate of the workspace");
 }
 
 /// The workflows (study, reproduce, fidelity, accuracy) take plain option structs, so that a
@@ -386,13 +388,19 @@ fn no_source_or_doc_cites_a_path_outside_the_repository() {
     assert!(outside_citations("see docs/model.md section 5").is_empty());
 }
 
-/// The library crates: they report through the `log` facade, and the binary prints.
-const LIBRARY_SOURCES: [&str; 4] = [
-    "crates/hvi-engine/src",
-    "crates/hvi-analysis/src",
-    "crates/hvi-plot/src",
-    "crates/hvi-run/src",
-];
+/// The command's crate: the only one that prints and the only one that uses `anyhow`.
+const COMMAND_CRATE: &str = "hvi-study";
+
+/// Every library crate's directory (every crate of `crates/` but the command's).
+fn library_crates() -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = std::fs::read_dir(repo().join("crates"))
+        .expect("crates/")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.join("Cargo.toml").is_file() && !p.ends_with(COMMAND_CRATE))
+        .collect();
+    out.sort();
+    out
+}
 
 /// The lines of `text` outside its `#[cfg(test)]` module that print to the terminal, as (line
 /// number, line). Comments do not count.
@@ -428,8 +436,8 @@ fn prints(text: &str) -> Vec<(usize, String)> {
 fn library_crates_never_print() {
     let root = repo();
     let mut files = Vec::new();
-    for dir in LIBRARY_SOURCES {
-        sources_under(&root.join(dir), &mut files);
+    for dir in library_crates() {
+        sources_under(&dir.join("src"), &mut files);
     }
     files.retain(|p| p.extension().is_some_and(|e| e == "rs"));
     let found = matching_lines(&root, &files, prints);
@@ -487,14 +495,16 @@ fn architecture_md_names_every_module() {
     let text = std::fs::read_to_string(root.join("ARCHITECTURE.md")).expect("ARCHITECTURE.md");
     let mut missing = Vec::new();
     let mut count = 0;
-    for krate in [
-        "hvi-engine",
-        "hvi-analysis",
-        "hvi-plot",
-        "hvi-run",
-        "hvi-study",
-    ] {
-        for m in module_paths(&root.join("crates").join(krate).join("src")) {
+    let crates = library_crates()
+        .into_iter()
+        .chain([root.join("crates").join(COMMAND_CRATE)]);
+    for dir in crates {
+        let krate = dir
+            .file_name()
+            .expect("a crate's name")
+            .to_string_lossy()
+            .into_owned();
+        for m in module_paths(&dir.join("src")) {
             count += 1;
             // Named as `a::b::c`, or as `c` inside its parent's row (`sim::band`,
             // `stages::shared`, `render::side`).
@@ -516,4 +526,51 @@ fn architecture_md_names_every_module() {
         "ARCHITECTURE.md does not name these modules:\n{}",
         missing.join("\n")
     );
+}
+
+/// The `[dependencies]` table of a crate's manifest, as the names it lists.
+fn dependencies(manifest: &str) -> Vec<String> {
+    let mut names = Vec::new();
+    let mut inside = false;
+    for line in manifest.lines() {
+        let line = line.trim();
+        if line.starts_with('[') {
+            inside = line == "[dependencies]";
+        } else if inside && !line.is_empty() && !line.starts_with('#') {
+            if let Some((name, _)) = line.split_once(['=', '.']) {
+                names.push(name.trim().to_string());
+            }
+        }
+    }
+    names
+}
+
+#[test]
+fn library_crates_return_typed_errors_and_only_the_command_uses_anyhow_clap_and_bars() {
+    let crates = library_crates();
+    assert!(
+        crates.len() >= 8,
+        "only {} library crates found",
+        crates.len()
+    );
+    let mut found = Vec::new();
+    for dir in &crates {
+        let manifest = std::fs::read_to_string(dir.join("Cargo.toml")).expect("manifest");
+        let deps = dependencies(&manifest);
+        for only_the_command in ["anyhow", "clap", "indicatif"] {
+            if deps.iter().any(|d| d == only_the_command) {
+                found.push(format!("{}: depends on {only_the_command}", dir.display()));
+            }
+        }
+        if !deps.iter().any(|d| d == "thiserror" || d == "hvi-run") {
+            found.push(format!(
+                "{}: neither defines a typed error (thiserror) nor returns hvi-run's",
+                dir.display()
+            ));
+        }
+    }
+    assert!(found.is_empty(), "{}", found.join("\n"));
+    // The reader finds what it is for.
+    let sample = "[package]\nname = \"x\"\n[dependencies]\nanyhow.workspace = true\nserde = \"1\"\n[dev-dependencies]\nproptest = \"1\"\n";
+    assert_eq!(dependencies(sample), ["anyhow", "serde"]);
 }

@@ -9,7 +9,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-mod common;
+use crate::common;
 use common::{bin, repo};
 
 /// A run of the default scene at 2000 particles through 6 us, with pictures (frames captured at

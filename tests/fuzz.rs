@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use hvi_run::scene_file::parse_scene;
-use hvi_run::spec::Study;
+use hvi_store::spec::Study;
 use proptest::prelude::*;
 
 fn repo() -> std::path::PathBuf {

@@ -9,7 +9,7 @@
 use std::path::Path;
 use std::process::Command;
 
-mod common;
+use crate::common;
 use common::{bin, repo, scratch};
 
 fn summary(out: &Path) -> serde_json::Value {

@@ -22,10 +22,10 @@ use hvi_engine::scene::{Analysis, SceneSpec, Width, DEFAULT_QUANTILE};
 use hvi_engine::sim::Simulation;
 use hvi_run::run::{run_scene, RunOptions, Summary};
 use hvi_run::state::{file_bytes, STATE_FILE};
-use hvi_run::store::read_summary;
-use hvi_study::study::reanalyse::{reanalyse_run, AnalysisChanges};
+use hvi_store::store::read_summary;
+use hvi_studies::reanalyse::{reanalyse_run, AnalysisChanges};
 
-mod common;
+use crate::common;
 use common::{bin, repo};
 
 fn scratch(name: &str) -> PathBuf {
@@ -447,8 +447,8 @@ fn sweep_with(study: &Path, out: &Path, sets: &[&str]) -> Output {
 }
 
 /// The records of a study's store, by run directory.
-fn store_records(out: &Path) -> Vec<(PathBuf, hvi_run::store::Record)> {
-    let mut v: Vec<(PathBuf, hvi_run::store::Record)> = std::fs::read_dir(out.join("runs"))
+fn store_records(out: &Path) -> Vec<(PathBuf, hvi_store::store::Record)> {
+    let mut v: Vec<(PathBuf, hvi_store::store::Record)> = std::fs::read_dir(out.join("runs"))
         .expect("runs")
         .map(|e| e.expect("entry").path())
         .filter(|p| p.join("record.json").is_file())

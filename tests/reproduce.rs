@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-mod common;
+use crate::common;
 use common::{bin, repo};
 
 fn scratch(name: &str) -> PathBuf {

@@ -1,11 +1,11 @@
 //! Geometric sizing (Fig. 4): colliding plates give the same energy curves at any particle
 //! count with sizing, and not without. Uses the reproduction's scene and deciding numbers
-//! (`hvi_study::reproduce::sizing`, `hvi_analysis::decide`), so it lives at the workspace level;
+//! (`hvi_reproduce::sizing`, `hvi_analysis::decide`), so it lives at the workspace level;
 //! the engine's own physics tests are in `crates/hvi-engine/tests/physics.rs`.
 
 use hvi_analysis::decide::{curve_deviation, EnergySample};
 use hvi_engine::sim::Simulation;
-use hvi_study::reproduce::sizing;
+use hvi_reproduce::sizing;
 
 /// Kinetic and potential (contact + bond) energy against time since contact, stepping the
 /// engine directly on the scene `hvi-study reproduce` uses for Fig. 4.

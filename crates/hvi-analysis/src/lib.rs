@@ -8,6 +8,7 @@
 
 pub mod contour;
 pub mod decide;
+pub mod error;
 pub mod number;
 pub mod observable;
 pub mod onset;

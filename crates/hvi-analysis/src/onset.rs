@@ -16,7 +16,7 @@
 //! assert_eq!(p.onset_m_s(0.4), 2600.0);
 //! ```
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, AnalysisError, Result};
 use serde::{Deserialize, Serialize};
 
 /// The shipped relations file, `experiments_data/fragmentation-onset.toml`.
@@ -140,14 +140,14 @@ pub struct Relations {
 impl Relations {
     /// Parses and checks a relations file's text (`what` names it in errors).
     pub fn parse(text: &str, what: &str) -> Result<Relations> {
-        let r: Relations =
-            toml::from_str(text).with_context(|| format!("onset relations {what}"))?;
+        let r: Relations = toml::from_str(text)
+            .map_err(|e| AnalysisError::context(format!("onset relations {what}"), e))?;
         if r.relations.is_empty() {
             bail!("onset relations {what}: no [[relations]]");
         }
         for (i, a) in r.relations.iter().enumerate() {
             a.check()
-                .with_context(|| format!("onset relations {what}"))?;
+                .map_err(|e| AnalysisError::context(format!("onset relations {what}"), e))?;
             if r.relations[..i].iter().any(|b| b.id == a.id) {
                 bail!("onset relations {what}: id `{}` twice", a.id);
             }

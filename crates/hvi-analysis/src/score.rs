@@ -30,7 +30,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, bail, Context, Result};
+use crate::error::{bail, AnalysisError, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::observable::Observable;
@@ -104,13 +104,17 @@ pub struct Targets {
 impl Targets {
     /// Parses target TOML, checking kinds, tolerances, weights and observable names.
     pub fn parse(text: &str, path: &Path) -> Result<Targets> {
-        let doc: toml::Value = toml::from_str(text).context("target file is not valid TOML")?;
+        let doc: toml::Value = toml::from_str(text)
+            .map_err(|e| AnalysisError::context("target file is not valid TOML", e))?;
         let mut t: Targets = serde_path_to_error::deserialize(doc).map_err(|e| {
             let p = e.path().to_string();
-            anyhow!("target file key `{p}`: {}", e.into_inner().message().trim())
+            AnalysisError::Input(format!(
+                "target file key `{p}`: {}",
+                e.into_inner().message().trim()
+            ))
         })?;
         t.path = path.to_path_buf();
-        t.shot.check().map_err(|e| anyhow!("{e}"))?;
+        t.shot.check().map_err(AnalysisError::Input)?;
         for (i, x) in t.targets.iter().enumerate() {
             let key = format!("targets[{i}] ({})", x.name);
             if !x.value.is_finite() {
@@ -146,7 +150,9 @@ impl Targets {
                 .targets
                 .iter_mut()
                 .find(|t| &t.name == name)
-                .ok_or_else(|| anyhow!("calibrate.weights: no target named `{name}`"))?;
+                .ok_or_else(|| {
+                    AnalysisError::Input(format!("calibrate.weights: no target named `{name}`"))
+                })?;
             if !(w.is_finite() && w >= 0.0) {
                 bail!("calibrate.weights.{name}: {w} (allowed: a finite number >= 0)");
             }

@@ -30,7 +30,7 @@
 
 use std::sync::Arc;
 
-use anyhow::{anyhow, bail, Result};
+use crate::error::{bail, AnalysisError, Result};
 use egobox_gp::correlation_models::Matern52Corr;
 use egobox_gp::mean_models::ConstantMean;
 use egobox_gp::GaussianProcess;
@@ -155,7 +155,7 @@ impl Prior {
         let d = observations
             .first()
             .map(|o| o.x.len())
-            .ok_or_else(|| anyhow!("a prior needs observations"))?;
+            .ok_or_else(|| AnalysisError::Input("a prior needs observations".into()))?;
         let mut bounds = vec![(f64::INFINITY, f64::NEG_INFINITY); d];
         for o in observations {
             if o.x.len() != d {
@@ -275,7 +275,7 @@ impl Surrogate {
         )
         .nugget(nugget)
         .fit(&Dataset::new(x, y))
-        .map_err(|e| anyhow!("the surrogate could not be fitted: {e}"))?;
+        .map_err(|e| AnalysisError::Surrogate(format!("the surrogate could not be fitted: {e}")))?;
         Ok(Surrogate {
             gp,
             space: space.clone(),
@@ -312,7 +312,7 @@ impl Surrogate {
         let (m, v) = self
             .gp
             .predict_valvar(&x)
-            .map_err(|e| anyhow!("surrogate prediction: {e}"))?;
+            .map_err(|e| AnalysisError::Surrogate(format!("surrogate prediction: {e}")))?;
         Ok(m.iter()
             .zip(&v)
             .map(|(&m, &v)| (m, v.max(0.0).sqrt()))
@@ -558,7 +558,7 @@ pub fn region(
     let pred = model.predict(&lattice)?;
     let k_best = (0..pred.len())
         .min_by(|&a, &b| pred[a].0.total_cmp(&pred[b].0))
-        .ok_or_else(|| anyhow!("empty lattice"))?;
+        .ok_or_else(|| AnalysisError::Invariant("empty lattice".into()))?;
     let threshold = pred[k_best].0 + REGION_NOISE_MULTIPLE * noise_sd;
     let d = space.dims();
     let mut intervals = vec![(f64::INFINITY, f64::NEG_INFINITY); d];

@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, Result};
+use crate::error::{PlotError, Result};
 use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
@@ -744,11 +744,11 @@ where
 pub fn contour_plot(stem: &Path, p: &ContourPlot) -> Result<()> {
     fonts()?;
     if p.field.x.len() < 2 || p.field.y.len() < 2 {
-        return Err(anyhow!(
+        return Err(PlotError::Input(format!(
             "a contour plot needs at least 2 x 2 grid points (got {} x {})",
             p.field.x.len(),
             p.field.y.len()
-        ));
+        )));
     }
     let (w, h) = (1150u32, 860u32);
     let mut rgb = vec![255u8; (w * h * 3) as usize];

@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Result};
+use crate::error::{PlotError, Result};
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
@@ -132,7 +132,9 @@ fn axes<'a, 'b>(
 /// Draws the figure to `path` (PNG).
 pub fn ladder_plot(path: &Path, plot: &LadderPlot) -> Result<()> {
     if plot.panels.is_empty() || plot.objective.is_empty() {
-        bail!("a ladder figure needs a parameter and a level");
+        return Err(PlotError::Input(
+            "a ladder figure needs a parameter and a level".into(),
+        ));
     }
     fonts()?;
     let n_panels = plot.panels.len() + 1;

@@ -27,6 +27,7 @@
 //! ```
 
 pub mod contour;
+pub mod error;
 pub mod ladder;
 pub mod paper;
 pub mod pareto;

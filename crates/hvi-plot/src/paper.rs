@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use anyhow::Result;
+use crate::error::Result;
 use hvi_engine::potential::Interaction;
 use plotters::coord::combinators::{LogCoord, WithKeyPoints};
 use plotters::coord::types::RangedCoordf64;

@@ -6,7 +6,7 @@
 use std::ops::Range;
 use std::path::Path;
 
-use anyhow::{bail, Result};
+use crate::error::{PlotError, Result};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -77,7 +77,7 @@ impl Axes {
             .map(|p| p.wall_s)
             .fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
         if !w_lo.is_finite() {
-            bail!("no completed run to plot");
+            return Err(PlotError::Input("no completed run to plot".into()));
         }
         Ok(Axes {
             x: (w_lo * 0.7).max(1e-3).log10()..(w_hi * 1.4).log10(),

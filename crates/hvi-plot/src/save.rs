@@ -4,7 +4,16 @@
 use std::io::Write;
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use crate::error::{PlotError, Result};
+
+/// An I/O error writing `path` as [`PlotError::Write`].
+fn write_error(path: &Path, context: String, source: std::io::Error) -> PlotError {
+    PlotError::Write {
+        path: path.to_path_buf(),
+        context,
+        source,
+    }
+}
 
 /// Writes `bytes` to `path` atomically, through `.NAME.tmp.PID` beside it (created as any new
 /// file is, so the picture gets the usual permissions), synced, then renamed over `path`.
@@ -20,13 +29,19 @@ pub(crate) fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = dir.join(format!(".{name}.tmp.{}", std::process::id()));
     {
         let mut file = std::fs::File::create(&tmp)
-            .with_context(|| format!("cannot create {}", tmp.display()))?;
+            .map_err(|e| write_error(&tmp, format!("cannot create {}", tmp.display()), e))?;
         file.write_all(bytes)
-            .with_context(|| format!("cannot write {}", tmp.display()))?;
-        file.sync_all()?;
+            .map_err(|e| write_error(&tmp, format!("cannot write {}", tmp.display()), e))?;
+        file.sync_all()
+            .map_err(|e| write_error(&tmp, format!("cannot sync {}", tmp.display()), e))?;
     }
-    std::fs::rename(&tmp, path)
-        .with_context(|| format!("cannot move {} into place", path.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        write_error(
+            path,
+            format!("cannot move {} into place", path.display()),
+            e,
+        )
+    })?;
     Ok(())
 }
 
@@ -46,9 +61,13 @@ pub(crate) fn encode_png(
         if let Some(c) = compression {
             enc.set_compression(c);
         }
-        let mut writer = enc.write_header().context("PNG header")?;
-        writer.write_image_data(rgb).context("PNG data")?;
-        writer.finish().context("PNG end")?;
+        let mut writer = enc
+            .write_header()
+            .map_err(|e| PlotError::draw("PNG header", e))?;
+        writer
+            .write_image_data(rgb)
+            .map_err(|e| PlotError::draw("PNG data", e))?;
+        writer.finish().map_err(|e| PlotError::draw("PNG end", e))?;
     }
     Ok(bytes)
 }
@@ -56,7 +75,7 @@ pub(crate) fn encode_png(
 /// Encodes an RGB buffer as PNG (fast compression) and writes it atomically.
 pub fn write_png(path: &Path, rgb: &[u8], w: u32, h: u32) -> Result<()> {
     let bytes = encode_png(rgb, w, h, Some(png::Compression::Fast))?;
-    write_atomic_bytes(path, &bytes).with_context(|| format!("cannot write {}", path.display()))
+    write_atomic_bytes(path, &bytes)
 }
 
 #[cfg(test)]

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use anyhow::Result;
+use crate::error::Result;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 

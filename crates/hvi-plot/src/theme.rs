@@ -4,7 +4,7 @@
 
 use std::sync::OnceLock;
 
-use anyhow::{anyhow, Result};
+use crate::error::{PlotError, Result};
 use plotters::chart::{ChartContext, MeshStyle, SecondaryMeshStyle, SeriesLabelPosition};
 use plotters::coord::ranged1d::Ranged;
 use plotters::coord::{CoordTranslate, Shift};
@@ -27,7 +27,9 @@ pub fn fonts() -> Result<()> {
     if ok {
         Ok(())
     } else {
-        Err(anyhow!("the embedded font could not be loaded"))
+        Err(PlotError::Input(
+            "the embedded font could not be loaded".into(),
+        ))
     }
 }
 

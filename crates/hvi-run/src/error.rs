@@ -23,6 +23,12 @@ pub enum RunError {
     /// A scene value outside its range, or a run the engine stopped (the engine's error).
     #[error(transparent)]
     Engine(#[from] hvi_engine::error::EngineError),
+    /// An analysis refused its input or failed (a targets file, a surrogate fit).
+    #[error(transparent)]
+    Analysis(#[from] hvi_analysis::error::AnalysisError),
+    /// A picture that could not be drawn or written.
+    #[error(transparent)]
+    Plot(#[from] hvi_plot::error::PlotError),
     /// Wrong input: a scene or study file's key, an option, a value; the message names the
     /// field and what is allowed.
     #[error("{0}")]
@@ -256,6 +262,56 @@ impl From<postcard::Error> for RunError {
     }
 }
 
+/// A number in a table that does not parse.
+impl From<std::num::ParseFloatError> for RunError {
+    fn from(e: std::num::ParseFloatError) -> RunError {
+        RunError::Library(Box::new(e))
+    }
+}
+
+/// An integer in a table that does not parse.
+impl From<std::num::ParseIntError> for RunError {
+    fn from(e: std::num::ParseIntError) -> RunError {
+        RunError::Library(Box::new(e))
+    }
+}
+
+/// A formatter that failed (writing into a `String` does not).
+impl From<std::fmt::Error> for RunError {
+    fn from(e: std::fmt::Error) -> RunError {
+        RunError::Library(Box::new(e))
+    }
+}
+
+/// `.context(...)` and `.with_context(|| ...)` on an `Option`: `None` becomes a
+/// [`RunError::Input`] with that message (the message names what is missing and what is
+/// allowed), as `anyhow::Context` makes an error of `None`.
+pub trait OptionExt<T> {
+    /// `None` as an error with `message`.
+    fn context(self, message: impl Into<String>) -> Result<T>;
+    /// `None` as an error with the message `f` makes (made only on `None`).
+    fn with_context<C: Into<String>>(self, f: impl FnOnce() -> C) -> Result<T>;
+}
+
+impl<T> OptionExt<T> for Option<T> {
+    fn context(self, message: impl Into<String>) -> Result<T> {
+        self.ok_or_else(|| RunError::Input(message.into()))
+    }
+
+    fn with_context<C: Into<String>>(self, f: impl FnOnce() -> C) -> Result<T> {
+        self.ok_or_else(|| RunError::Input(f().into()))
+    }
+}
+
+/// `return Err(RunError::Input(format!(...)))`: a refusal whose message names the field and
+/// what is allowed (as `anyhow::bail!` reads, with a typed error).
+#[macro_export]
+macro_rules! bail {
+    ($($t:tt)*) => {
+        return Err($crate::error::RunError::Input(format!($($t)*)))
+    };
+}
+
 /// A worker pool that does not start.
 impl From<rayon::ThreadPoolBuildError> for RunError {
     fn from(e: rayon::ThreadPoolBuildError) -> RunError {
@@ -366,6 +422,7 @@ pub fn exit_code(e: &(dyn StdError + 'static)) -> u8 {
         match run {
             Some(RunError::Interrupted(stop)) => return stop.exit_code(),
             Some(RunError::Write { .. }) => return EXIT_IO,
+            Some(RunError::Plot(hvi_plot::error::PlotError::Write { .. })) => return EXIT_IO,
             Some(RunError::External(_)) => return EXIT_UNAVAILABLE,
             _ => {}
         }

@@ -1,15 +1,12 @@
 //! # hvi-run
 //!
-//! Runs scenes and studies and keeps their results: scene files with `--set` overrides
-//! ([`scene_file`]), one run and its files ([`run`], [`output`]), the cloud's kept state for
-//! re-analysis ([`state`]), study files and their validated plans ([`spec`], [`plan`]), the
-//! resolution warnings of a scene or a plan ([`resolution`]), the
-//! run store that keeps each result once ([`store`]) and measures a run from another's kept
-//! state where only the measurement differs ([`remeasured`]), checkpoints of runs in progress
-//! ([`checkpoint`]), parallel execution ([`exec`]) or as Slurm batches ([`runner`]), results tables ([`table`]), Slurm job
-//! arrays ([`slurm`]) and the engine benchmark ([`mod@bench`]). Every function returns
-//! [`error::Result`]: its [`error::RunError`] says what went wrong, and [`error::exit_code`]
-//! the exit code a command ends with.
+//! One run, from a scene file to its outputs: scene files with `--set` overrides
+//! ([`scene_file`]), the run and its files ([`run`], [`output`]), the cloud's kept state for
+//! re-analysis ([`state`]), checkpoints of a run in progress and the continuation a later end
+//! time extends from ([`checkpoint`]), the LAMMPS export ([`lammps`]) and the engine benchmark
+//! ([`mod@bench`]). Studies of many runs and the store that keeps them are the `hvi-store`
+//! crate's. Every function returns [`error::Result`]: its [`error::RunError`] says what went
+//! wrong, and [`error::exit_code`] the exit code a command ends with.
 //!
 //! ```
 //! use hvi_run::run::{run_scene, RunOptions};
@@ -42,21 +39,13 @@
 pub mod bench;
 pub mod checkpoint;
 pub mod error;
-pub mod exec;
 pub mod files;
 pub mod interrupt;
 pub mod lammps;
-pub mod lock;
 pub mod output;
-pub mod plan;
-pub mod remeasured;
-pub mod resolution;
+pub mod progress;
 pub mod run;
-pub mod runner;
 pub mod scene_file;
-pub mod slurm;
-pub mod spec;
 pub mod state;
-pub mod store;
-pub mod study;
-pub mod table;
+
+pub use progress::STDOUT;

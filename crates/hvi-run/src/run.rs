@@ -5,10 +5,10 @@
 //! `state.bin` ([`crate::state`]) written atomically.
 
 use std::fmt::Write as _;
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use crate::progress::{Bar, Unit};
 use hvi_engine::cloud::{
     size_distribution, step_at_tau, CloudObserver, CloudReport, CloudResult, ObserverState,
     TrackRow,
@@ -16,7 +16,6 @@ use hvi_engine::cloud::{
 use hvi_engine::scene::{Derived, RunSettings, SceneSpec};
 use hvi_engine::sim::{Energy, SimState, Simulation, Timing};
 use hvi_engine::EngineError;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{self, CheckpointOptions, Every, Found};
@@ -294,7 +293,7 @@ pub struct Summary {
     /// The scene as run (after overrides).
     pub scene: SceneSpec,
     /// The fingerprint of the stored run whose kept state this run's cloud was measured from,
-    /// when a study's store measured it rather than simulated it (`hvi_run::store`): every
+    /// when a study's store measured it rather than simulated it (the run store, crate hvi-store): every
     /// number but the cloud's is that run's simulation. Absent for a simulated run.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measured_from: Option<String>,
@@ -1074,10 +1073,10 @@ impl Gathered {
         // The pool's other workers spin between the step's parallel loops instead of
         // sleeping (see `hvi_engine::threads`); results do not depend on it.
         hvi_engine::threads::with_awake_workers(|| {
-            self.step_loop(sim, spec, opts, n, bar.as_ref(), step_wall0)
+            self.step_loop(sim, spec, opts, n, bar.as_deref(), step_wall0)
         })?;
         if let Some(b) = &bar {
-            b.finish_and_clear();
+            b.finish();
         }
         if let Some(t) = self.trajectory.take() {
             let t0 = Instant::now();
@@ -1098,7 +1097,7 @@ impl Gathered {
         spec: &SceneSpec,
         opts: &RunOptions,
         n: usize,
-        bar: Option<&ProgressBar>,
+        bar: Option<&dyn Bar>,
         step_wall0: Instant,
     ) -> Result<()> {
         let d = sim.derived;
@@ -1267,26 +1266,19 @@ impl Gathered {
     }
 }
 
-/// The progress bar over `steps`, when progress is on and stderr is a terminal (else thermo
-/// lines go to stderr as text).
-fn progress_bar(opts: &RunOptions, steps: u64) -> Option<ProgressBar> {
-    if opts.progress && std::io::stderr().is_terminal() {
-        let b = ProgressBar::with_draw_target(Some(steps), ProgressDrawTarget::stderr());
-        b.set_style(
-            ProgressStyle::with_template("{bar:30} {pos}/{len} steps  {msg}  ETA {eta}")
-                .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        Some(b)
-    } else {
-        None
-    }
+/// The progress bar over `steps`, when progress is on and the command draws bars (else thermo
+/// lines go to the log as text).
+fn progress_bar(opts: &RunOptions, steps: u64) -> Option<Box<dyn Bar>> {
+    opts.progress
+        .then(|| crate::progress::bar(steps, Unit::Steps))
+        .flatten()
 }
 
 /// One thermo line (time, throughput since `since`, when the run stood at `from` = (base
 /// step, steps taken), bonds broken) on the progress bar when
 /// there is one, else on stderr; returns the time it took.
 fn thermo(
-    bar: Option<&ProgressBar>,
+    bar: Option<&dyn Bar>,
     sim: &Simulation,
     n: usize,
     from: (u64, u64),
@@ -1304,10 +1296,7 @@ fn thermo(
         sim.bonds_broken
     );
     match bar {
-        Some(b) => {
-            b.set_position(s);
-            b.set_message(msg);
-        }
+        Some(b) => b.set(s, msg),
         None => log::info!("step {s:>9}/{steps}  {msg} ETA {eta:.0} s"),
     }
     t.elapsed()
@@ -1378,7 +1367,7 @@ fn write_tables(
 
 /// The files of a run that its cloud's measurement writes (the fragment and crater tables and
 /// the pictures that show the measurement): what a run measured from another's kept state
-/// writes anew rather than takes over ([`crate::remeasured`]).
+/// writes anew rather than takes over (the run store's remeasured runs, crate hvi-store).
 pub const MEASURED_FILES: [&str; 5] = [
     "fragments.csv",
     "craters.csv",
@@ -1389,7 +1378,7 @@ pub const MEASURED_FILES: [&str; 5] = [
 
 /// Writes the cloud's tables into `dir`: `fragments.csv` (the size distribution) and
 /// `craters.csv` (the witness plate).
-pub(crate) fn write_cloud_tables(dir: &Path, cloud: &CloudResult) -> Result<()> {
+pub fn write_cloud_tables(dir: &Path, cloud: &CloudResult) -> Result<()> {
     write_csv_atomic(
         &dir.join("fragments.csv"),
         size_distribution(&cloud.fragments),
@@ -1443,7 +1432,7 @@ fn render_pictures(
 /// Draws the pictures that show the cloud's measurement into `dir`: the side view of `last`
 /// (the particles at the analysis time) with La and Lr, and with a measured cloud its fragment
 /// histogram and its shadowgraph.
-pub(crate) fn render_measured(
+pub fn render_measured(
     dir: &Path,
     info: &SceneInfo,
     last: &Frame,

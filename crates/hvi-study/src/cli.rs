@@ -6,21 +6,21 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 use clap::{Args, Parser, Subcommand};
 use hvi_run::checkpoint::Every;
-use hvi_run::exec::ExecOptions;
-use hvi_run::plan::Plan;
-use hvi_run::slurm::SlurmOptions;
-use hvi_run::spec::Study;
+use hvi_store::exec::ExecOptions;
+use hvi_store::plan::Plan;
+use hvi_store::slurm::SlurmOptions;
+use hvi_store::spec::Study;
 
-use crate::fidelity::FidelityOptions;
-use crate::reproduce::ReproduceOptions;
-use crate::study::calibrate::config::Method;
-use crate::study::calibrate::ladder::LadderOptions;
-use crate::study::calibrate::CalibrateOptions;
-use crate::study::collect::{CollectAs, CollectOptions, StatusOptions};
-use crate::study::options::StudyOptions;
-use crate::study::reanalyse::ReanalyseOptions;
-use crate::study::stability::StabilityOptions;
-use crate::study::validity::ValidityOptions;
+use hvi_calibrate::config::Method;
+use hvi_calibrate::ladder::LadderOptions;
+use hvi_calibrate::CalibrateOptions;
+use hvi_reproduce::fidelity::FidelityOptions;
+use hvi_reproduce::ReproduceOptions;
+use hvi_studies::collect::{CollectAs, CollectOptions, StatusOptions};
+use hvi_studies::options::StudyOptions;
+use hvi_studies::reanalyse::ReanalyseOptions;
+use hvi_studies::stability::StabilityOptions;
+use hvi_studies::validity::ValidityOptions;
 
 /// Hypervelocity impact with the discrete element method (Watson & Steinhauser 2017).
 #[derive(Parser, Debug)]
@@ -172,13 +172,13 @@ impl StudyArgs {
 
     /// Loads the study, builds and validates its plan, and writes `plan.json`.
     pub fn plan(&self) -> Result<(Study, Plan, PathBuf)> {
-        self.options().plan()
+        Ok(self.options().plan()?)
     }
 
     /// Loads the study and builds and validates its plan; returns it with the output
     /// directory, writing nothing.
     pub fn build_plan(&self) -> Result<(Study, Plan, PathBuf)> {
-        self.options().build_plan()
+        Ok(self.options().build_plan()?)
     }
 
     /// Execution options from the flags.
@@ -216,7 +216,7 @@ pub struct CalibrateArgs {
     pub no_refine: bool,
     /// The search after the grid (overrides calibrate.method).
     #[arg(long, value_enum)]
-    pub method: Option<Method>,
+    pub method: Option<MethodArg>,
     /// Nelder-Mead iterations at most (overrides calibrate.max_iters).
     #[arg(long)]
     pub max_iters: Option<u64>,
@@ -301,7 +301,7 @@ impl CalibrateArgs {
         Ok(CalibrateOptions {
             study: self.study.options(),
             no_refine: self.no_refine,
-            method: self.method,
+            method: self.method.map(Method::from),
             max_iters: self.max_iters,
             max_batches: self.max_batches,
             seeds: self.seeds.clone(),
@@ -391,7 +391,7 @@ pub struct CollectArgs {
     /// Write what this command writes (default: `calibrate` for a study with `[calibrate]`,
     /// `validity-map` for one with `[validity]`, else `sweep`).
     #[arg(long = "as", value_enum, value_name = "COMMAND")]
-    pub kind: Option<CollectAs>,
+    pub kind: Option<CollectAsArg>,
     /// The validity cut-off (with `--as validity-map`; default: the study's, else 0.3).
     #[arg(long)]
     pub cutoff: Option<f64>,
@@ -412,7 +412,7 @@ impl CollectArgs {
     pub fn options(&self) -> CollectOptions {
         CollectOptions {
             study: self.store.options(),
-            kind: self.kind,
+            kind: self.kind.map(CollectAs::from),
             cutoff: self.cutoff,
         }
     }
@@ -868,4 +868,45 @@ pub struct RunUnitArgs {
     /// (Slurm's `--signal` before a time limit); a task run again resumes from it.
     #[arg(long, value_name = "EVERY", default_value = "10m")]
     pub checkpoint_every: Every,
+}
+
+/// `--method`: the search after the grid ([`Method`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum MethodArg {
+    /// Efficient global optimisation: a kriging model of the objective, batches of runs by
+    /// expected improvement, stopped when the improvement left is below the seed noise.
+    Ego,
+    /// Nelder-Mead (argmin) from the best grid point, one run at a time.
+    NelderMead,
+}
+
+impl From<MethodArg> for Method {
+    fn from(m: MethodArg) -> Method {
+        match m {
+            MethodArg::Ego => Method::Ego,
+            MethodArg::NelderMead => Method::NelderMead,
+        }
+    }
+}
+
+/// `collect --as`: which command's outputs to write ([`CollectAs`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum CollectAsArg {
+    /// results.csv / results.json, as `sweep`.
+    Sweep,
+    /// The results with the objective and each target's score, as the grid stage of
+    /// `calibrate` (the refinement needs new runs: `hvi-study calibrate` does it).
+    Calibrate,
+    /// The results with `valid`, the map, its boundary and the snapshots, as `validity-map`.
+    ValidityMap,
+}
+
+impl From<CollectAsArg> for CollectAs {
+    fn from(k: CollectAsArg) -> CollectAs {
+        match k {
+            CollectAsArg::Sweep => CollectAs::Sweep,
+            CollectAsArg::Calibrate => CollectAs::Calibrate,
+            CollectAsArg::ValidityMap => CollectAs::ValidityMap,
+        }
+    }
 }

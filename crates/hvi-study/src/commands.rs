@@ -1,6 +1,6 @@
 //! What each subcommand does with its arguments: `main` parses the command line into
 //! [`Command`] and calls [`dispatch`]; each arm is one small function here or a workflow of
-//! [`crate::study`], [`crate::accuracy`] or [`crate::reproduce`].
+//! [`crate::study`], [`hvi_studies::accuracy`] or [`hvi_reproduce`].
 
 use std::path::PathBuf;
 
@@ -12,7 +12,7 @@ use hvi_run::scene_file::load_scene;
 use crate::cli::{
     AccuracyArgs, BenchArgs, Command, KeysArgs, RunArgs, RunUnitArgs, StudyArgs, SubmitArgs,
 };
-use crate::study::collect::{CollectAs, CollectOptions};
+use hvi_studies::collect::{CollectAs, CollectOptions};
 
 /// Runs one subcommand.
 pub fn dispatch(command: Command) -> Result<()> {
@@ -31,44 +31,50 @@ pub fn dispatch(command: Command) -> Result<()> {
         Command::Bench(args) => bench(args),
         Command::Accuracy(args) => accuracy(args),
         Command::Stability(args) => {
-            crate::study::stability::stability(&args.options()).map(|cells| {
-                let stopped = cells.iter().filter(|c| c.status != "stable").count();
-                println!(
-                    "{} cells, {} stopped; report: {}",
-                    cells.len(),
-                    stopped,
-                    args.out.join("stability.md").display()
-                );
-            })
+            let cells = hvi_studies::stability::stability(&args.options())?;
+            let stopped = cells.iter().filter(|c| c.status != "stable").count();
+            println!(
+                "{} cells, {} stopped; report: {}",
+                cells.len(),
+                stopped,
+                args.out.join("stability.md").display()
+            );
+            Ok(())
         }
-        Command::Plan(args) => crate::study::sweep::plan(&args.options()),
+        Command::Plan(args) => Ok(hvi_studies::sweep::plan(&args.options())?),
         Command::Sweep(args) => {
-            let r = crate::study::sweep::sweep(&args.options());
+            let r = hvi_studies::sweep::sweep(&args.options()).map_err(Into::into);
             tables_if_interrupted(&args, CollectAs::Sweep, r)
         }
         Command::Calibrate(args) => {
             if let Some(ladder) = args.ladder()? {
-                return args
-                    .options()
-                    .and_then(|o| crate::study::calibrate::ladder::ladder(&o, &ladder))
-                    .map(|_| ());
+                hvi_calibrate::ladder::ladder(&args.options()?, &ladder)?;
+                return Ok(());
             }
             let r = args
                 .options()
-                .and_then(|o| crate::study::calibrate::calibrate(&o))
+                .and_then(|o| Ok(hvi_calibrate::calibrate(&o)?))
                 .map(|_| ());
             tables_if_interrupted(&args.study, CollectAs::Calibrate, r)
         }
         Command::ValidityMap(args) => {
-            let r = crate::study::validity::validity_map(&args.options()).map(|_| ());
+            let r = hvi_studies::validity::validity_map(&args.options())
+                .map(|_| ())
+                .map_err(Into::into);
             tables_if_interrupted(&args.study, CollectAs::ValidityMap, r)
         }
         Command::Submit(args) => submit(&args),
-        Command::Status(args) => crate::study::collect::status(&args.options()),
-        Command::Collect(args) => crate::study::collect::collect(&args.options()),
-        Command::Reanalyse(args) => crate::study::reanalyse::reanalyse(&args.options()),
-        Command::Fidelity(args) => crate::fidelity::fidelity(&args.options()).map(|_| ()),
-        Command::Reproduce(args) => crate::reproduce::reproduce(&args.options()).map(|_| ()),
+        Command::Status(args) => Ok(hvi_studies::collect::status(&args.options())?),
+        Command::Collect(args) => collect(&args.options()),
+        Command::Reanalyse(args) => Ok(hvi_studies::reanalyse::reanalyse(&args.options())?),
+        Command::Fidelity(args) => {
+            hvi_reproduce::fidelity::fidelity(&args.options())?;
+            Ok(())
+        }
+        Command::Reproduce(args) => {
+            hvi_reproduce::reproduce(&args.options())?;
+            Ok(())
+        }
         Command::RunUnit(args) => run_unit(&args),
     }
 }
@@ -97,7 +103,7 @@ fn tables_if_interrupted(study: &StudyArgs, kind: CollectAs, r: Result<()>) -> R
             kind: Some(kind),
             cutoff: None,
         };
-        match crate::study::collect::collect(&opts) {
+        match collect(&opts) {
             Ok(()) => eprintln!("the tables of the runs that finished are written"),
             Err(e) => eprintln!("the tables could not be written: {e:#}"),
         }
@@ -210,7 +216,7 @@ fn run(args: RunArgs) -> Result<()> {
         anyhow::bail!("invalid value for `--dump-every`: 0 (allowed: an integer >= 1)");
     }
     let spec = load_scene(&args.scene, &args.sets)?;
-    let resolution = hvi_run::resolution::scene_warnings(&args.scene, &args.sets, &spec);
+    let resolution = hvi_store::resolution::scene_warnings(&args.scene, &args.sets, &spec);
     for w in spec.warnings().into_iter().chain(resolution) {
         eprintln!("warning: {w}");
     }
@@ -298,7 +304,7 @@ fn extends_finished_run(
     let continues = |path: &std::path::Path| -> Result<bool> {
         Ok(hvi_run::checkpoint::key_of(path) == Some(hvi_run::run::continuation_key(spec, opts)?))
     };
-    let Some(old) = hvi_run::store::read_summary(out).filter(|s| s.status == "completed") else {
+    let Some(old) = hvi_store::store::read_summary(out).filter(|s| s.status == "completed") else {
         // An unfinished run (stopped at a checkpoint) of this scene to another end: its
         // continuation is its last state that the new run shares (run_scene checks that it
         // lies before the new run's first end-dependent sample).
@@ -401,7 +407,7 @@ fn bench(mut args: BenchArgs) -> Result<()> {
 
 /// `hvi-study accuracy`.
 fn accuracy(args: AccuracyArgs) -> Result<()> {
-    use crate::accuracy::{self, Variant};
+    use hvi_studies::accuracy::{self, Variant};
     accuracy::check_seeds(args.seeds)?;
     let noise_seeds = args.noise_seeds.max(args.seeds.saturating_sub(1));
     let mut list: Vec<Variant> = accuracy::reference_variants(noise_seeds)?;
@@ -441,18 +447,18 @@ fn accuracy(args: AccuracyArgs) -> Result<()> {
 fn submit(args: &SubmitArgs) -> Result<()> {
     let opts = args.slurm_options()?;
     let (study, plan, out) = args.study.build_plan()?;
-    crate::study::sweep::print_resolution_warnings(&study, &plan)?;
-    match hvi_run::slurm::submit(&plan, &out, &opts)? {
-        hvi_run::slurm::Submitted::Nothing => {}
-        hvi_run::slurm::Submitted::DryRun { script } => print!("{script}"),
-        hvi_run::slurm::Submitted::Job { id } => println!("{id}"),
+    hvi_studies::sweep::print_resolution_warnings(&study, &plan)?;
+    match hvi_store::slurm::submit(&plan, &out, &opts)? {
+        hvi_store::slurm::Submitted::Nothing => {}
+        hvi_store::slurm::Submitted::DryRun { script } => print!("{script}"),
+        hvi_store::slurm::Submitted::Job { id } => println!("{id}"),
     }
     Ok(())
 }
 
 /// `hvi-study run-unit`: a failed run is an error (recorded in its directory).
 fn run_unit(args: &RunUnitArgs) -> Result<()> {
-    let completed = crate::study::sweep::run_unit(
+    let completed = hvi_studies::sweep::run_unit(
         &args.plan,
         args.index,
         args.threads,
@@ -467,6 +473,68 @@ fn run_unit(args: &RunUnitArgs) -> Result<()> {
             args.index
         ))
     }
+}
+
+/// `hvi-study collect`: the tables (and figures) of a local run from the store, running
+/// nothing. Runs without a result are rows with status `missing` (and gaps in the figures),
+/// listed on stderr; the command still writes everything and exits 0, so a partial study can
+/// be looked at while the rest runs.
+fn collect(args: &CollectOptions) -> Result<()> {
+    let (plan, dir) = hvi_studies::collect::open_plan(&args.study, true)?;
+    let store = hvi_store::store::Store::open(&dir)?;
+    let records: Vec<Option<hvi_store::store::Record>> = plan
+        .runs
+        .iter()
+        .map(|r| store.record(&r.fingerprint))
+        .collect::<hvi_run::error::Result<_>>()?;
+    let kind = match args.kind {
+        Some(k) => k,
+        None => match hvi_store::spec::Study::load(&plan.study_file) {
+            Ok(s) if s.calibrate.is_some() => CollectAs::Calibrate,
+            Ok(s) if s.validity.is_some() => CollectAs::ValidityMap,
+            _ => CollectAs::Sweep,
+        },
+    };
+    if args.cutoff.is_some() && kind != CollectAs::ValidityMap {
+        anyhow::bail!("--cutoff applies to `--as validity-map`");
+    }
+    let missing: Vec<usize> = (0..plan.runs.len())
+        .filter(|&i| records[i].is_none())
+        .collect();
+    let filled: Vec<hvi_store::store::Record> = records
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            r.clone()
+                .unwrap_or_else(|| hvi_studies::collect::missing_record(&plan, i))
+        })
+        .collect();
+    let table = hvi_store::table::results_table(&plan, &records);
+    let quiet = args.study.quiet;
+    let done = records.iter().flatten().cloned().collect::<Vec<_>>();
+    hvi_studies::sweep::print_failures(&done);
+    match kind {
+        CollectAs::Sweep => {
+            table.write(&dir, "results")?;
+            println!("{}", dir.join("results.csv").display());
+        }
+        CollectAs::Calibrate => {
+            hvi_calibrate::grid::collect_calibration(&plan, &dir, table, &filled, &missing, quiet)?
+        }
+        CollectAs::ValidityMap => {
+            let cfg = hvi_studies::validity::ValidityConfig::of(&hvi_store::spec::Study::load(
+                &plan.study_file,
+            )?)?;
+            let cutoff = cfg.cutoff(args.cutoff)?;
+            let cut = hvi_studies::validity::Cut {
+                observable: cfg.observable,
+                cutoff,
+            };
+            hvi_studies::validity::validity_outputs(&plan, &dir, cut, table, &filled, quiet, None)?;
+        }
+    }
+    hvi_studies::collect::report_missing(&plan, &missing, quiet);
+    Ok(())
 }
 
 #[cfg(test)]

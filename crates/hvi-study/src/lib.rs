@@ -15,9 +15,6 @@
 //! assert!(Cli::try_parse_from(["hvi-study", "sweep"]).is_err());
 //! ```
 
-pub mod accuracy;
 pub mod cli;
 pub mod commands;
-pub mod fidelity;
-pub mod reproduce;
-pub mod study;
+pub mod terminal;

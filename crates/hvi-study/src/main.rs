@@ -7,26 +7,6 @@ use std::process::ExitCode;
 use clap::Parser;
 use hvi_study::cli::Cli;
 
-/// Prints the libraries' progress lines and warnings (the `log` facade) on stderr, each
-/// message as it is: the words carry their own "warning:" or "note:".
-struct Stderr;
-
-impl log::Log for Stderr {
-    fn enabled(&self, metadata: &log::Metadata) -> bool {
-        metadata.level() <= log::Level::Info
-    }
-
-    fn log(&self, record: &log::Record) {
-        if self.enabled(record.metadata()) {
-            eprintln!("{}", record.args());
-        }
-    }
-
-    fn flush(&self) {}
-}
-
-static STDERR: Stderr = Stderr;
-
 fn main() -> ExitCode {
     // Output piped into a reader that stops early (`hvi-study keys | head`) ends the process
     // quietly, as it ends `ls | head`, instead of a panic on the failed write: Rust ignores
@@ -37,9 +17,7 @@ fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
-    if log::set_logger(&STDERR).is_ok() {
-        log::set_max_level(log::LevelFilter::Info);
-    }
+    hvi_study::terminal::install();
     let cli = Cli::parse();
     if let Err(e) = hvi_run::interrupt::install() {
         eprintln!("warning: Ctrl-C and SIGTERM will end the process at once: {e}");

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use anyhow::Result;
+use crate::error::Result;
 use hvi_engine::cloud::{CloudMeasurement, Fragment, TrackRow};
 use plotters::chart::DualCoordChartContext;
 use plotters::coord::combinators::{LogCoord, WithKeyPoints};

@@ -3,7 +3,7 @@
 
 use std::ops::Range;
 
-use anyhow::Result;
+use crate::error::Result;
 use glam::DVec3;
 use hvi_engine::cloud::quantile;
 use hvi_engine::scene::{Derived, Geometry, SceneSpec};

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, Result};
+use crate::error::{PlotError, Result};
 use glam::DVec3;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -147,7 +147,7 @@ impl View {
 pub fn series(path: &Path, frames: &[Frame], info: &SceneInfo) -> Result<()> {
     fonts()?;
     if frames.is_empty() {
-        return Err(anyhow!("no frames to render"));
+        return Err(PlotError::Input("no frames to render".into()));
     }
     let cols = frames.len().min(2) as u32;
     let rows = frames.len().div_ceil(2) as u32;

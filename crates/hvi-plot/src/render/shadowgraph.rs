@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use anyhow::Result;
+use crate::error::Result;
 use hvi_engine::cloud::SilhouetteReport;
 use hvi_engine::shadowgraph::Shadowgraph;
 use plotters::element::DashedPathElement;

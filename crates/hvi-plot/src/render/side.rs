@@ -5,7 +5,7 @@
 use std::ops::Range;
 use std::path::Path;
 
-use anyhow::Result;
+use crate::error::Result;
 use hvi_engine::cloud::CloudMeasurement;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
