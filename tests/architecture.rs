@@ -574,3 +574,74 @@ fn library_crates_return_typed_errors_and_only_the_command_uses_anyhow_clap_and_
     let sample = "[package]\nname = \"x\"\n[dependencies]\nanyhow.workspace = true\nserde = \"1\"\n[dev-dependencies]\nproptest = \"1\"\n";
     assert_eq!(dependencies(sample), ["anyhow", "serde"]);
 }
+
+/// The longest a function outside tests may be, in lines from its `fn` line to its closing
+/// brace (a reader holds it at once).
+const LONGEST_FUNCTION: usize = 80;
+
+/// The functions of `text` (outside its `#[cfg(test)]` module) longer than
+/// [`LONGEST_FUNCTION`], as (line of the `fn`, name and length). A function is read from a line
+/// whose code starts with `fn` (after `pub`, `pub(crate)`, `const`, `unsafe`) to the first line
+/// that is its indentation and `}`.
+fn long_functions(text: &str) -> Vec<(usize, String)> {
+    let lines: Vec<&str> = text
+        .lines()
+        .take_while(|l| l.trim() != "#[cfg(test)]")
+        .collect();
+    let mut found = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        let code = line.trim_start();
+        let indent = &line[..line.len() - code.len()];
+        let mut rest = code;
+        for prefix in ["pub(crate) ", "pub(super) ", "pub ", "const ", "unsafe "] {
+            rest = rest.strip_prefix(prefix).unwrap_or(rest);
+        }
+        let Some(sig) = rest.strip_prefix("fn ") else {
+            continue;
+        };
+        if line.trim_end().ends_with(';') {
+            continue; // a declaration in a trait
+        }
+        let close = format!("{indent}}}");
+        let Some(end) = lines[i..].iter().position(|l| l.trim_end() == close) else {
+            continue;
+        };
+        let n = end + 1;
+        if n > LONGEST_FUNCTION {
+            let name: String = sig
+                .chars()
+                .take_while(|c| c.is_alphanumeric() || *c == '_')
+                .collect();
+            found.push((i + 1, format!("fn {name}: {n} lines")));
+        }
+    }
+    found
+}
+
+#[test]
+fn no_function_is_longer_than_a_reader_holds() {
+    let root = repo();
+    let mut files = Vec::new();
+    sources_under(&root.join("crates"), &mut files);
+    files.retain(|p| {
+        p.extension().is_some_and(|e| e == "rs") && p.components().any(|c| c.as_os_str() == "src")
+    });
+    assert!(files.len() > 100, "only {} sources found", files.len());
+    let found = matching_lines(&root, &files, long_functions);
+    assert!(
+        found.is_empty(),
+        "functions over {LONGEST_FUNCTION} lines (split them into named steps):\n{}",
+        found.join("\n")
+    );
+    // The reader finds what it is for, and leaves tests alone.
+    let body = "    let x = 1;\n".repeat(LONGEST_FUNCTION);
+    let long = format!(
+        "pub fn f() {{\n{body}}}\n#[cfg(test)]\nmod tests {{\n    fn g() {{\n{body}    }}\n}}\n"
+    );
+    assert_eq!(long_functions(&long).len(), 1, "{long}");
+    let short = format!(
+        "fn f() {{\n{}}}\n",
+        "    let x = 1;\n".repeat(LONGEST_FUNCTION - 2)
+    );
+    assert!(long_functions(&short).is_empty());
+}

@@ -367,43 +367,7 @@ fn history_chart(series: &[(&Record, &Value)]) -> String {
         "<svg class=\"history\" xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" \
          viewBox=\"0 0 {w} {h}\" data-points=\"{n}\">"
     );
-    let ys: Vec<f64> = match &numbers {
-        Some(xs) if !xs.is_empty() => {
-            let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
-            let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            let span = hi - lo;
-            if span > 0.0 {
-                let _ = write!(
-                    s,
-                    "<text x=\"2\" y=\"{}\">{}</text><text x=\"2\" y=\"{}\">{}</text>",
-                    pad + 4.0,
-                    esc(&Value::Number(hi).show()),
-                    h - pad + 3.0,
-                    esc(&Value::Number(lo).show())
-                );
-            } else {
-                let _ = write!(
-                    s,
-                    "<text x=\"2\" y=\"{}\">{}</text>",
-                    0.5 * h + 3.0,
-                    esc(&Value::Number(hi).show())
-                );
-            }
-            xs.iter()
-                .map(|&x| {
-                    if span > 0.0 {
-                        h - pad - (h - 2.0 * pad) * (x - lo) / span
-                    } else {
-                        0.5 * h
-                    }
-                })
-                .collect()
-        }
-        _ => {
-            let _ = write!(s, "<text x=\"2\" y=\"{}\">values</text>", 0.5 * h + 3.0);
-            vec![0.5 * h; n]
-        }
-    };
+    let ys = y_axis(&mut s, numbers.as_deref(), n);
     if numbers.is_some() && n > 1 {
         let pts: Vec<String> = ys
             .iter()
@@ -414,23 +378,69 @@ fn history_chart(series: &[(&Record, &Value)]) -> String {
     }
     for (k, ((r, v), y)) in series.iter().zip(&ys).enumerate() {
         let moved = k > 0 && series[k - 1].1 != *v;
-        let class = match (moved, k + 1 == n) {
-            (true, true) => "pt moved last",
-            (true, false) => "pt moved",
-            (false, true) => "pt last",
-            (false, false) => "pt",
-        };
-        let _ = write!(
-            s,
-            "<circle class=\"{class}\" cx=\"{:.1}\" cy=\"{y:.1}\" r=\"3.5\"><title>{} {}: {}</title></circle>",
-            x_of(k),
-            esc(&r.commit),
-            esc(&r.date),
-            esc(&v.show())
-        );
+        point(&mut s, (x_of(k), *y), (moved, k + 1 == n), r, v);
     }
     s.push_str("</svg>");
     s
+}
+
+/// The chart's y axis: each value's height, and its labels written into `s` (the highest and
+/// the lowest value; one label for a flat series; "values" for a series that is not numbers,
+/// drawn along the middle).
+fn y_axis(s: &mut String, numbers: Option<&[f64]>, n: usize) -> Vec<f64> {
+    let (_, h) = CHART;
+    let (_, pad) = PAD;
+    let Some(xs) = numbers.filter(|xs| !xs.is_empty()) else {
+        let _ = write!(s, "<text x=\"2\" y=\"{}\">values</text>", 0.5 * h + 3.0);
+        return vec![0.5 * h; n];
+    };
+    let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let span = hi - lo;
+    if span > 0.0 {
+        let _ = write!(
+            s,
+            "<text x=\"2\" y=\"{}\">{}</text><text x=\"2\" y=\"{}\">{}</text>",
+            pad + 4.0,
+            esc(&Value::Number(hi).show()),
+            h - pad + 3.0,
+            esc(&Value::Number(lo).show())
+        );
+    } else {
+        let _ = write!(
+            s,
+            "<text x=\"2\" y=\"{}\">{}</text>",
+            0.5 * h + 3.0,
+            esc(&Value::Number(hi).show())
+        );
+    }
+    xs.iter()
+        .map(|&x| {
+            if span > 0.0 {
+                h - pad - (h - 2.0 * pad) * (x - lo) / span
+            } else {
+                0.5 * h
+            }
+        })
+        .collect()
+}
+
+/// One run's point at (x, y), marked when its value moved from the run before and when it is
+/// the last, with the run's commit, date and value as its tooltip.
+fn point(s: &mut String, (x, y): (f64, f64), (moved, last): (bool, bool), r: &Record, v: &Value) {
+    let class = match (moved, last) {
+        (true, true) => "pt moved last",
+        (true, false) => "pt moved",
+        (false, true) => "pt last",
+        (false, false) => "pt",
+    };
+    let _ = write!(
+        s,
+        "<circle class=\"{class}\" cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"3.5\"><title>{} {}: {}</title></circle>",
+        esc(&r.commit),
+        esc(&r.date),
+        esc(&v.show())
+    );
 }
 
 fn runs_table(s: &mut String, runs: &[&Record]) {

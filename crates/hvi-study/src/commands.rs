@@ -1,6 +1,6 @@
 //! What each subcommand does with its arguments: `main` parses the command line into
 //! [`Command`] and calls [`dispatch`]; each arm is one small function here or a workflow of
-//! [`crate::study`], [`hvi_studies::accuracy`] or [`hvi_reproduce`].
+//! [`hvi_studies`], [`hvi_calibrate`] or [`hvi_reproduce`], called with plain options.
 
 use std::path::PathBuf;
 
@@ -247,151 +247,10 @@ fn run(args: RunArgs) -> Result<()> {
             .then(|| args.out.join(hvi_run::files::CONTINUATION_FILE)),
         extend: false,
     };
-    // A run that left a checkpoint here resumes: what it wrote stays (run_scene checks the
-    // checkpoint whole and starts from t = 0 if it is not).
-    let key = hvi_run::run::checkpoint_key(&spec, &opts)?;
-    let resumes = opts
-        .checkpoint
-        .as_ref()
-        .is_some_and(|c| hvi_run::checkpoint::key_of(&c.path) == Some(key));
-    let opts = RunOptions {
-        extend: !resumes && !args.fresh && extends_finished_run(&args.out, &spec, &opts)?,
-        ..opts
-    };
-    if opts.extend {
-        // An unfinished run's checkpoint of another end time: the run continues from its
-        // continuation instead, and the checkpoint would only be reported as another run's.
-        if let Some(c) = opts.checkpoint.as_ref().filter(|c| c.path.exists()) {
-            hvi_run::checkpoint::remove(&c.path)?;
-            if !args.quiet {
-                eprintln!(
-                    "{}: of this scene to another end time; the run continues from {} instead",
-                    c.path.display(),
-                    hvi_run::files::CONTINUATION_FILE
-                );
-            }
-        }
-    }
-    let removed = match resumes || opts.extend {
-        true => Vec::new(),
-        false => hvi_run::output::clear_run_dir(&args.out, &keep)?,
-    };
-    if !removed.is_empty() && !args.quiet {
-        eprintln!(
-            "{} held an earlier run: removed its {} files ({})",
-            args.out.display(),
-            removed.len(),
-            removed.join(", ")
-        );
-    }
+    let (opts, _) = hvi_run::start::prepare(&spec, opts, args.fresh, &keep)?;
     pool.install(|| run_scene(&spec, &opts))?;
     println!("{}", args.out.join("summary.json").display());
     Ok(())
-}
-
-/// Whether the run should extend the finished run in `out` (`hvi-study run` without
-/// `--fresh`): true for a completed run of this scene to an earlier end time that kept its
-/// continuation; false for nothing there, a failed or unfinished run, or this very run (run
-/// again from t = 0). A completed run of another scene, or of this one to a later end, is
-/// refused with the keys that differ, as is one that cannot be extended; nothing in `out`
-/// is touched then.
-fn extends_finished_run(
-    out: &std::path::Path,
-    spec: &hvi_engine::scene::SceneSpec,
-    opts: &RunOptions,
-) -> Result<bool> {
-    let here = out.display();
-    let continues = |path: &std::path::Path| -> Result<bool> {
-        Ok(hvi_run::checkpoint::key_of(path) == Some(hvi_run::run::continuation_key(spec, opts)?))
-    };
-    let Some(old) = hvi_store::store::read_summary(out).filter(|s| s.status == "completed") else {
-        // An unfinished run (stopped at a checkpoint) of this scene to another end: its
-        // continuation is its last state that the new run shares (run_scene checks that it
-        // lies before the new run's first end-dependent sample).
-        return match &opts.continuation {
-            Some(path) if continues(path)? => Ok(true),
-            _ => Ok(false),
-        };
-    };
-    let other = "pass --fresh to replace it, or choose another --out";
-    let differ = scene_differences(&old.scene, spec)?;
-    if !differ.is_empty() {
-        anyhow::bail!(
-            "{here} holds a finished run of another scene ({}); {other}",
-            differ.join("; ")
-        );
-    }
-    let (was, now) = (old.scene.run.end_time_s, spec.run.end_time_s);
-    if now == was {
-        return Ok(false);
-    }
-    if now < was {
-        anyhow::bail!(
-            "{here} holds this scene run to run.end_time_s = {was:e} s; a run to {now:e} s is \
-             not a part of it (the samples at its end differ); {other}"
-        );
-    }
-    let cannot = |why: String| -> Result<bool> {
-        anyhow::bail!(
-            "{here} holds this scene run to run.end_time_s = {was:e} s, which cannot be \
-             extended to {now:e} s: {why}; pass --fresh to run it from t = 0"
-        )
-    };
-    let Some(path) = &opts.continuation else {
-        return cannot("--no-continuation asks not to keep the state to continue from".into());
-    };
-    match hvi_run::checkpoint::key_of(path) {
-        None => cannot(format!(
-            "it kept no continuation ({} is missing: the run had --no-continuation or an \
-             earlier hvi-study)",
-            path.display()
-        )),
-        Some(_) if !continues(path)? => cannot(format!(
-            "{} was written with other output flags (--render, --dump-every, --dump-format) or \
-             another hvi-study version",
-            path.display()
-        )),
-        Some(_) => Ok(true),
-    }
-}
-
-/// The keys whose values differ between two scenes, apart from `run.end_time_s`, as
-/// `key: old there, new here`.
-fn scene_differences(
-    old: &hvi_engine::scene::SceneSpec,
-    new: &hvi_engine::scene::SceneSpec,
-) -> Result<Vec<String>> {
-    use std::collections::BTreeMap;
-    fn flatten(prefix: &str, v: &serde_json::Value, out: &mut BTreeMap<String, String>) {
-        match v.as_object() {
-            Some(map) => {
-                for (k, v) in map {
-                    let key = if prefix.is_empty() {
-                        k.clone()
-                    } else {
-                        format!("{prefix}.{k}")
-                    };
-                    flatten(&key, v, out);
-                }
-            }
-            None => {
-                out.insert(prefix.to_string(), v.to_string());
-            }
-        }
-    }
-    let (mut a, mut b) = (BTreeMap::new(), BTreeMap::new());
-    flatten("", &serde_json::to_value(old)?, &mut a);
-    flatten("", &serde_json::to_value(new)?, &mut b);
-    let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
-    let unset = "(not set)".to_string();
-    Ok(keys
-        .into_iter()
-        .filter(|k| k.as_str() != "run.end_time_s")
-        .filter_map(|k| {
-            let (x, y) = (a.get(k).unwrap_or(&unset), b.get(k).unwrap_or(&unset));
-            (x != y).then(|| format!("{k}: {x} there, {y} here"))
-        })
-        .collect())
 }
 
 /// `hvi-study bench`.

@@ -209,22 +209,9 @@ fn observable(field: &str, name: Option<&str>, default: Observable) -> Result<Ob
     }
 }
 
-/// One `[[readings]]` table validated against the readings before it.
-fn reading(i: usize, r: ReadingFile, before: &[Reading]) -> Result<Reading> {
-    let at = format!("readings[{i}] (`{}`)", r.name);
-    if !valid_name(&r.name) {
-        bail!(
-            "readings[{i}].name: `{}` (allowed: lower-case letters, digits, '-', '_', '.', \
-             starting with a letter or digit, at most 64 characters)",
-            r.name
-        );
-    }
-    if before.iter().any(|b| b.name == r.name) {
-        bail!("{at}.name: used twice (allowed: a name no other reading has)");
-    }
-    if r.label.trim().is_empty() {
-        bail!("{at}.label: empty (allowed: one line saying what the reading is)");
-    }
+/// Where a reading's runs come from: its own (with its `set`), or another reading's measured
+/// again (`from`, with its `analysis`), checked against the readings before it.
+fn source_of(at: &str, r: &ReadingFile, before: &[Reading]) -> Result<Source> {
     let source = match &r.from {
         None => {
             if !r.analysis.is_empty() {
@@ -264,6 +251,26 @@ fn reading(i: usize, r: ReadingFile, before: &[Reading]) -> Result<Reading> {
             }
         }
     };
+    Ok(source)
+}
+
+/// One `[[readings]]` table validated against the readings before it.
+fn reading(i: usize, r: ReadingFile, before: &[Reading]) -> Result<Reading> {
+    let at = format!("readings[{i}] (`{}`)", r.name);
+    if !valid_name(&r.name) {
+        bail!(
+            "readings[{i}].name: `{}` (allowed: lower-case letters, digits, '-', '_', '.', \
+             starting with a letter or digit, at most 64 characters)",
+            r.name
+        );
+    }
+    if before.iter().any(|b| b.name == r.name) {
+        bail!("{at}.name: used twice (allowed: a name no other reading has)");
+    }
+    if r.label.trim().is_empty() {
+        bail!("{at}.label: empty (allowed: one line saying what the reading is)");
+    }
+    let source = source_of(&at, &r, before)?;
     if let Some(seeds) = &r.seeds {
         if r.from.is_some() {
             bail!("{at}.seeds: a reading measured from another's runs has that reading's seeds");

@@ -167,15 +167,7 @@ pub fn fidelity(args: &FidelityOptions) -> Result<Option<FidelityResult>> {
     }
     let plans = plans(&config, &tier, cli_seeds)?;
     let root = args.runs.join(&tier);
-    let dir_of = |r: &Reading| root.join(&r.name);
-    let mut todo = 0;
-    let mut total = 0;
-    for (r, p) in config.readings.iter().zip(&plans) {
-        if let Some((p, _)) = p {
-            total += p.runs.len();
-            todo += p.runs.len() - completed_runs(p, &dir_of(r))?;
-        }
-    }
+    let (total, todo) = count_runs(&config, &plans, &root)?;
     if !args.quiet || args.dry_run {
         log::info!(
             "readings study `{}` at tier `{tier}`, seeds {seeds:?}: {} readings, {total} runs \
@@ -189,37 +181,7 @@ pub fn fidelity(args: &FidelityOptions) -> Result<Option<FidelityResult>> {
     if args.dry_run {
         return Ok(None);
     }
-    let exec = ExecOptions {
-        threads: args.threads.unwrap_or(0),
-        jobs: args.jobs,
-        progress: !args.quiet,
-        ..ExecOptions::default()
-    };
-    let mut executed: Vec<Option<Executed>> = Vec::new();
-    for (r, p) in config.readings.iter().zip(plans) {
-        let Some((plan, seeds)) = p else {
-            executed.push(None);
-            continue;
-        };
-        let dir = dir_of(r);
-        if !args.quiet {
-            log::info!(
-                "reading `{}`: {} runs in {}",
-                r.name,
-                plan.runs.len(),
-                dir.display()
-            );
-        }
-        plan.write(&dir)?;
-        let (_, rep) = execute_plan(&plan, &dir, &exec)?;
-        executed.push(Some(Executed {
-            plan,
-            seeds,
-            dir,
-            records: rep.records,
-            cached: rep.cached,
-        }));
-    }
+    let executed = execute_readings(&config, plans, &root, args)?;
     let ran = executed
         .iter()
         .flatten()
@@ -248,6 +210,65 @@ pub fn fidelity(args: &FidelityOptions) -> Result<Option<FidelityResult>> {
         log::info!("wrote {}", args.out.join("report.md").display());
     }
     Ok(Some(result))
+}
+
+/// The runs of the readings' plans (those with runs of their own) under `root`: (in all, still
+/// to run).
+fn count_runs(
+    config: &FidelityConfig,
+    plans: &[Option<SeededPlan>],
+    root: &Path,
+) -> Result<(usize, usize)> {
+    let (mut total, mut todo) = (0, 0);
+    for (r, p) in config.readings.iter().zip(plans) {
+        if let Some((p, _)) = p {
+            total += p.runs.len();
+            todo += p.runs.len() - completed_runs(p, &root.join(&r.name))?;
+        }
+    }
+    Ok((total, todo))
+}
+
+/// Each reading's plan executed into its store under `root` (`<root>/<reading>`); None for a
+/// reading measured from another's runs.
+fn execute_readings(
+    config: &FidelityConfig,
+    plans: Vec<Option<SeededPlan>>,
+    root: &Path,
+    args: &FidelityOptions,
+) -> Result<Vec<Option<Executed>>> {
+    let exec = ExecOptions {
+        threads: args.threads.unwrap_or(0),
+        jobs: args.jobs,
+        progress: !args.quiet,
+        ..ExecOptions::default()
+    };
+    let mut executed = Vec::new();
+    for (r, p) in config.readings.iter().zip(plans) {
+        let Some((plan, seeds)) = p else {
+            executed.push(None);
+            continue;
+        };
+        let dir = root.join(&r.name);
+        if !args.quiet {
+            log::info!(
+                "reading `{}`: {} runs in {}",
+                r.name,
+                plan.runs.len(),
+                dir.display()
+            );
+        }
+        plan.write(&dir)?;
+        let (_, rep) = execute_plan(&plan, &dir, &exec)?;
+        executed.push(Some(Executed {
+            plan,
+            seeds,
+            dir,
+            records: rep.records,
+            cached: rep.cached,
+        }));
+    }
+    Ok(executed)
 }
 
 /// (R, va/v0) of every run of `e`'s plan for reading `r`: from the records, or measured again
