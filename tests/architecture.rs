@@ -217,6 +217,12 @@ fn no_module_imports_one_that_imports_it_back() {
             continue;
         }
         let graph = graph_of(&src);
+        let files = std::fs::read_dir(&src).expect("src").count();
+        if files == 1 {
+            // One module (lib.rs alone): nothing to circle.
+            checked += 1;
+            continue;
+        }
         assert!(graph.len() > 1, "{}: no modules read", src.display());
         let edges: usize = graph.values().map(BTreeSet::len).sum();
         assert!(edges > 0, "{}: no imports read", src.display());
@@ -562,9 +568,14 @@ fn library_crates_return_typed_errors_and_only_the_command_uses_anyhow_clap_and_
                 found.push(format!("{}: depends on {only_the_command}", dir.display()));
             }
         }
-        if !deps.iter().any(|d| d == "thiserror" || d == "hvi-run") {
+        // Its own typed error, or the one of the crate below it that it returns (hvi-run's
+        // RunError for the store and the workflows, hvi-scene's EngineError for the engine).
+        if !deps
+            .iter()
+            .any(|d| d == "thiserror" || d == "hvi-run" || d == "hvi-scene")
+        {
             found.push(format!(
-                "{}: neither defines a typed error (thiserror) nor returns hvi-run's",
+                "{}: neither defines a typed error (thiserror) nor returns a lower crate's",
                 dir.display()
             ));
         }

@@ -95,7 +95,7 @@ pub(super) fn seed_list(settings: &EgoSettings) -> Vec<Option<u64>> {
 }
 
 /// Each point's run seeds: `seeds`, or the scene's own seed (None) when empty.
-pub(super) fn seeds_of(seeds: &[u64]) -> Vec<Option<u64>> {
+pub fn seeds_of(seeds: &[u64]) -> Vec<Option<u64>> {
     if seeds.is_empty() {
         vec![None]
     } else {
@@ -430,7 +430,7 @@ fn noise_of(evaluations: &[Scored], floor: f64) -> (f64, String) {
 /// Runs `points` at every seed of every shot together (in parallel through the store) and
 /// scores each on its seed-mean observables per shot. Returns the evaluations (with the runs'
 /// observables) and the runs simulated.
-pub(super) fn run_points(
+pub fn run_points(
     problem: &Refinement,
     stage: EvalStage,
     points: &[BTreeMap<String, f64>],

@@ -14,7 +14,6 @@ pub mod ego;
 pub mod extend;
 pub mod grid;
 pub mod identify;
-pub mod ladder;
 pub mod maps;
 pub mod nelder_mead;
 pub mod problem;
@@ -151,8 +150,8 @@ pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
 }
 
 /// The calibration of a written plan of `study` in its directory `out` (what [`calibrate`]
-/// and each level of a [`ladder`] run).
-pub(crate) fn calibrate_plan(
+/// and each level of a ladder (crate hvi-ladder) run).
+pub fn calibrate_plan(
     args: &CalibrateOptions,
     study: &hvi_store::spec::Study,
     shots: &[ShotPlan],
@@ -410,7 +409,7 @@ fn publish(
 
 /// Where the calibration's runs execute: here (`threads`, `jobs`) or, with Slurm options,
 /// each batch as a Slurm job array.
-fn runner_of(args: &CalibrateOptions) -> Result<Runner> {
+pub fn runner_of(args: &CalibrateOptions) -> Result<Runner> {
     Ok(match &args.slurm {
         None => Runner::Local(args.study.exec_options()),
         Some((opts, poll)) => {

@@ -46,7 +46,7 @@ pub(super) fn as_num(v: &Value, key: &str) -> Result<f64> {
 
 /// The refinement's problem: parameters in transformed coordinates -> objective, each point a
 /// run through the store.
-pub(super) struct Refinement<'a> {
+pub struct Refinement<'a> {
     pub(super) study: &'a Study,
     /// The study's plan (the first shot's), which names the study and tier of every run.
     pub(super) plan: &'a Plan,
@@ -258,7 +258,8 @@ fn outside(
     }
 }
 
-pub(super) fn fmt_params(p: &BTreeMap<String, f64>) -> String {
+/// Parameters as `key = value` pairs for the report and the log.
+pub fn fmt_params(p: &BTreeMap<String, f64>) -> String {
     p.iter()
         .map(|(k, v)| format!("{}={v:.4e}", k.rsplit('.').next().unwrap_or(k)))
         .collect::<Vec<_>>()
@@ -283,21 +284,20 @@ pub(super) fn describe_eval(e: &Evaluation) -> String {
 
 /// A refined axis and the grid's box on it, in the coordinates the search moves in.
 #[derive(Debug, Clone, PartialEq)]
-pub(super) struct Dim {
+pub struct Dim {
     /// The axis's scene key.
-    pub(super) key: String,
+    pub key: String,
     /// Refined in log10 of the value (else in the value).
-    pub(super) log: bool,
+    pub log: bool,
     /// The box's lowest coordinate.
-    pub(super) lo: f64,
+    pub lo: f64,
     /// The box's highest coordinate.
-    pub(super) hi: f64,
+    pub hi: f64,
 }
 
 impl Dim {
     /// The axis `key` over the box [lo, hi] in its coordinates (log10 when `log`).
-    #[cfg(test)]
-    pub(super) fn new(key: &str, log: bool, lo: f64, hi: f64) -> Self {
+    pub fn new(key: &str, log: bool, lo: f64, hi: f64) -> Self {
         Dim {
             key: key.to_string(),
             log,
@@ -309,7 +309,7 @@ impl Dim {
 
 /// The axes the refinement moves (`calibrate.refine`, default every axis with more than one
 /// value) and their coordinates.
-pub(super) fn refined_axes(plan: &Plan, cfg: &CalibrateConfig) -> Result<(Vec<String>, Vec<Dim>)> {
+pub fn refined_axes(plan: &Plan, cfg: &CalibrateConfig) -> Result<(Vec<String>, Vec<Dim>)> {
     let refine_keys: Vec<String> = match &cfg.refine {
         Some(k) => k.clone(),
         None => plan
@@ -349,24 +349,30 @@ pub(super) fn refined_axes(plan: &Plan, cfg: &CalibrateConfig) -> Result<(Vec<St
 }
 
 /// What the stages after the grid share: where runs go and how they are scored.
-pub(super) struct Stage<'a> {
-    pub(super) study: &'a Study,
+pub struct Stage<'a> {
+    /// The study.
+    pub study: &'a Study,
     /// The study's plan (the first shot's).
-    pub(super) plan: &'a Plan,
+    pub plan: &'a Plan,
     /// Each shot's plan: the study's grid at its impact.
-    pub(super) plans: &'a [&'a Plan],
-    pub(super) store: &'a Store,
+    pub plans: &'a [&'a Plan],
+    /// The run store.
+    pub store: &'a Store,
     /// Each shot's targets.
-    pub(super) targets: &'a [Targets],
-    pub(super) threads: usize,
-    pub(super) runner: &'a Runner,
-    pub(super) out: &'a Path,
-    pub(super) progress: bool,
+    pub targets: &'a [Targets],
+    /// Threads for the runs.
+    pub threads: usize,
+    /// Where the runs execute (here, or Slurm).
+    pub runner: &'a Runner,
+    /// The study directory.
+    pub out: &'a Path,
+    /// Progress on the log.
+    pub progress: bool,
 }
 
 impl<'a> Stage<'a> {
     /// A problem over `dims` with the other scene keys at `fixed` (per shot).
-    pub(super) fn problem(&self, fixed: Vec<Vec<String>>, dims: Vec<Dim>) -> Refinement<'a> {
+    pub fn problem(&self, fixed: Vec<Vec<String>>, dims: Vec<Dim>) -> Refinement<'a> {
         Refinement {
             study: self.study,
             plan: self.plan,
@@ -386,7 +392,7 @@ impl<'a> Stage<'a> {
 
 /// Per shot, its plan's common overrides plus every axis at the best run's value, except the
 /// axes `moved` names (those the stage sets itself).
-pub(super) fn fixed_overrides(
+pub fn fixed_overrides(
     plans: &[&Plan],
     best_values: &[Value],
     moved: impl Fn(&String) -> bool,

@@ -4,7 +4,10 @@
 //! (Materials 2017, 10, 379): bodies as simple cubic lattices of particles, nearest-neighbour
 //! springs that break for good past `rcut`, a Lennard-Jones contact repulsion between every
 //! pair closer than r_eq, geometric sizing so results do not depend on the particle count, and
-//! velocity Verlet. The crate knows nothing of files, plots or command lines.
+//! velocity Verlet. This crate steps a scene in time (`sim`, `neighbour`, `threads`) and
+//! measures its debris cloud (`cloud`); the scene, its laws and the state arrays are
+//! hvi-scene's, re-exported here under the same names. The crate knows nothing of files, plots
+//! or command lines.
 //!
 //! ```
 //! use hvi_engine::scene::{Analysis, Geometry, Material, Resolution, RunSettings, SceneSpec};
@@ -30,18 +33,14 @@
 //! ```
 
 pub mod cloud;
-pub mod error;
 pub mod neighbour;
-pub mod paper;
-pub mod potential;
-pub mod rng;
-pub mod scene;
-pub mod shadowgraph;
 pub mod sim;
-pub mod state;
-pub mod step;
-pub mod symmetry;
 pub mod threads;
-pub mod witness;
+
+// The scene, its laws and the state arrays are hvi-scene's; re-exported so that a user of the
+// engine names every part of the model through one crate.
+pub use hvi_scene::{
+    error, paper, potential, rng, scene, shadowgraph, state, step, symmetry, witness,
+};
 
 pub use error::{EngineError, Result};

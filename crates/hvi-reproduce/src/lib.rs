@@ -19,7 +19,6 @@
 //! Every paper number comes from `hvi_engine::paper`.
 
 pub mod config;
-pub mod fidelity;
 pub mod history;
 pub mod page;
 mod plans;

@@ -12,9 +12,9 @@ use hvi_store::slurm::SlurmOptions;
 use hvi_store::spec::Study;
 
 use hvi_calibrate::config::Method;
-use hvi_calibrate::ladder::LadderOptions;
 use hvi_calibrate::CalibrateOptions;
-use hvi_reproduce::fidelity::FidelityOptions;
+use hvi_fidelity::FidelityOptions;
+use hvi_ladder::LadderOptions;
 use hvi_reproduce::ReproduceOptions;
 use hvi_studies::collect::{CollectAs, CollectOptions, StatusOptions};
 use hvi_studies::options::StudyOptions;

@@ -48,7 +48,7 @@ pub fn dispatch(command: Command) -> Result<()> {
         }
         Command::Calibrate(args) => {
             if let Some(ladder) = args.ladder()? {
-                hvi_calibrate::ladder::ladder(&args.options()?, &ladder)?;
+                hvi_ladder::ladder(&args.options()?, &ladder)?;
                 return Ok(());
             }
             let r = args
@@ -68,7 +68,7 @@ pub fn dispatch(command: Command) -> Result<()> {
         Command::Collect(args) => collect(&args.options()),
         Command::Reanalyse(args) => Ok(hvi_studies::reanalyse::reanalyse(&args.options())?),
         Command::Fidelity(args) => {
-            hvi_reproduce::fidelity::fidelity(&args.options())?;
+            hvi_fidelity::fidelity(&args.options())?;
             Ok(())
         }
         Command::Reproduce(args) => {

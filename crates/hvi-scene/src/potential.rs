@@ -46,7 +46,7 @@ impl ContactForm {
 /// The interaction constants at the actual particle diameter, ready for the kernels.
 ///
 /// ```
-/// use hvi_engine::potential::{ContactForm, Interaction};
+/// use hvi_scene::potential::{ContactForm, Interaction};
 ///
 /// // sigma = 1, eps = 1, kappa = 10, rcut = 1.5 sigma, in any consistent units.
 /// let ia = Interaction::new(1.0, 1.0, 10.0, 1.5, ContactForm::Printed);
@@ -201,8 +201,8 @@ impl Interaction {
 /// eps_plate) (Lorentz-Berthelot with one sigma; docs/model.md section 3, "Two materials").
 ///
 /// ```
-/// use hvi_engine::potential::{ContactForm, Materials};
-/// use hvi_engine::potential::Interaction;
+/// use hvi_scene::potential::{ContactForm, Materials};
+/// use hvi_scene::potential::Interaction;
 ///
 /// let plate = Interaction::new(1.0, 1.0, 10.0, 1.5, ContactForm::Printed);
 /// let sphere = Interaction::new(1.0, 4.0, 30.0, 1.4, ContactForm::Printed);

@@ -185,7 +185,7 @@ impl SceneSpec {
     /// Validates the spec and lays out the scene.
     ///
     /// ```
-    /// use hvi_engine::scene::SceneSpec;
+    /// use hvi_scene::scene::SceneSpec;
     ///
     /// let setup = SceneSpec::calibration(500.0, 1e-7).build().expect("valid scene");
     /// assert!(setup.derived.dt_s <= setup.derived.dt_max_s);

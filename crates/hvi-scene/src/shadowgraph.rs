@@ -16,7 +16,7 @@
 //!
 //! ```
 //! use glam::DVec3;
-//! use hvi_engine::shadowgraph::{Shadowgraph, ShadowgraphSettings};
+//! use hvi_scene::shadowgraph::{Shadowgraph, ShadowgraphSettings};
 //! // A dense 10 x 10 x 20 block of particles 1 mm apart (1 mg each), its lower face at z = 0.
 //! let pos: Vec<DVec3> = (0..2000)
 //!     .map(|k| DVec3::new((k % 10) as f64, ((k / 10) % 10) as f64, (k / 100) as f64) * 1e-3)

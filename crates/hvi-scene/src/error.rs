@@ -36,7 +36,7 @@ pub enum EngineError {
         /// What was seen.
         reason: String,
     },
-    /// A saved state ([`crate::sim::SimState`]) does not fit the simulation it was restored
+    /// A saved state (`hvi_engine::sim::SimState`) does not fit the simulation it was restored
     /// into (another scene, or a damaged file).
     #[error("the saved state does not fit this scene: {0}")]
     StateMismatch(String),

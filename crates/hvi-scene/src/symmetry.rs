@@ -106,7 +106,7 @@ pub fn image_bond_intact(flags: u8, code: u32) -> bool {
 }
 
 /// Forgets image bonds that broke since the last build (the pair joins the image list).
-pub(crate) fn clear_broken_image_bonds(flags: &mut [u8]) {
+pub fn clear_broken_image_bonds(flags: &mut [u8]) {
     for f in flags {
         for code in [MIRROR_X, MIRROR_Y] {
             let (bond, broken) = image_bond_flags(code);

@@ -16,7 +16,7 @@
 //! 405-418) measured for hypervelocity craters in aluminium (0.56-0.60 above 5 km/s).
 //!
 //! ```
-//! use hvi_engine::witness::{crater, WitnessPlate};
+//! use hvi_scene::witness::{crater, WitnessPlate};
 //! let plate = WitnessPlate::aluminium_6061(0.1);
 //! // A 1 mm aluminium fragment at 6.7 km/s leaves a crater a few millimetres wide.
 //! let d = plate.crater_diameter_m(1e-3, 2700.0, 6700.0);

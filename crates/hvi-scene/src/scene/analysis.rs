@@ -1,5 +1,5 @@
 //! The analysis settings (`[analysis]`): which debris-cloud observables a run measures, and
-//! when. The observables themselves are defined in `crate::cloud`; their defaults (quantile,
+//! when. The observables themselves are defined in `hvi_engine::cloud`; their defaults (quantile,
 //! front times) live here with the settings that use them.
 
 use serde::{Deserialize, Serialize};
@@ -71,7 +71,7 @@ impl Width {
 }
 
 /// What a run measures of the debris cloud, and when. The observables themselves are defined in
-/// [`crate::cloud`] (docs/model.md section 5); these keys only choose the quantile, the times and
+/// `hvi_engine::cloud` (docs/model.md section 5); these keys only choose the quantile, the times and
 /// how often. Only what is asked for is computed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -123,7 +123,7 @@ pub struct Analysis {
     /// Keep the cloud's compact state at the analysis time and at the two front times (every
     /// particle's position, velocity, body, fragment label and membership; `state.bin` in the
     /// run's directory), so that the cloud can be measured again with other settings without
-    /// re-simulating ([`crate::cloud::remeasure`], `hvi-study reanalyse`).
+    /// re-simulating (`hvi_engine::cloud::remeasure`, `hvi-study reanalyse`).
     #[serde(skip_serializing_if = "is_true")]
     pub keep_state: bool,
 }

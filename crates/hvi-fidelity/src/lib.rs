@@ -1,8 +1,8 @@
 //! `hvi-study fidelity`: the readings study. The calibration grid (Figs. 7, 9, 10) under each
 //! reading of the paper that could explain a gap between our maps and the paper's, at two
 //! seeds or more; each reading's R and va/v0 maps judged by the same checks as the
-//! reproduction's Figs. 9 and 10 ([`crate::stages::fig9_checks`],
-//! [`crate::stages::fig10_checks`]), side by side in
+//! reproduction's Figs. 9 and 10 ([`hvi_reproduce::stages::fig9_checks`],
+//! [`hvi_reproduce::stages::fig10_checks`]), side by side in
 //! `reports/fidelity/` (`report.md`, `fidelity.json`, `readings.csv`, two maps per reading).
 //!
 //! Every run goes through the study store (`<runs>/<tier>/<reading>/`): a killed study resumes,
@@ -25,9 +25,9 @@ use hvi_store::spec::{Axis, Study};
 use hvi_store::store::{Record, RunStatus};
 use hvi_store::study::execute_plan;
 
-use crate::report::Verdict;
-use crate::stages::{completed_runs, fig10_checks, fig10_figure, fig9_checks, fig9_figure};
 use config::{check_seeds, FidelityConfig, Reading, Source};
+use hvi_reproduce::report::Verdict;
+use hvi_reproduce::stages::{completed_runs, fig10_checks, fig10_figure, fig9_checks, fig9_figure};
 use hvi_studies::figures::sorted_axis;
 use hvi_studies::reanalyse::reanalyse_run;
 pub use report::write_report;
@@ -163,7 +163,7 @@ pub fn fidelity(args: &FidelityOptions) -> Result<Option<FidelityResult>> {
     }
     seeded_study(&config.study, &seeds)?;
     if !args.dry_run {
-        crate::report::check_report_dir(&args.out, "fidelity.json", "fidelity")?;
+        hvi_reproduce::report::check_report_dir(&args.out, "fidelity.json", "fidelity")?;
     }
     let plans = plans(&config, &tier, cli_seeds)?;
     let root = args.runs.join(&tier);

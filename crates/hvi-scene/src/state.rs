@@ -131,7 +131,7 @@ impl Particles {
 
     /// Clears the owned and mirror slots of bonds that broke since the last call (the image
     /// bonds that did are `symmetry::clear_broken_image_bonds`'s).
-    pub(crate) fn clear_broken_slots(&mut self) {
+    pub fn clear_broken_slots(&mut self) {
         for i in 0..self.len() {
             for m in 0..OWNED_BONDS {
                 let s = self.bonds[i * BONDS_PER_PARTICLE + 2 * m];
@@ -157,7 +157,7 @@ impl Particles {
     /// Reorders all arrays so that new index `k` holds old particle `perm[k]`, remapping bonds.
     /// Forces are not carried over: they are stale and recomputed right after a re-sort.
     /// Gathers go into `scratch` buffers that are swapped in, so a re-sort allocates nothing.
-    pub(crate) fn permute(&mut self, perm: &[u32], scratch: &mut PermuteScratch) {
+    pub fn permute(&mut self, perm: &[u32], scratch: &mut PermuteScratch) {
         use rayon::prelude::*;
         let n = self.len();
         if n == 0 {

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use hvi_analysis::contour::Field;
 
-use super::config::{FidelityConfig, Reading};
-use crate::report::{Check, Figure, Verdict};
+use crate::config::{FidelityConfig, Reading};
+use hvi_reproduce::report::{Check, Figure, Verdict};
 
 /// One reading, measured and judged.
 #[derive(Debug, Clone)]

@@ -34,12 +34,14 @@ use hvi_store::spec::{Axis, Study};
 use hvi_store::store::{Record, Store};
 use serde::{Deserialize, Serialize};
 
-use crate::config::{CalibrateConfig, Method};
-use crate::problem::{fixed_overrides, refined_axes, Dim, Stage, PAPER_BEST};
-use crate::result::EvalStage;
-use crate::result::{fmt_bounds, fmt_value, CalibrationResult, Edge, Evaluation, TargetsMet};
-use crate::shots::plans_of;
-use crate::{calibrate_plan, ego, runner_of, CalibrateOptions, Coarse};
+use hvi_calibrate::config::{CalibrateConfig, Method};
+use hvi_calibrate::problem::{fixed_overrides, refined_axes, Dim, Stage, PAPER_BEST};
+use hvi_calibrate::result::EvalStage;
+use hvi_calibrate::result::{
+    fmt_bounds, fmt_value, CalibrationResult, Edge, Evaluation, TargetsMet,
+};
+use hvi_calibrate::shots::plans_of;
+use hvi_calibrate::{calibrate_plan, ego, runner_of, CalibrateOptions, Coarse};
 use hvi_studies::document::Document;
 
 /// What a ladder takes beside the calibration's options.
@@ -581,7 +583,7 @@ fn check_run(
     if progress {
         log::info!(
             "ladder check: the last answer ({}) at {n} particles",
-            crate::problem::fmt_params(&params)
+            hvi_calibrate::problem::fmt_params(&params)
         );
     }
     let runner = runner_of(&check_args)?;
@@ -1126,7 +1128,7 @@ mod tests {
         let mut edge = near.clone();
         edge[1].edges.push(Edge {
             key: "material.eps_j".into(),
-            side: crate::result::Side::High,
+            side: hvi_calibrate::result::Side::High,
             value: 0.05,
             touched_by: "confidence region".into(),
             limit: None,

@@ -6,7 +6,7 @@
 //! docs/running.md, "Resolution").
 //!
 //! ```
-//! use hvi_engine::scene::{Geometry, ResolutionIssue, SceneSpec};
+//! use hvi_scene::scene::{Geometry, ResolutionIssue, SceneSpec};
 //!
 //! // The calibration scene at 2000 particles with a plate of t/D = 0.05: one layer.
 //! let mut spec = SceneSpec::calibration(2000.0, 1e-7);

@@ -31,7 +31,7 @@ pub struct SceneSpec {
     /// Time integration and safety settings.
     #[serde(default)]
     pub run: RunSettings,
-    /// What to measure of the debris cloud, and when (definitions in [`crate::cloud`]).
+    /// What to measure of the debris cloud, and when (definitions in `hvi_engine::cloud`).
     #[serde(default)]
     pub analysis: Analysis,
 }
@@ -327,7 +327,7 @@ pub struct RunSettings {
     pub frame_block_over_sigma: f64,
     /// Adaptive step: the largest multiple of the base step (`dt_s`, the step the impact is
     /// resolved with) a step may take, a whole number in [1, 64]; 1 is a fixed step. The
-    /// criterion is in [`crate::sim`]: a step of m base steps is taken only while the bound on
+    /// criterion is in `hvi_engine::sim`: a step of m base steps is taken only while the bound on
     /// the relative speed of any two neighbours, times m dt, stays below
     /// `stride_displacement_over_sigma` sigma, and the stiffest active pair is resolved.
     /// Omitted from the scene as written in outputs when 1, so a fixed-step run's fingerprint
@@ -356,7 +356,7 @@ pub struct RunSettings {
     /// ... the broken-bond count grew by at most this fraction (0: not a single break).
     pub cutoff_break_fraction: f64,
     /// Width over D of the absorbing band inside the plate's lateral edge (0: none; sphere on
-    /// plate only; see [`crate::sim::AbsorbingBand`]). Omitted from the scene as written when
+    /// plate only; see `hvi_engine::sim::AbsorbingBand`). Omitted from the scene as written when
     /// 0, so runs without a band keep their fingerprints.
     #[serde(skip_serializing_if = "is_zero")]
     pub absorbing_band_over_d: f64,

@@ -11,9 +11,9 @@ use hvi_run::error::{Result, ResultExt};
 use plotters::style::RGBColor;
 use serde::Serialize;
 
-use super::result::{FidelityResult, Judged, SeedFields};
-use crate::report::{cell, check_report_dir, fmt_num, numbers_table, Figure};
-use crate::stages::{FIG10_CHECKS, FIG10_MAIN_CHECKS, FIG9_CHECKS, FIG9_MAIN_CHECKS};
+use crate::result::{FidelityResult, Judged, SeedFields};
+use hvi_reproduce::report::{cell, check_report_dir, fmt_num, numbers_table, Figure};
+use hvi_reproduce::stages::{FIG10_CHECKS, FIG10_MAIN_CHECKS, FIG9_CHECKS, FIG9_MAIN_CHECKS};
 use hvi_run::output::{write_atomic_bytes, write_csv_atomic};
 
 /// All check names, Fig. 9's then Fig. 10's, in [`Judged::checks`] order, with whether each is
@@ -59,7 +59,7 @@ fn number(f: &Figure, name: &str) -> Option<f64> {
         .iter()
         .find(|n| n.name.starts_with(name))
         .and_then(|n| match n.value {
-            crate::report::Value::Number(x) => Some(x),
+            hvi_reproduce::report::Value::Number(x) => Some(x),
             _ => None,
         })
 }
@@ -278,10 +278,10 @@ fn markdown(res: &FidelityResult) -> String {
         res.ran,
         res.readings
             .iter()
-            .filter(|j| matches!(j.reading.source, super::config::Source::Runs { .. }))
+            .filter(|j| matches!(j.reading.source, crate::config::Source::Runs { .. }))
             .map(|j| j.runs)
             .sum::<usize>(),
-        crate::report::fmt_duration(res.wall_seconds)
+        hvi_reproduce::report::fmt_duration(res.wall_seconds)
     );
     if !res.config.description.is_empty() {
         let _ = writeln!(s, "{}\n", res.config.description.trim());
@@ -294,7 +294,7 @@ fn markdown(res: &FidelityResult) -> String {
     s
 }
 
-fn summary_table(s: &mut String, res: &FidelityResult, readings: &[super::config::Reading]) {
+fn summary_table(s: &mut String, res: &FidelityResult, readings: &[crate::config::Reading]) {
     let _ = writeln!(s, "## Side by side\n");
     let _ = writeln!(
         s,
@@ -373,7 +373,7 @@ fn checks_table(s: &mut String, res: &FidelityResult) {
     let _ = writeln!(s);
 }
 
-fn reading_section(s: &mut String, j: &Judged, readings: &[super::config::Reading]) {
+fn reading_section(s: &mut String, j: &Judged, readings: &[crate::config::Reading]) {
     let name = &j.reading.name;
     let _ = writeln!(
         s,

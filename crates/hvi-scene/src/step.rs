@@ -25,13 +25,13 @@ pub const DEFAULT_STRIDE_DISPLACEMENT_OVER_SIGMA: f64 = MAX_STEP_DISPLACEMENT_OV
 /// stays within the stiffness bound whatever this is, so this is an accuracy knob
 /// (`hvi-study accuracy` measures it), not a stability one.
 pub const MAX_STRIDE_DISPLACEMENT_OVER_SIGMA: f64 = 2.0 * MAX_STEP_DISPLACEMENT_OVER_SIGMA;
-/// The adaptive step's look-ahead (see [`crate::sim::Simulation::step_until`]) takes at most
+/// The adaptive step's look-ahead (see `hvi_engine::sim::Simulation::step_until`) takes at most
 /// this fraction of the skin: pairs not yet listed close in by at most this much in one step.
 pub const LOOKAHEAD_SKIN_FRACTION: f64 = 0.5;
 /// The adaptive step measures the interacting pairs' largest relative speed again between
 /// builds once the growth allowed for it since the last measurement (twice the largest change
 /// of a particle's velocity) exceeds this fraction of the measured speed (see
-/// [`crate::sim::Simulation::step_until`]).
+/// `hvi_engine::sim::Simulation::step_until`).
 pub const SPEED_REFRESH: f64 = 0.25;
 /// The default `run.max_stride`: high enough that the displacement and stiffness bounds, not
 /// this cap, set the stride on the paper's scenes.
