@@ -421,7 +421,7 @@ impl Reproduction {
             s,
             "Written by `hvi-study reproduce --tier {}` (hvi-study {}, config `{}`). Regenerate it \
              with the command; do not edit it. The paper's numbers come from \
-             `crates/hvi-engine/src/paper.rs`; every number of ours is computed by the command from \
+             `crates/hvi-scene/src/paper.rs`; every number of ours is computed by the command from \
              the runs.{}\n",
             self.tier,
             self.version,
