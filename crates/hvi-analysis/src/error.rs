@@ -26,8 +26,9 @@ pub enum AnalysisError {
     Surrogate(String),
 }
 
-/// `message`, and under `{:#}` the chain below it (`: cause` for each, as `anyhow` prints it).
-fn fmt_chain(
+/// `message`, and under `{:#}` the chain below it (`: cause` for each, as `anyhow` prints it);
+/// hvi-plot's errors print the same way.
+pub fn fmt_chain(
     message: &str,
     source: &(dyn std::error::Error + 'static),
     f: &mut std::fmt::Formatter<'_>,

@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use hvi_analysis::error::fmt_chain;
+
 /// Everything that can go wrong while drawing a picture.
 #[derive(Debug, thiserror::Error)]
 pub enum PlotError {
@@ -28,23 +30,6 @@ pub enum PlotError {
         #[source]
         source: std::io::Error,
     },
-}
-
-/// `message`, and under `{:#}` the chain below it (`: cause` for each, as `anyhow` prints it).
-fn fmt_chain(
-    message: &str,
-    source: &(dyn std::error::Error + 'static),
-    f: &mut std::fmt::Formatter<'_>,
-) -> std::fmt::Result {
-    f.write_str(message)?;
-    if f.alternate() {
-        let mut next = Some(source);
-        while let Some(e) = next {
-            write!(f, ": {e}")?;
-            next = e.source();
-        }
-    }
-    Ok(())
 }
 
 fn fmt_draw(context: &str, source: &BoxError, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

@@ -493,6 +493,26 @@ mod tests {
     }
 
     #[test]
+    fn a_picture_or_an_analysis_that_failed_keeps_its_chain_and_exit_code() {
+        let denied = std::io::Error::new(ErrorKind::PermissionDenied, "Permission denied");
+        let plot = hvi_plot::error::PlotError::Write {
+            path: "map.png".into(),
+            context: "cannot create map.png".into(),
+            source: denied,
+        };
+        let e = RunError::from(plot).context("the calibration's maps");
+        assert_eq!(
+            format!("{e:#}"),
+            "the calibration's maps: cannot create map.png: Permission denied"
+        );
+        assert_eq!(exit_code(&e), EXIT_IO);
+        let bad = hvi_analysis::error::AnalysisError::Input("targets[0]: weight -1".into());
+        let e = RunError::from(bad);
+        assert_eq!(format!("{e:#}"), "targets[0]: weight -1");
+        assert_eq!(exit_code(&e), EXIT_ERROR);
+    }
+
+    #[test]
     fn the_exit_code_is_found_below_contexts() {
         let write = RunError::write(Path::new("out/runs/a/record.json"), full_disk())
             .context("run 3")
