@@ -109,15 +109,10 @@ fn fmt_chain(
     source: Option<&(dyn StdError + 'static)>,
     f: &mut fmt::Formatter<'_>,
 ) -> fmt::Result {
-    f.write_str(message)?;
-    if f.alternate() {
-        let mut next = source;
-        while let Some(e) = next {
-            write!(f, ": {e}")?;
-            next = e.source();
-        }
+    match source {
+        Some(source) => hvi_analysis::error::fmt_chain(message, source, f),
+        None => f.write_str(message),
     }
-    Ok(())
 }
 
 fn fmt_io(

@@ -9,10 +9,14 @@ use hvi_run::bail;
 use hvi_run::error::Result;
 
 use crate::options::StudyOptions;
+use crate::sweep::print_failures;
+use crate::validity::{validity_outputs, Cut, ValidityConfig};
 use hvi_analysis::observable::Observables;
 use hvi_store::plan::{describe_values, Plan, DIR_DIGITS};
 use hvi_store::slurm::{QueueView, TaskState};
+use hvi_store::spec::Study;
 use hvi_store::store::{Record, RunStatus, Store};
+use hvi_store::table::{results_table, Table};
 
 /// Reads a plan and its study directory: a study directory or its `plan.json` as is, or a
 /// study file planned like every other command (which writes plan.json when `write`; a
@@ -356,7 +360,7 @@ fn run_lines(s: &mut String, plan: &Plan, survey: &Survey) {
 }
 
 /// A stand-in record for a run without a result, so the figures draw a gap there.
-pub fn missing_record(plan: &Plan, i: usize) -> Record {
+fn missing_record(plan: &Plan, i: usize) -> Record {
     Record {
         format: hvi_store::plan::STUDY_FORMAT_VERSION,
         fingerprint: plan.runs[i].fingerprint.clone(),
@@ -374,8 +378,104 @@ pub fn missing_record(plan: &Plan, i: usize) -> Record {
     }
 }
 
-/// Names the runs without a result (the first ten), or says every run was collected.
-pub fn report_missing(plan: &Plan, missing: &[usize], quiet: bool) {
+/// A study's runs as its store holds them, for `collect`: what to write (`kind`), the results
+/// table, every run's record (a run without a result as a `missing` one) and which are missing.
+pub struct Collected {
+    /// The plan.
+    pub plan: Plan,
+    /// The study directory.
+    pub dir: PathBuf,
+    /// What to write.
+    pub kind: CollectAs,
+    /// One row per run.
+    pub table: Table,
+    /// One record per run; a run without a result has status `missing`.
+    pub filled: Vec<Record>,
+    /// The runs without a result.
+    pub missing: Vec<usize>,
+    /// No progress output.
+    pub quiet: bool,
+}
+
+/// Reads a study's records from its store and decides what `collect` writes (the study's kind
+/// unless `args.kind`); refuses `--cutoff` for another kind than `validity-map`. Failed runs
+/// are said on the log.
+pub fn gather(args: &CollectOptions) -> Result<Collected> {
+    let (plan, dir) = open_plan(&args.study, true)?;
+    let store = Store::open(&dir)?;
+    let records: Vec<Option<Record>> = plan
+        .runs
+        .iter()
+        .map(|r| store.record(&r.fingerprint))
+        .collect::<Result<_>>()?;
+    let kind = match args.kind {
+        Some(k) => k,
+        None => match Study::load(&plan.study_file) {
+            Ok(s) if s.calibrate.is_some() => CollectAs::Calibrate,
+            Ok(s) if s.validity.is_some() => CollectAs::ValidityMap,
+            _ => CollectAs::Sweep,
+        },
+    };
+    if args.cutoff.is_some() && kind != CollectAs::ValidityMap {
+        bail!("--cutoff applies to `--as validity-map`");
+    }
+    let missing: Vec<usize> = (0..plan.runs.len())
+        .filter(|&i| records[i].is_none())
+        .collect();
+    let filled: Vec<Record> = records
+        .iter()
+        .enumerate()
+        .map(|(i, r)| r.clone().unwrap_or_else(|| missing_record(&plan, i)))
+        .collect();
+    let table = results_table(&plan, &records);
+    let done = records.iter().flatten().cloned().collect::<Vec<_>>();
+    print_failures(&done);
+    Ok(Collected {
+        plan,
+        dir,
+        kind,
+        table,
+        filled,
+        missing,
+        quiet: args.study.quiet,
+    })
+}
+
+impl Collected {
+    /// `sweep`'s tables: `results.csv` / `results.json`; their path on the log's stdout target.
+    pub fn write_sweep(&self) -> Result<()> {
+        self.table.write(&self.dir, "results")?;
+        log::info!(target: hvi_run::STDOUT, "{}", self.dir.join("results.csv").display());
+        Ok(())
+    }
+
+    /// `validity-map`'s outputs at `cutoff` (None: the study's, else 0.3).
+    pub fn write_validity_map(&self, cutoff: Option<f64>) -> Result<()> {
+        let cfg = ValidityConfig::of(&Study::load(&self.plan.study_file)?)?;
+        let cut = Cut {
+            observable: cfg.observable,
+            cutoff: cfg.cutoff(cutoff)?,
+        };
+        validity_outputs(
+            &self.plan,
+            &self.dir,
+            cut,
+            self.table.clone(),
+            &self.filled,
+            self.quiet,
+            None,
+        )?;
+        Ok(())
+    }
+
+    /// Names the runs without a result (the first ten), or says every run was collected.
+    pub fn finish(&self) {
+        report_missing(&self.plan, &self.missing, self.quiet);
+    }
+}
+
+/// Names the runs without a result (`collect` ends with it) (the first ten), or says every run was collected.
+fn report_missing(plan: &Plan, missing: &[usize], quiet: bool) {
     if !missing.is_empty() {
         let shown: Vec<String> = missing
             .iter()

@@ -339,60 +339,20 @@ fn run_unit(args: &RunUnitArgs) -> Result<()> {
 /// listed on stderr; the command still writes everything and exits 0, so a partial study can
 /// be looked at while the rest runs.
 fn collect(args: &CollectOptions) -> Result<()> {
-    let (plan, dir) = hvi_studies::collect::open_plan(&args.study, true)?;
-    let store = hvi_store::store::Store::open(&dir)?;
-    let records: Vec<Option<hvi_store::store::Record>> = plan
-        .runs
-        .iter()
-        .map(|r| store.record(&r.fingerprint))
-        .collect::<hvi_run::error::Result<_>>()?;
-    let kind = match args.kind {
-        Some(k) => k,
-        None => match hvi_store::spec::Study::load(&plan.study_file) {
-            Ok(s) if s.calibrate.is_some() => CollectAs::Calibrate,
-            Ok(s) if s.validity.is_some() => CollectAs::ValidityMap,
-            _ => CollectAs::Sweep,
-        },
-    };
-    if args.cutoff.is_some() && kind != CollectAs::ValidityMap {
-        anyhow::bail!("--cutoff applies to `--as validity-map`");
+    let c = hvi_studies::collect::gather(args)?;
+    match c.kind {
+        CollectAs::Sweep => c.write_sweep()?,
+        CollectAs::Calibrate => hvi_calibrate::grid::collect_calibration(
+            &c.plan,
+            &c.dir,
+            c.table.clone(),
+            &c.filled,
+            &c.missing,
+            c.quiet,
+        )?,
+        CollectAs::ValidityMap => c.write_validity_map(args.cutoff)?,
     }
-    let missing: Vec<usize> = (0..plan.runs.len())
-        .filter(|&i| records[i].is_none())
-        .collect();
-    let filled: Vec<hvi_store::store::Record> = records
-        .iter()
-        .enumerate()
-        .map(|(i, r)| {
-            r.clone()
-                .unwrap_or_else(|| hvi_studies::collect::missing_record(&plan, i))
-        })
-        .collect();
-    let table = hvi_store::table::results_table(&plan, &records);
-    let quiet = args.study.quiet;
-    let done = records.iter().flatten().cloned().collect::<Vec<_>>();
-    hvi_studies::sweep::print_failures(&done);
-    match kind {
-        CollectAs::Sweep => {
-            table.write(&dir, "results")?;
-            println!("{}", dir.join("results.csv").display());
-        }
-        CollectAs::Calibrate => {
-            hvi_calibrate::grid::collect_calibration(&plan, &dir, table, &filled, &missing, quiet)?
-        }
-        CollectAs::ValidityMap => {
-            let cfg = hvi_studies::validity::ValidityConfig::of(&hvi_store::spec::Study::load(
-                &plan.study_file,
-            )?)?;
-            let cutoff = cfg.cutoff(args.cutoff)?;
-            let cut = hvi_studies::validity::Cut {
-                observable: cfg.observable,
-                cutoff,
-            };
-            hvi_studies::validity::validity_outputs(&plan, &dir, cut, table, &filled, quiet, None)?;
-        }
-    }
-    hvi_studies::collect::report_missing(&plan, &missing, quiet);
+    c.finish();
     Ok(())
 }
 
