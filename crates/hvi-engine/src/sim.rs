@@ -138,6 +138,8 @@ pub struct Simulation {
     pub bonds_broken: u64,
     coast_velocity: Vec<DVec3>,
     coast_from_step: Option<u64>,
+    /// The ledger when free flight began (see [`Self::energy`]).
+    coast_energy: Option<Energy>,
     broken_energy: f64,
     /// The absorbing band: damping rate by particle id, 1/s (empty: no band), and by current
     /// index (refreshed at every re-sort); energy it took out, J; per-chunk partials.
@@ -261,6 +263,7 @@ impl Simulation {
             bonds_broken: 0,
             coast_velocity: Vec::new(),
             coast_from_step: None,
+            coast_energy: None,
             broken_energy: 0.0,
             damping_by_id: Vec::new(),
             damping: Vec::new(),
@@ -762,8 +765,22 @@ impl Simulation {
         Ok(())
     }
 
-    /// The energy ledger now (a full pass over pairs and bonds).
+    /// The energy ledger now: a full pass over pairs and bonds ([`Self::energy_of_state`]),
+    /// or in free flight ([`Self::start_coasting`]) the ledger as it was when free flight
+    /// began. Free flight keeps every velocity and every distance inside a fragment, so the
+    /// kinetic, bond and broken-bond energy and each fragment's own contact energy are those
+    /// of its start; two fragments on crossing paths pass through each other without force,
+    /// and their overlap is not energy of the model.
     pub fn energy(&mut self) -> Energy {
+        match self.coast_energy {
+            Some(e) => e,
+            None => self.energy_of_state(),
+        }
+    }
+
+    /// The energy of the particles as they are (a full pass over pairs and bonds), in free
+    /// flight too.
+    pub fn energy_of_state(&mut self) -> Energy {
         let t = Instant::now();
         let partials = if self.materials.is_one() {
             self.energy_partials(self.materials.target)
@@ -935,6 +952,7 @@ impl Simulation {
     /// `labels` as for [`Self::fragments_separating`].
     pub fn start_coasting(&mut self, labels: &[u32]) {
         let (cm, _) = fragment_velocities(&self.particles, labels);
+        self.coast_energy = Some(self.energy_of_state());
         self.coast_velocity = labels.iter().map(|&l| cm[l as usize]).collect();
         self.coast_from_step = Some(self.step);
     }

@@ -276,8 +276,8 @@ pub struct Summary {
     pub speed_refreshes: u64,
     /// How often each bound of the adaptive step set the stride (all zero at a fixed step).
     pub stride_limits: hvi_engine::sim::StrideLimits,
-    /// Time since first contact at which the ballistic cut-off began free flight, s (null when
-    /// it did not, or was off).
+    /// Time since first contact at which free flight began, by the ballistic cut-off's gate or
+    /// at `run.free_flight_after_s`, s (null when it did not).
     pub ballistic_cutoff_tau_s: Option<f64>,
     /// Energy ledger.
     pub energy: EnergySummary,
@@ -598,6 +598,13 @@ fn render_steps(spec: &SceneSpec, d: &Derived, opts: &RunOptions) -> Vec<(u64, f
     }
     render_steps.sort_by_key(|&(s, _)| s);
     render_steps
+}
+
+/// The base step at which `run.free_flight_after_s` begins free flight (the first at or after
+/// that time since first contact), if it is set.
+fn free_flight_step(run: &RunSettings, d: &Derived) -> Option<u64> {
+    run.free_flight_after_s
+        .map(|t| ((d.contact_time_s + t) / d.dt_s).ceil() as u64)
 }
 
 /// The first base step after `s` that is a multiple of `every`.
@@ -1107,6 +1114,7 @@ impl Gathered {
         let from = (sim.step, sim.steps_taken);
         let mut next_thermo = next_multiple(sim.step, thermo_every);
         let mut progress_written: Option<Instant> = None;
+        let free_flight = free_flight_step(&spec.run, &d);
         while sim.step < d.steps {
             if opts.progress_file && progress_written.is_none_or(|t| t.elapsed() >= PROGRESS_EVERY)
             {
@@ -1133,7 +1141,10 @@ impl Gathered {
             if self.checkpoint_due(sim.step) {
                 self.save(sim, step_wall0.elapsed())?;
             }
-            let next = self.next_landing(sim.step, d.steps, energy_every);
+            let mut next = self.next_landing(sim.step, d.steps, energy_every);
+            if let Some(f) = free_flight.filter(|&f| f > sim.step) {
+                next = next.min(f);
+            }
             self.keep_continuation(sim, next, step_wall0.elapsed())?;
             if let Err(e) = sim.step_until(next) {
                 self.failure = Some(e);
@@ -1143,11 +1154,12 @@ impl Gathered {
             if (at_multiple(s, energy_every) || s == d.steps) && !self.sample_energy(sim) {
                 break;
             }
-            if spec.run.ballistic_cutoff
-                && sim.coasting_since().is_none()
-                && at_multiple(s, energy_every)
-            {
-                self.consider_cutoff(sim, &spec.run, opts.progress);
+            if sim.coasting_since().is_none() {
+                if free_flight.is_some_and(|f| s >= f) {
+                    self.begin_free_flight(sim, opts.progress);
+                } else if spec.run.ballistic_cutoff && at_multiple(s, energy_every) {
+                    self.consider_cutoff(sim, &spec.run, opts.progress);
+                }
             }
             self.observe(sim);
             if self.trajectory.is_some() && (s >= self.next_dump || s == d.steps) {
@@ -1228,6 +1240,21 @@ impl Gathered {
             }
             self.output_time += t.elapsed();
         }
+    }
+
+    /// Free flight from `run.free_flight_after_s` on: the fragments as they are now move
+    /// rigidly to the end, whatever the cut-off's gate.
+    fn begin_free_flight(&mut self, sim: &mut Simulation, progress: bool) {
+        let t = Instant::now();
+        let labels = hvi_engine::cloud::label_fragments(&sim.particles);
+        sim.start_coasting(&labels);
+        if progress {
+            log::info!(
+                "free flight from tau = {:.3} us (run.free_flight_after_s): fragments now move rigidly",
+                sim.tau_s() * 1e6
+            );
+        }
+        self.output_time += t.elapsed();
     }
 
     /// Observes the cloud when a sample is due and captures a frame at a render step.
@@ -1621,5 +1648,57 @@ mod tests {
             }
         }
         let _ = std::fs::remove_dir_all(&base);
+    }
+
+    /// `run.free_flight_after_s`: free flight begins at the first base step at or after that
+    /// time whatever the gate, the run computes no force after it, and the ledger from then on
+    /// is the one at its start; the run up to it is the run without it, bit for bit.
+    #[test]
+    fn free_flight_after_a_set_time_begins_there_and_keeps_the_ledger_from_then() {
+        let base = std::env::temp_dir().join(format!("hvi-free-flight-{}", std::process::id()));
+        let mut spec = SceneSpec::calibration(1000.0, 4e-6);
+        spec.run.free_flight_after_s = Some(1.5e-6);
+        // No cloud samples: the two runs below land on the same steps.
+        spec.analysis.cloud = false;
+        let opts = |dir: &str| RunOptions {
+            out_dir: base.join(dir),
+            ..RunOptions::default()
+        };
+        let coasted = run_scene(&spec, &opts("coasted")).expect("runs");
+        let s = &coasted.summary;
+        let dt = s.dt_s;
+        let tau = s.ballistic_cutoff_tau_s.expect("free flight began");
+        assert!((1.5e-6..1.5e-6 + dt).contains(&tau), "{tau}");
+        let from: Vec<_> = coasted.energy.iter().filter(|r| r.tau_s >= tau).collect();
+        assert!(from.len() > 2, "samples after the start: {}", from.len());
+        let ledger = |r: &EnergyRow| {
+            (
+                r.kinetic_j,
+                r.contact_j,
+                r.bond_j,
+                r.total_j,
+                r.bonds_broken,
+            )
+        };
+        for r in &from {
+            assert_eq!(ledger(r), ledger(from[0]));
+        }
+        let mut until = spec.clone();
+        until.run.free_flight_after_s = None;
+        until.run.end_time_s = tau;
+        let plain = run_scene(&until, &opts("plain")).expect("runs");
+        assert_eq!(plain.energy.last().map(ledger), Some(ledger(from[0])));
+        let far = spec.clone().build().expect("valid").derived.steps;
+        assert_eq!(coasted.sim.step, far);
+        assert_eq!(coasted.sim.coasting_since(), Some(plain.sim.step));
+        let _ = std::fs::remove_dir_all(&base);
+
+        let mut late = SceneSpec::calibration(1000.0, 4e-6);
+        late.run.free_flight_after_s = Some(4e-6);
+        let err = late.build().expect_err("at the end time").to_string();
+        assert!(
+            err.contains("run.free_flight_after_s") && err.contains("below run.end_time_s"),
+            "{err}"
+        );
     }
 }

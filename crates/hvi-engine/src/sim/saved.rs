@@ -3,7 +3,7 @@
 //! the same scene, the run continues bit-identically: the particles in their current order with
 //! the forces of the last step (velocity Verlet's first half-kick uses them), the neighbour list
 //! as built ([`NeighbourState`]), the adaptive step's memory, the ledger's bookings and the
-//! free flight's velocities. What a scene fixes (the interaction, the derived numbers, the rim)
+//! free flight's velocities and ledger. What a scene fixes (the interaction, the derived numbers, the rim)
 //! and scratch space are rebuilt from the scene.
 
 use glam::DVec3;
@@ -33,6 +33,7 @@ pub struct SimState {
     bonds_broken: u64,
     coast_velocity: Vec<DVec3>,
     coast_from_step: Option<u64>,
+    coast_energy: Option<Energy>,
     broken_energy: f64,
     #[serde(default)]
     absorbed_energy: f64,
@@ -119,6 +120,7 @@ impl Simulation {
             bonds_broken: self.bonds_broken,
             coast_velocity: self.coast_velocity.clone(),
             coast_from_step: self.coast_from_step,
+            coast_energy: self.coast_energy,
             broken_energy: self.broken_energy,
             absorbed_energy: self.absorbed_energy,
             energy_initial: self.energy_initial,
@@ -165,6 +167,7 @@ impl Simulation {
         self.bonds_broken = s.bonds_broken;
         self.coast_velocity = s.coast_velocity;
         self.coast_from_step = s.coast_from_step;
+        self.coast_energy = s.coast_energy;
         self.broken_energy = s.broken_energy;
         self.absorbed_energy = s.absorbed_energy;
         self.energy_initial = s.energy_initial;

@@ -377,6 +377,15 @@ pub const KEYS: &[Key] = &[
         default: "1e-3",
     },
     Key {
+        name: "run.free_flight_after_s",
+        meaning: "free flight from this time after first contact on, whatever the cut-off's \
+                  gate: the fragments as they are then move rigidly with their \
+                  centre-of-mass velocities to the end (its cost in accuracy: \
+                  docs/model-decisions.md)",
+        allowed: Allowed::Text("a number > 0 and below run.end_time_s, or unset"),
+        default: "unset",
+    },
+    Key {
         name: "run.absorbing_band_over_d",
         meaning: "width over D of a band inside the plate's lateral edge that damps outgoing \
                   stress waves (a sponge layer; sphere on plate only, less than half the \

@@ -355,6 +355,13 @@ pub struct RunSettings {
     pub cutoff_quiet_s: f64,
     /// ... the broken-bond count grew by at most this fraction (0: not a single break).
     pub cutoff_break_fraction: f64,
+    /// Free flight from this time after first contact on, s, whatever the cut-off's gate: the
+    /// fragments as they are then move rigidly with their centre-of-mass velocities to the
+    /// end (`Simulation::start_coasting`). What it costs in accuracy is measured in
+    /// docs/model-decisions.md ("Free flight after a set time"). Omitted from the scene as
+    /// written when unset, so runs without it keep their fingerprints.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub free_flight_after_s: Option<f64>,
     /// Width over D of the absorbing band inside the plate's lateral edge (0: none; sphere on
     /// plate only; see `hvi_engine::sim::AbsorbingBand`). Omitted from the scene as written when
     /// 0, so runs without a band keep their fingerprints.
@@ -387,6 +394,7 @@ impl Default for RunSettings {
             cutoff_min_tau_s: 8e-6,
             cutoff_quiet_s: 2e-6,
             cutoff_break_fraction: 1e-3,
+            free_flight_after_s: None,
             absorbing_band_over_d: 0.0,
             symmetry: Symmetry::Full,
         }

@@ -121,6 +121,18 @@ impl RunSettings {
         keys::check("run.cutoff_min_tau_s", self.cutoff_min_tau_s)?;
         keys::check("run.cutoff_quiet_s", self.cutoff_quiet_s)?;
         keys::check("run.cutoff_break_fraction", self.cutoff_break_fraction)?;
+        if let Some(t) = self.free_flight_after_s {
+            if !(t > 0.0 && t < self.end_time_s) {
+                return Err(EngineError::invalid(
+                    "run.free_flight_after_s",
+                    t,
+                    format!(
+                        "a number > 0 and below run.end_time_s = {:e} s, or unset",
+                        self.end_time_s
+                    ),
+                ));
+            }
+        }
         Ok(())
     }
 }
