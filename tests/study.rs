@@ -1971,3 +1971,57 @@ fn a_calibration_whose_targets_bound_eps_from_above_only_reports_the_bound() {
         "{e}"
     );
 }
+
+/// `calibrate.tier_set`: calibrate adds the tier's settings to every run it makes (here free
+/// flight from 20 us), says so, and `sweep` of the same study runs the tier without them; a
+/// tier the study does not have is refused naming the key.
+#[test]
+fn calibrate_adds_its_tier_settings_and_sweep_does_not() {
+    let dir = scratch("calibrate-tier-set");
+    let study = edge_study(
+        &dir,
+        "\n[calibrate.tier_set]\nquick = [\"run.free_flight_after_s=2e-5\"]\n",
+    );
+    let cutoffs = |out: &Path| -> Vec<Option<f64>> {
+        let mut v = Vec::new();
+        for e in std::fs::read_dir(out.join("runs")).expect("runs") {
+            let run = e.expect("entry").path();
+            if !run.is_dir() {
+                continue;
+            }
+            let summary = run.join("summary.json");
+            let s: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(&summary).expect("summary"))
+                    .expect("json");
+            v.push(s["ballistic_cutoff_tau_s"].as_f64());
+        }
+        v
+    };
+    let out = dir.join("calibrated");
+    let o = calibrate_with(&study, &out, &["--no-refine"]);
+    assert_ok(&o);
+    assert!(
+        stderr(&o).contains("calibrate sets at this tier")
+            && stderr(&o).contains("run.free_flight_after_s=2e-5"),
+        "{}",
+        stderr(&o)
+    );
+    let c = cutoffs(&out);
+    assert!(c.len() >= 3, "every grid point ran: {c:?}");
+    for t in c {
+        let t = t.expect("free flight began");
+        assert!((2e-5..2.001e-5).contains(&t), "{t}");
+    }
+    let swept = dir.join("swept");
+    assert_ok(&sweep(&study, &swept, &[]));
+    assert!(cutoffs(&swept).iter().all(Option::is_none));
+
+    let bad = edge_study(&dir, "\n[calibrate.tier_set]\nnope = [\"run.seed=3\"]\n");
+    let o = calibrate_with(&bad, &dir.join("bad"), &["--no-refine"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("calibrate.tier_set.nope") && stderr(&o).contains("\"quick\""),
+        "{}",
+        stderr(&o)
+    );
+}

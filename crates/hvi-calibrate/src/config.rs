@@ -137,6 +137,13 @@ pub struct CalibrateConfig {
     /// as a check (none: no check; `--ladder-check` overrides).
     #[serde(default)]
     pub ladder_check: Option<f64>,
+    /// Overrides `calibrate` adds to every run it makes at a tier, by tier name (after the
+    /// study's `set`, so the tier's own `set` and `--set` still win): settings that give the
+    /// calibration its answer sooner at a cost measured in docs/model-decisions.md, such as the
+    /// quarter-symmetric scene and free flight after a set time. `sweep` and the reproduction
+    /// run the tier without them.
+    #[serde(default)]
+    pub tier_set: BTreeMap<String, Vec<String>>,
 }
 
 impl CalibrateConfig {
@@ -197,6 +204,7 @@ impl CalibrateConfig {
             }
         }
         cfg.check_seeds("study key `calibrate.seeds`")?;
+        cfg.check_tier_set(study)?;
         match (&cfg.targets, cfg.shots.len()) {
             (Some(_), n) if n > 0 => bail!(
                 "study keys `calibrate.targets` and `calibrate.shots` are both given (allowed: \
@@ -209,6 +217,36 @@ impl CalibrateConfig {
             _ => {}
         }
         Ok(cfg)
+    }
+
+    /// `calibrate.tier_set`: each name a tier of the study, each entry an override of a key
+    /// that is not an axis.
+    fn check_tier_set(&self, study: &Study) -> Result<()> {
+        for (tier, set) in &self.tier_set {
+            if !study.tiers.contains_key(tier) {
+                bail!(
+                    "study key `calibrate.tier_set.{tier}`: `{tier}` is not a tier of this study \
+                 (allowed: {:?})",
+                    study.tiers.keys().collect::<Vec<_>>()
+                );
+            }
+            for o in set {
+                let k = hvi_store::spec::override_key(o);
+                if !o.contains('=') || study.axes.iter().any(|a| a.key == k) {
+                    bail!(
+                        "study key `calibrate.tier_set.{tier}`: `{o}` (allowed: section.key=value \
+                     overrides of keys that are not axes)"
+                    );
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The overrides `calibrate` adds at `tier` (the study's default tier when None).
+    pub fn tier_set_of(&self, study: &Study, tier: Option<&str>) -> Result<Vec<String>> {
+        let name = &study.tier(tier)?.name;
+        Ok(self.tier_set.get(name).cloned().unwrap_or_default())
     }
 
     /// The shot files, as the study names them (relative to the study file).

@@ -95,8 +95,18 @@ pub fn shot_plans(
     opts: &StudyOptions,
     hold_out: Option<&str>,
 ) -> Result<(Study, Vec<ShotPlan>, PathBuf)> {
-    let study = opts.load_study()?;
-    let shots = crate::CalibrateConfig::of(&study)?.load_shots(&study)?;
+    let mut study = opts.load_study()?;
+    let cfg = crate::CalibrateConfig::of(&study)?;
+    let shots = cfg.load_shots(&study)?;
+    let extra = cfg.tier_set_of(&study, opts.tier.as_deref())?;
+    if !extra.is_empty() {
+        log::info!(
+            "calibrate sets at this tier (calibrate.tier_set; their measured cost: \
+             docs/model-decisions.md): {}",
+            extra.join(", ")
+        );
+        study.set.extend(extra);
+    }
     if let Some(h) = hold_out {
         if !shots.iter().any(|t| t.shot.id == h) {
             bail!(
