@@ -35,6 +35,7 @@
 pub mod cloud;
 pub mod neighbour;
 pub mod sim;
+pub mod simd;
 pub mod threads;
 
 // The scene, its laws and the state arrays are hvi-scene's; re-exported so that a user of the

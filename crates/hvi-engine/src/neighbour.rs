@@ -138,9 +138,20 @@ fn cell_key(p: DVec3, inv_h: f64) -> (u64, bool) {
     let mut ok = true;
     let mut c = [0i64; 3];
     for (a, v) in [p.x, p.y, p.z].into_iter().enumerate() {
-        let q = (v * inv_h).floor();
-        let q = if q.is_finite() {
-            q as i64 + COORD_OFFSET
+        let y = v * inv_h;
+        // floor(y) as an integer without `f64::floor` (a library call on x86-64's baseline,
+        // where it cost as much as the rest of the key): truncation toward zero, one less
+        // where that rounded a negative fraction up. Exact for every finite y: one that
+        // truncates to within i64's range converts back exactly, and the cast saturates
+        // beyond it as `floor(y) as i64` does.
+        let q = if y.is_finite() {
+            let t = y as i64;
+            let floor = if (t as f64) > y {
+                t.saturating_sub(1)
+            } else {
+                t
+            };
+            floor.wrapping_add(COORD_OFFSET)
         } else {
             -1
         };
@@ -595,6 +606,17 @@ impl NeighbourList {
     /// row, and the three rows of the next plane). Sorted order is key order, so these hold
     /// exactly the candidates j > i: each pair is examined once and entered on both lists.
     fn search_cells(&self, search: &PairSearch, chunk: usize, out: &mut ChunkPairs) {
+        let nl = self;
+        crate::simd::dispatch!(search_cells_avx2(
+            nl: &NeighbourList, search: &PairSearch, chunk: usize, out: &mut ChunkPairs
+        ) -> () {
+            nl.search_cells_body(search, chunk, out)
+        })
+    }
+
+    /// [`Self::search_cells`] as compiled for the instruction set it is called from.
+    #[inline(always)]
+    fn search_cells_body(&self, search: &PairSearch, chunk: usize, out: &mut ChunkPairs) {
         let (cell_start, cell_keys) = (&self.cell_start, &self.cell_keys);
         let ncell = cell_keys.len();
         let c0 = chunk * CELL_CHUNK;
@@ -1214,7 +1236,7 @@ impl PairSearch<'_> {
     /// Adds to `found` the unbonded pairs (i, j > i) within the radius among the candidates
     /// `ranges` (particle index ranges of the forward rows), and raises `max_w2` to the largest
     /// squared relative speed of the pairs within the radius when measured.
-    #[inline]
+    #[inline(always)]
     fn scan(
         &self,
         i: usize,

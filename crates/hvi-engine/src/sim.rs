@@ -29,7 +29,7 @@ use crate::symmetry::{
     image_bond_flags, image_bond_intact, intact_image_bonds, reflect, unfold, unfold_ids, Symmetry,
     MIRROR_X, MIRROR_Y,
 };
-use crate::threads;
+use crate::{simd, threads};
 
 // The adaptive step's raise delay, also at the path it had when it was defined here.
 pub use crate::step::STRIDE_RAISE_AFTER;
@@ -86,6 +86,84 @@ pub struct Timing {
     pub integrate: Duration,
     /// Energy-ledger samples.
     pub energy: Duration,
+}
+
+/// What the first half-kick and drift read ([`drift_chunk`]).
+struct DriftInputs<'a> {
+    force: &'a [DVec3],
+    inv_mass: &'a [f64],
+    /// Positions at the last build and the frames' velocities (see `neighbour`).
+    built: &'a [DVec3],
+    frame: &'a [DVec3],
+    /// Velocities at the last build (the adaptive step's speed bound).
+    vel_built: &'a [DVec3],
+    adaptive: bool,
+    half: f64,
+    dt: f64,
+    /// Time since the build at the end of this step, s.
+    since: f64,
+}
+
+/// The first half-kick and the drift of the chunk of particles from `base` (their `pos` and
+/// `vel`). Returns the largest squared displacement relative to the frame (infinite for NaN)
+/// and, with the adaptive step, the largest squared speed relative to a frame and to the
+/// velocity at the build.
+fn drift_chunk(
+    inputs: &DriftInputs,
+    base: usize,
+    pos: &mut [DVec3],
+    vel: &mut [DVec3],
+) -> (f64, [f64; 2]) {
+    simd::dispatch!(drift_chunk_avx2(
+        inputs: &DriftInputs, base: usize, pos: &mut [DVec3], vel: &mut [DVec3]
+    ) -> (f64, [f64; 2]) {
+        drift_chunk_body(inputs, base, pos, vel)
+    })
+}
+
+/// [`drift_chunk`] as compiled for the instruction set it is called from.
+#[inline(always)]
+fn drift_chunk_body(
+    inputs: &DriftInputs,
+    base: usize,
+    pos: &mut [DVec3],
+    vel: &mut [DVec3],
+) -> (f64, [f64; 2]) {
+    let DriftInputs {
+        force,
+        inv_mass,
+        built,
+        frame,
+        vel_built,
+        adaptive,
+        half,
+        dt,
+        since,
+    } = *inputs;
+    let mut max_d2: f64 = 0.0;
+    let (mut max_e2, mut max_w2): (f64, f64) = (0.0, 0.0);
+    for k in 0..pos.len() {
+        let i = base + k;
+        let v = vel[k] + force[i] * (half * inv_mass[i]);
+        vel[k] = v;
+        if adaptive {
+            max_e2 = max_e2.max((v - frame[i]).length_squared());
+            max_w2 = max_w2.max((v - vel_built[i]).length_squared());
+        }
+        let x = pos[k] + v * dt;
+        pos[k] = x;
+        // Displacement relative to the particle's frame (see `neighbour`).
+        let d2 = (x - built[i] - frame[i] * since).length_squared();
+        // NaN fails every comparison: make it win the max so it is caught below.
+        max_d2 = if d2 <= max_d2 {
+            max_d2
+        } else if d2.is_nan() {
+            f64::INFINITY
+        } else {
+            d2
+        };
+    }
+    (max_d2, [max_e2, max_w2])
 }
 
 /// Per-chunk results of the bond kernel.
@@ -443,17 +521,21 @@ impl Simulation {
     /// [`Self::contact_forces_and_kick`] under one law lookup (monomorphised per [`PairLaw`]).
     fn contact_forces_and_kick_with<L: PairLaw>(&mut self, law: L, half_dt: f64) {
         let p = &mut self.particles;
-        let bodies = &p.body;
-        let pos = &p.pos;
-        let nl = &self.neighbours;
-        let fr_bond = &self.bond_force_over_r;
-        let bonds = &p.bonds;
-        let inv_mass = &p.inv_mass;
-        let mass = &p.mass;
-        let damping = &self.damping;
-        let damp = !damping.is_empty() && half_dt > 0.0;
-        let image_bonds = &p.image_bonds;
-        let mirrored = self.symmetry == Symmetry::Quarter;
+        let inputs = ContactInputs {
+            law,
+            bodies: &p.body,
+            pos: &p.pos,
+            nl: &self.neighbours,
+            fr_bond: &self.bond_force_over_r,
+            bonds: &p.bonds,
+            inv_mass: &p.inv_mass,
+            mass: &p.mass,
+            damping: &self.damping,
+            damp: !self.damping.is_empty() && half_dt > 0.0,
+            image_bonds: &p.image_bonds,
+            mirrored: self.symmetry == Symmetry::Quarter,
+            half_dt,
+        };
         let chunks = p
             .force
             .chunks_mut(CHUNK)
@@ -461,33 +543,7 @@ impl Simulation {
             .zip(self.contact_min_r2.iter_mut())
             .zip(self.absorbed_partials.iter_mut());
         threads::for_each_chunk(chunks, |c, (((force, vel), min_out), absorbed_out)| {
-            let base = c * CHUNK;
-            let mut min_r2 = f64::INFINITY;
-            let mut absorbed = 0.0;
-            for (k, (f_out, v)) in force.iter_mut().zip(vel.iter_mut()).enumerate() {
-                let i = base + k;
-                let f = contact_force(&law, bodies, pos, i, nl.of(i), &mut min_r2);
-                let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
-                let mut f = add_bond_forces(f, pos, i, slots, fr_bond);
-                if mirrored {
-                    f += image_force(
-                        &law,
-                        bodies,
-                        pos,
-                        i,
-                        nl.images_of(i),
-                        image_bonds[i],
-                        &mut min_r2,
-                    );
-                }
-                *f_out = f;
-                *v += f * (half_dt * inv_mass[i]);
-                if damp && damping[i] > 0.0 {
-                    absorbed += band::damp(v, damping[i], 2.0 * half_dt, mass[i]);
-                }
-            }
-            *min_out = min_r2;
-            *absorbed_out = absorbed;
+            (*min_out, *absorbed_out) = contact_chunk(&inputs, c * CHUNK, force, vel);
         });
     }
 
@@ -627,33 +683,19 @@ impl Simulation {
             .zip(p.vel.chunks_mut(CHUNK))
             .zip(self.disp_partials.iter_mut())
             .zip(self.speed_partials.iter_mut());
+        let inputs = DriftInputs {
+            force: &p.force,
+            inv_mass: &p.inv_mass,
+            built,
+            frame,
+            vel_built,
+            adaptive,
+            half,
+            dt,
+            since,
+        };
         threads::for_each_chunk(chunks, |c, (((pos, vel), out), speed_out)| {
-            let base = c * CHUNK;
-            let mut max_d2: f64 = 0.0;
-            let (mut max_e2, mut max_w2): (f64, f64) = (0.0, 0.0);
-            for k in 0..pos.len() {
-                let i = base + k;
-                let v = vel[k] + p.force[i] * (half * p.inv_mass[i]);
-                vel[k] = v;
-                if adaptive {
-                    max_e2 = max_e2.max((v - frame[i]).length_squared());
-                    max_w2 = max_w2.max((v - vel_built[i]).length_squared());
-                }
-                let x = pos[k] + v * dt;
-                pos[k] = x;
-                // Displacement relative to the particle's frame (see `neighbour`).
-                let d2 = (x - built[i] - frame[i] * since).length_squared();
-                // NaN fails every comparison: make it win the max so it is caught below.
-                max_d2 = if d2 <= max_d2 {
-                    max_d2
-                } else if d2.is_nan() {
-                    f64::INFINITY
-                } else {
-                    d2
-                };
-            }
-            *out = max_d2;
-            *speed_out = [max_e2, max_w2];
+            (*out, *speed_out) = drift_chunk(&inputs, c * CHUNK, pos, vel);
         });
         let max_d2 = self.disp_partials.iter().fold(0.0f64, |a, &b| a.max(b));
         let [max_e2, max_w2] = self
@@ -1035,6 +1077,23 @@ fn bond_chunk<L: PairLaw>(
     bonds: &mut [u32],
     fr: &mut [f64],
 ) -> BondPartial {
+    simd::dispatch!(bond_chunk_avx2<L: PairLaw>(
+        law: &L, bodies: &[Body], pos: &[DVec3], base: usize, bonds: &mut [u32], fr: &mut [f64]
+    ) -> BondPartial {
+        bond_chunk_body(law, bodies, pos, base, bonds, fr)
+    })
+}
+
+/// [`bond_chunk`] as compiled for the instruction set it is called from.
+#[inline(always)]
+fn bond_chunk_body<L: PairLaw>(
+    law: &L,
+    bodies: &[Body],
+    pos: &[DVec3],
+    base: usize,
+    bonds: &mut [u32],
+    fr: &mut [f64],
+) -> BondPartial {
     // One lattice: r_eq is every body's.
     let r_eq2 = law.bond(bodies, base).r_eq2();
     let mut part = BondPartial {
@@ -1091,6 +1150,93 @@ fn bond_chunk<L: PairLaw>(
         b0 += nb;
     }
     part
+}
+
+/// What the contact pass reads ([`contact_chunk`]).
+struct ContactInputs<'a, L> {
+    law: L,
+    bodies: &'a [Body],
+    pos: &'a [DVec3],
+    nl: &'a NeighbourList,
+    fr_bond: &'a [f64],
+    bonds: &'a [u32],
+    inv_mass: &'a [f64],
+    mass: &'a [f64],
+    damping: &'a [f64],
+    /// Whether the absorbing band damps this kick.
+    damp: bool,
+    image_bonds: &'a [u8],
+    /// Quarter symmetry: the image pairs and bonds too.
+    mirrored: bool,
+    half_dt: f64,
+}
+
+/// The contact pass over the chunk of particles from `base` (their `force` and `vel`): per
+/// particle the contact repulsion over its list, the bond forces gathered from its slots, the
+/// image pairs' and bonds' forces under quarter symmetry, and the second half-kick with the
+/// band's damping. Returns the chunk's closest listed pair (squared) and the energy the band
+/// took out.
+fn contact_chunk<L: PairLaw>(
+    inputs: &ContactInputs<L>,
+    base: usize,
+    force: &mut [DVec3],
+    vel: &mut [DVec3],
+) -> (f64, f64) {
+    simd::dispatch!(contact_chunk_avx2<L: PairLaw>(
+        inputs: &ContactInputs<L>, base: usize, force: &mut [DVec3], vel: &mut [DVec3]
+    ) -> (f64, f64) {
+        contact_chunk_body(inputs, base, force, vel)
+    })
+}
+
+/// [`contact_chunk`] as compiled for the instruction set it is called from.
+#[inline(always)]
+fn contact_chunk_body<L: PairLaw>(
+    inputs: &ContactInputs<L>,
+    base: usize,
+    force: &mut [DVec3],
+    vel: &mut [DVec3],
+) -> (f64, f64) {
+    let ContactInputs {
+        law,
+        bodies,
+        pos,
+        nl,
+        fr_bond,
+        bonds,
+        inv_mass,
+        mass,
+        damping,
+        damp,
+        image_bonds,
+        mirrored,
+        half_dt,
+    } = *inputs;
+    let mut min_r2 = f64::INFINITY;
+    let mut absorbed = 0.0;
+    for (k, (f_out, v)) in force.iter_mut().zip(vel.iter_mut()).enumerate() {
+        let i = base + k;
+        let f = contact_force(&law, bodies, pos, i, nl.of(i), &mut min_r2);
+        let slots = &bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
+        let mut f = add_bond_forces(f, pos, i, slots, fr_bond);
+        if mirrored {
+            f += image_force(
+                &law,
+                bodies,
+                pos,
+                i,
+                nl.images_of(i),
+                image_bonds[i],
+                &mut min_r2,
+            );
+        }
+        *f_out = f;
+        *v += f * (half_dt * inv_mass[i]);
+        if damp && damping[i] > 0.0 {
+            absorbed += band::damp(v, damping[i], 2.0 * half_dt, mass[i]);
+        }
+    }
+    (min_r2, absorbed)
 }
 
 /// The contact repulsion on particle `i` from the pairs of its neighbour list `list`;
@@ -1162,7 +1308,7 @@ fn add_bond_forces(mut f: DVec3, pos: &[DVec3], i: usize, slots: &[u32], fr_bond
 /// `flags` the same law as an ordinary bond (repulsion when compressed, the spring when
 /// stretched and intact, nothing when broken and stretched). Lowers `min_r2` to the closest
 /// such pair's squared distance.
-#[inline]
+#[inline(always)]
 fn image_force<L: PairLaw>(
     law: &L,
     bodies: &[Body],

@@ -100,6 +100,46 @@ fn same_seed_is_bit_identical_at_one_and_two_threads() {
     }
 }
 
+/// The kernels compiled for AVX2 and for x86-64's baseline give the same state to the bit
+/// (`hvi_engine::simd`): the instruction set changes the speed only.
+#[test]
+fn results_do_not_depend_on_the_instruction_set() {
+    use hvi_engine::simd::{self, Isa};
+    if !simd::avx2_available() {
+        eprintln!("this CPU has no AVX2: only the baseline kernels can run here");
+        return;
+    }
+    // An impact that breaks bonds, with the adaptive step and the absorbing band, on two
+    // threads: every dispatched kernel runs.
+    let mut spec = sphere_scene(3000.0, 3e-6);
+    spec.run.absorbing_band_over_d = 0.5;
+    let run_with = |isa| {
+        simd::force(isa);
+        assert_eq!(simd::isa(), isa);
+        pool(2).install(|| run(&spec))
+    };
+    let (a, ea) = run_with(Isa::Baseline);
+    let (b, eb) = run_with(Isa::Avx2);
+    assert!(a.bonds_broken > 0);
+    assert_eq!(a.bonds_broken, b.bonds_broken);
+    assert_eq!(a.steps_taken, b.steps_taken);
+    for (x, y) in ea.iter().zip(&eb) {
+        assert_eq!(x.total_j().to_bits(), y.total_j().to_bits());
+    }
+    for (u, v) in a
+        .particles
+        .pos
+        .iter()
+        .zip(&b.particles.pos)
+        .chain(a.particles.vel.iter().zip(&b.particles.vel))
+    {
+        assert_eq!(
+            u.to_array().map(f64::to_bits),
+            v.to_array().map(f64::to_bits)
+        );
+    }
+}
+
 /// Two bonded particles flying apart: the bond holds up to rcut, breaks in the first step
 /// past it, and its energy at rcut is booked once in the broken column; the ledger closes.
 #[test]

@@ -269,6 +269,10 @@ pub struct Summary {
     pub particle_steps_per_second: f64,
     /// Threads used.
     pub threads: usize,
+    /// The instruction set the engine's kernels ran with (`baseline` or `avx2`, chosen at
+    /// run time: `hvi_engine::simd`); results do not depend on it.
+    #[serde(default)]
+    pub kernels_isa: String,
     /// Neighbour-list builds.
     pub neighbour_builds: u64,
     /// Measurements of the interacting pairs' speed between builds (the adaptive step's).
@@ -564,7 +568,11 @@ fn set_up(spec: &SceneSpec, opts: &RunOptions) -> Result<(Simulation, Counts)> {
         if copies > 1 {
             log::info!("quarter symmetry: {n} particles simulated, with their mirror images");
         }
-        log::info!("threads {}", rayon::current_num_threads());
+        log::info!(
+            "threads {}, kernels {}",
+            rayon::current_num_threads(),
+            hvi_engine::simd::isa().name()
+        );
     }
     let counts = Counts {
         particles: sim.full_particle_count(),
@@ -1539,6 +1547,7 @@ fn summarise(spec: &SceneSpec, sim: &Simulation, counts: Counts, m: Measured) ->
         particle_steps_per_second: counts.simulated as f64 * sim.steps_taken as f64
             / m.step_wall_s.max(1e-12),
         threads: rayon::current_num_threads(),
+        kernels_isa: hvi_engine::simd::isa().name().into(),
         neighbour_builds: sim.neighbour_builds(),
         speed_refreshes: sim.speed_refreshes,
         stride_limits: sim.stride_limits,

@@ -67,7 +67,7 @@ impl AbsorbingBand {
 
 /// Damps `v` at rate `gamma` over `dt` (v -> v exp(-gamma dt)) and returns the kinetic energy
 /// taken out, J, for a particle of mass `mass`.
-#[inline]
+#[inline(always)]
 pub(super) fn damp(v: &mut DVec3, gamma: f64, dt: f64, mass: f64) -> f64 {
     let before = v.length_squared();
     *v *= (-gamma * dt).exp();
