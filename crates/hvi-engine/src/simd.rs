@@ -7,7 +7,7 @@
 //! ([`wide`]). Results are the same to the bit either way: Rust never fuses a multiply and an
 //! add unless the code asks for it (`mul_add`, which the engine does not use), and IEEE 754
 //! fixes the result of every add, multiply, divide and square root whatever the width of the
-//! instruction that computes it; `engine_results_do_not_depend_on_the_instruction_set` runs a
+//! instruction that computes it; the engine test `results_do_not_depend_on_the_instruction_set` runs a
 //! scene both ways and compares. A build with `-C target-cpu=native` compiles everything for
 //! the build machine and needs none of this.
 //!
