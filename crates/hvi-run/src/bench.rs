@@ -90,7 +90,11 @@ pub fn bench(spec: &SceneSpec, threads: &[usize], out: &Path) -> Result<(Vec<Ben
             integrate_s: s.timing.integrate_s,
         });
     }
-    let mut table = String::from(
+    let mut table = format!(
+        "kernels: {} (hvi_engine::simd; HVI_ISA=baseline forces x86-64's baseline)\n",
+        hvi_engine::simd::isa().name()
+    );
+    table.push_str(
         "threads  particles     steps   wall (s)  particle-steps/s  speedup  bonds broken  energy drift\n",
     );
     for r in &rows {
