@@ -1288,17 +1288,25 @@ fn add_bond_forces(mut f: DVec3, pos: &[DVec3], i: usize, slots: &[u32], fr_bond
     let own: &[f64; OWNED_BONDS] = fr_bond[i * OWNED_BONDS..(i + 1) * OWNED_BONDS]
         .try_into()
         .expect("a particle's owned bonds");
+    // Without a branch per slot (empty slots are scattered through a cloud, so a branch
+    // would often be mispredicted): an empty slot stands for the particle itself, whose
+    // separation is +0, so its term is a zero, and adding a zero leaves `f` as it is (f starts
+    // at +0 and is never -0: a sum is -0 only if both terms are).
     for m in 0..OWNED_BONDS {
         let owned = slots[2 * m];
-        if owned != NO_BOND {
-            let d = pi - pos[(owned & INDEX_MASK) as usize];
-            f += d * own[m];
-        }
+        let j = if owned == NO_BOND {
+            i
+        } else {
+            (owned & INDEX_MASK) as usize
+        };
+        f += (pi - pos[j]) * own[m];
         let mirror = slots[2 * m + 1];
-        if mirror != NO_BOND {
-            let d = pi - pos[mirror as usize];
-            f += d * fr_bond[mirror as usize * OWNED_BONDS + m];
-        }
+        let j = if mirror == NO_BOND {
+            i
+        } else {
+            mirror as usize
+        };
+        f += (pi - pos[j]) * fr_bond[j * OWNED_BONDS + m];
     }
     f
 }
