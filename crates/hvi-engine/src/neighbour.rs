@@ -166,6 +166,16 @@ fn cell_key(p: DVec3, inv_h: f64) -> (u64, bool) {
     )
 }
 
+crate::simd::kernel! {
+    /// [`NeighbourList::search_cells`] for the widest instruction set this CPU has.
+    fn search_cells_kernel(
+        nl: &NeighbourList,
+        search: &PairSearch,
+        chunk: usize,
+        out: &mut ChunkPairs,
+    ) -> () = NeighbourList::search_cells_body;
+}
+
 /// Rows of the half stencil on the key grid: the own row, the next row, and the three rows of
 /// the next plane (key offsets of each row's centre cell).
 const FORWARD_ROWS: usize = 5;
@@ -606,12 +616,7 @@ impl NeighbourList {
     /// row, and the three rows of the next plane). Sorted order is key order, so these hold
     /// exactly the candidates j > i: each pair is examined once and entered on both lists.
     fn search_cells(&self, search: &PairSearch, chunk: usize, out: &mut ChunkPairs) {
-        let nl = self;
-        crate::simd::dispatch!(search_cells_avx2(
-            nl: &NeighbourList, search: &PairSearch, chunk: usize, out: &mut ChunkPairs
-        ) -> () {
-            nl.search_cells_body(search, chunk, out)
-        })
+        search_cells_kernel(self, search, chunk, out);
     }
 
     /// [`Self::search_cells`] as compiled for the instruction set it is called from.

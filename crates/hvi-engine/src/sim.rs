@@ -104,21 +104,17 @@ struct DriftInputs<'a> {
     since: f64,
 }
 
-/// The first half-kick and the drift of the chunk of particles from `base` (their `pos` and
-/// `vel`). Returns the largest squared displacement relative to the frame (infinite for NaN)
-/// and, with the adaptive step, the largest squared speed relative to a frame and to the
-/// velocity at the build.
-fn drift_chunk(
-    inputs: &DriftInputs,
-    base: usize,
-    pos: &mut [DVec3],
-    vel: &mut [DVec3],
-) -> (f64, [f64; 2]) {
-    simd::dispatch!(drift_chunk_avx2(
-        inputs: &DriftInputs, base: usize, pos: &mut [DVec3], vel: &mut [DVec3]
-    ) -> (f64, [f64; 2]) {
-        drift_chunk_body(inputs, base, pos, vel)
-    })
+simd::kernel! {
+    /// The first half-kick and the drift of the chunk of particles from `base` (their `pos` and
+    /// `vel`). Returns the largest squared displacement relative to the frame (infinite for NaN)
+    /// and, with the adaptive step, the largest squared speed relative to a frame and to the
+    /// velocity at the build.
+    fn drift_chunk(
+        inputs: &DriftInputs,
+        base: usize,
+        pos: &mut [DVec3],
+        vel: &mut [DVec3],
+    ) -> (f64, [f64; 2]) = drift_chunk_body;
 }
 
 /// [`drift_chunk`] as compiled for the instruction set it is called from.
@@ -1067,21 +1063,17 @@ impl Simulation {
     }
 }
 
-/// The bond kernel over one chunk of particles starting at index `base`: F/r of each owned
-/// slot into `fr`, in blocks of `BLOCK_BONDS` bonds; breaks are booked in the result.
-fn bond_chunk<L: PairLaw>(
-    law: &L,
-    bodies: &[Body],
-    pos: &[DVec3],
-    base: usize,
-    bonds: &mut [u32],
-    fr: &mut [f64],
-) -> BondPartial {
-    simd::dispatch!(bond_chunk_avx2<L: PairLaw>(
-        law: &L, bodies: &[Body], pos: &[DVec3], base: usize, bonds: &mut [u32], fr: &mut [f64]
-    ) -> BondPartial {
-        bond_chunk_body(law, bodies, pos, base, bonds, fr)
-    })
+simd::kernel! {
+    /// The bond kernel over one chunk of particles starting at index `base`: F/r of each owned
+    /// slot into `fr`, in blocks of `BLOCK_BONDS` bonds; breaks are booked in the result.
+    fn bond_chunk<L: PairLaw>(
+        law: &L,
+        bodies: &[Body],
+        pos: &[DVec3],
+        base: usize,
+        bonds: &mut [u32],
+        fr: &mut [f64],
+    ) -> BondPartial = bond_chunk_body;
 }
 
 /// [`bond_chunk`] as compiled for the instruction set it is called from.
@@ -1171,22 +1163,18 @@ struct ContactInputs<'a, L> {
     half_dt: f64,
 }
 
-/// The contact pass over the chunk of particles from `base` (their `force` and `vel`): per
-/// particle the contact repulsion over its list, the bond forces gathered from its slots, the
-/// image pairs' and bonds' forces under quarter symmetry, and the second half-kick with the
-/// band's damping. Returns the chunk's closest listed pair (squared) and the energy the band
-/// took out.
-fn contact_chunk<L: PairLaw>(
-    inputs: &ContactInputs<L>,
-    base: usize,
-    force: &mut [DVec3],
-    vel: &mut [DVec3],
-) -> (f64, f64) {
-    simd::dispatch!(contact_chunk_avx2<L: PairLaw>(
-        inputs: &ContactInputs<L>, base: usize, force: &mut [DVec3], vel: &mut [DVec3]
-    ) -> (f64, f64) {
-        contact_chunk_body(inputs, base, force, vel)
-    })
+simd::kernel! {
+    /// The contact pass over the chunk of particles from `base` (their `force` and `vel`): per
+    /// particle the contact repulsion over its list, the bond forces gathered from its slots, the
+    /// image pairs' and bonds' forces under quarter symmetry, and the second half-kick with the
+    /// band's damping. Returns the chunk's closest listed pair (squared) and the energy the band
+    /// took out.
+    fn contact_chunk<L: PairLaw>(
+        inputs: &ContactInputs<L>,
+        base: usize,
+        force: &mut [DVec3],
+        vel: &mut [DVec3],
+    ) -> (f64, f64) = contact_chunk_body;
 }
 
 /// [`contact_chunk`] as compiled for the instruction set it is called from.

@@ -4,12 +4,13 @@
 //! run the login node's binary on any compute node. The step's kernels (the bond pass, the
 //! contact pass with its kick, the drift, the neighbour search) are compiled twice: for the
 //! baseline and for AVX2 with FMA, and each call takes the wider one when the CPU has it
-//! ([`wide`]). Results are the same to the bit either way: Rust never fuses a multiply and an
-//! add unless the code asks for it (`mul_add`, which the engine does not use), and IEEE 754
-//! fixes the result of every add, multiply, divide and square root whatever the width of the
-//! instruction that computes it; the engine test `results_do_not_depend_on_the_instruction_set` runs a
-//! scene both ways and compares. A build with `-C target-cpu=native` compiles everything for
-//! the build machine and needs none of this.
+//! ([`wide`]; the crate's `kernel!` macro writes each entry point). Results are the same to
+//! the bit either way: Rust never fuses a multiply and an add unless the code asks for it
+//! (`mul_add`, which the engine does not use), and IEEE 754 fixes the result of every add,
+//! multiply, divide and square root whatever the width of the instruction that computes it;
+//! the engine test `results_do_not_depend_on_the_instruction_set` runs a scene both ways and
+//! compares. A build with `-C target-cpu=native` compiles everything for the build machine
+//! and needs none of this.
 //!
 //! `HVI_ISA=baseline` in the environment keeps the baseline kernels (for comparing the two);
 //! [`force`] does the same within a process.
@@ -100,27 +101,33 @@ fn cpu_has_avx2() -> bool {
     false
 }
 
-/// Evaluates `$body` compiled with AVX2 and FMA when [`wide`] says so, else as built: the
-/// whole body of a kernel's entry point. `$name` names the AVX2 copy, a nested function of the
-/// listed arguments (the entry point's own, by the same names) and generic parameters.
+/// Defines a kernel's entry point `$name`, which calls `$body` (a function of the same
+/// arguments, `#[inline(always)]`) compiled with AVX2 and FMA when [`wide`] says so, else as
+/// built. The AVX2 copy is a nested function `avx2` of the entry point.
 ///
 /// The body's callees must be `#[inline(always)]` (or small enough to inline) to be compiled
 /// for AVX2 with it.
-macro_rules! dispatch {
+macro_rules! kernel {
     (
-        $name:ident $(<$($g:ident : $bound:path),*>)? ($($arg:ident : $ty:ty),* $(,)?) -> $ret:ty
-        $body:block
-    ) => {{
-        #[cfg(target_arch = "x86_64")]
-        {
-            #[target_feature(enable = "avx2,fma")]
-            unsafe fn $name $(<$($g: $bound),*>)? ($($arg: $ty),*) -> $ret $body
-            if $crate::simd::wide() {
-                // SAFETY: `wide` is true only when the CPU has AVX2 and FMA.
-                return unsafe { $name($($arg),*) };
+        $(#[$meta:meta])*
+        fn $name:ident $(<$($g:ident : $bound:path),*>)? ($($arg:ident : $ty:ty),* $(,)?) -> $ret:ty
+        = $body:path;
+    ) => {
+        $(#[$meta])*
+        fn $name $(<$($g: $bound),*>)? ($($arg: $ty),*) -> $ret {
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx2,fma")]
+                unsafe fn avx2 $(<$($g: $bound),*>)? ($($arg: $ty),*) -> $ret {
+                    $body($($arg),*)
+                }
+                if $crate::simd::wide() {
+                    // SAFETY: `wide` is true only when the CPU has AVX2 and FMA.
+                    return unsafe { avx2($($arg),*) };
+                }
             }
+            $body($($arg),*)
         }
-        $body
-    }};
+    };
 }
-pub(crate) use dispatch;
+pub(crate) use kernel;
