@@ -82,6 +82,24 @@ pub fn avx2_available() -> bool {
     cpu_has_avx2()
 }
 
+/// What is wrong with the environment's `HVI_ISA`, if anything ([`setting_problem`]).
+pub fn env_setting_problem() -> Option<String> {
+    setting_problem(std::env::var("HVI_ISA").ok().as_deref())
+}
+
+/// What is wrong with a value of `HVI_ISA` (`None`: unset): it takes `baseline` and `avx2` (the
+/// default where the CPU has it); another is ignored.
+pub fn setting_problem(value: Option<&str>) -> Option<String> {
+    let v = value?;
+    if v.eq_ignore_ascii_case("baseline") || v.eq_ignore_ascii_case("avx2") {
+        return None;
+    }
+    Some(format!(
+        "HVI_ISA = {v:?} is ignored: it takes `baseline` or `avx2` (the kernels run {})",
+        isa().name()
+    ))
+}
+
 fn detect() -> Isa {
     let asked_baseline = std::env::var("HVI_ISA").is_ok_and(|v| v.eq_ignore_ascii_case("baseline"));
     if !asked_baseline && cpu_has_avx2() {

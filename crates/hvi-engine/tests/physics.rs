@@ -140,6 +140,18 @@ fn results_do_not_depend_on_the_instruction_set() {
     }
 }
 
+/// `HVI_ISA` takes `baseline` or `avx2`; another value is named as ignored, with the values
+/// it takes.
+#[test]
+fn an_unknown_hvi_isa_is_named_with_the_values_it_takes() {
+    use hvi_engine::simd::setting_problem;
+    let problem = setting_problem(Some("avx512")).expect("an unknown value is reported");
+    assert!(problem.contains("\"avx512\"") && problem.contains("`baseline` or `avx2`"));
+    assert_eq!(setting_problem(Some("Baseline")), None);
+    assert_eq!(setting_problem(Some("avx2")), None);
+    assert_eq!(setting_problem(None), None);
+}
+
 /// Two bonded particles flying apart: the bond holds up to rcut, breaks in the first step
 /// past it, and its energy at rcut is booked once in the broken column; the ledger closes.
 #[test]

@@ -574,6 +574,9 @@ fn set_up(spec: &SceneSpec, opts: &RunOptions) -> Result<(Simulation, Counts)> {
             hvi_engine::simd::isa().name()
         );
     }
+    if let Some(problem) = hvi_engine::simd::env_setting_problem() {
+        log::warn!("{problem}");
+    }
     let counts = Counts {
         particles: sim.full_particle_count(),
         simulated: n,
