@@ -471,9 +471,11 @@ fn calibrate_runs_each_batch_as_a_job_array_and_a_killed_calibration_submits_not
     let study = write_study(&dir);
     let mut text = std::fs::read_to_string(&study).expect("study");
     // The box is kept (max_extensions = 0) so that the search runs its batches as arrays;
-    // extending the box is tested in tests/study.rs.
+    // extending the box is tested in tests/study.rs. Every seed at every point, so that each
+    // stage is one array (screening the seeds adds an array for the further seeds: tested in
+    // tests/study.rs).
     text.push_str(&format!(
-        "\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nbatch = 2\nmax_batches = 2\nnoise_floor = 0\nmax_extensions = 0\n",
+        "\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nseeds_within_decades = inf\nbatch = 2\nmax_batches = 2\nnoise_floor = 0\nmax_extensions = 0\n",
         repo()
             .join("experiments_data/calibration-shot.toml")
             .display()

@@ -673,7 +673,7 @@ fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_n
     // Three eps values so the box has an inside; a zero noise floor so that the seeds' scatter
     // alone decides when to stop.
     let axes = format!(
-        "[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01, 0.1, 1.0]\n\n[[axes]]\nkey = \"material.kappa_n_m\"\nvalues = [2.28e6, 4.56e6]\n\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nbatch = 2\nmax_batches = 2\nnoise_floor = 0\nmax_extensions = 0\n",
+        "[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01, 0.1, 1.0]\n\n[[axes]]\nkey = \"material.kappa_n_m\"\nvalues = [2.28e6, 4.56e6]\n\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nseeds_within_decades = inf\nbatch = 2\nmax_batches = 2\nnoise_floor = 0\nmax_extensions = 0\n",
         targets.display()
     );
     let study = write_study(&dir, "ego", &axes, TINY);
@@ -780,6 +780,96 @@ fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_n
     let evals2 = c2["refinement"].as_array().expect("evaluations");
     assert_eq!(evals2.len(), evals.len());
     assert!(evals2.iter().all(|e| e["cached"] == true), "{evals2:?}");
+}
+
+/// `calibrate.seeds_within_decades` (at its default, 1): the grid and each batch run at the
+/// first seed, and at the second only the points whose first-seed J is within a decade of the
+/// lowest so far; the runs made are exactly those, and a second invocation makes the same
+/// decisions from the store without a run. The target (R = 1.2, read cylindrically, at 2000
+/// particles) puts J decades apart over eps from 1e-4 to 1 J.
+#[test]
+fn calibrate_runs_the_further_seeds_only_near_the_lowest_objective() {
+    let dir = scratch("calibrate-screened");
+    let targets = dir.join("targets.toml");
+    edge_targets(&targets);
+    let text = format!(
+        "[study]\nname = \"screened\"\nscene = \"{}\"\n\n[[axes]]\nkey = \"material.eps_j\"\nvalues = [1e-4, 1e-3, 1e-2, 0.1, 1.0]\n\n[tiers.quick]\nset = [\"resolution.particles=2000\", \"material.kappa_n_m=4.56e6\", \"analysis.width=cylindrical\"]\n\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nbatch = 2\nmax_batches = 1\nmax_extensions = 0\n",
+        repo().join("studies/scenes/calibration.toml").display(),
+        targets.display()
+    );
+    let study = dir.join("screened.toml");
+    std::fs::write(&study, text).expect("study");
+    let out = dir.join("out");
+    let o = calibrate(&study, &out);
+    assert_ok(&o);
+    assert!(
+        stderr(&o).contains("within 1 decade(s) of the lowest"),
+        "{}",
+        stderr(&o)
+    );
+    let c = calibration_json(&out);
+    let evals = c["refinement"].as_array().expect("evaluations");
+    // Each stage in turn: the lowest J so far (seed means, and the stage's own first seeds)
+    // decides which points run the second seed.
+    let log = |j: f64| j.max(1e-6).log10();
+    let mut lowest = f64::INFINITY;
+    let (mut runs, mut one, mut both) = (0, 0, 0);
+    let mut stages: Vec<&serde_json::Value> = evals.iter().map(|e| &e["stage"]).collect();
+    stages.dedup();
+    for stage in stages {
+        let of_stage: Vec<&serde_json::Value> =
+            evals.iter().filter(|e| &e["stage"] == stage).collect();
+        let first = |e: &serde_json::Value| e["seed_objectives"][0].as_f64().expect("J at seed 1");
+        let cut = log(of_stage.iter().map(|e| first(e)).fold(lowest, f64::min)) + 1.0;
+        for e in &of_stage {
+            let near = log(first(e)) <= cut;
+            let seeds = if near {
+                serde_json::json!([1, 2])
+            } else {
+                serde_json::json!([1])
+            };
+            assert_eq!(e["seeds"], seeds, "{stage}, cut-off log10 J {cut}: {e}");
+            // The grid's runs at seed 1 are the grid's own.
+            runs += usize::from(stage != "grid-seeds") + usize::from(near);
+            (one, both) = if near {
+                (one, both + 1)
+            } else {
+                (one + 1, both)
+            };
+        }
+        lowest = of_stage
+            .iter()
+            .map(|e| e["objective"].as_f64().expect("J"))
+            .fold(lowest, f64::min);
+    }
+    assert!(
+        one > 0 && both > 0,
+        "{one} points at one seed, {both} at two: {evals:?}"
+    );
+    // The paper's fit (a grid point here) runs at both seeds before the search: its second
+    // seed is one more run when the screening gave its grid point one seed.
+    let paper = evals
+        .iter()
+        .find(|e| e["stage"] == "grid-seeds" && e["params"] == c["paper"]["params"])
+        .expect("the paper's fit is a grid point");
+    runs += usize::from(paper["seeds"] == serde_json::json!([1]));
+    assert_eq!(
+        c["runs_made"].as_u64(),
+        Some(5 + runs as u64),
+        "{}",
+        stderr(&o)
+    );
+
+    let o = calibrate(&study, &out);
+    assert_ok(&o);
+    let c2 = calibration_json(&out);
+    assert_eq!(c2["runs_made"], 0, "{}", stderr(&o));
+    let seeds = |c: &serde_json::Value| -> Vec<serde_json::Value> {
+        let evals = c["refinement"].as_array().expect("evaluations");
+        evals.iter().map(|e| e["seeds"].clone()).collect()
+    };
+    assert_eq!(seeds(&c2), seeds(&c));
+    assert_eq!(c2["best"]["params"], c["best"]["params"]);
 }
 
 /// A calibration of eps alone on the calibration scene at 2000 particles (a quarter of a
@@ -1768,6 +1858,29 @@ fn a_ladder_refuses_counts_it_cannot_climb_naming_the_flag() {
         assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
     }
     assert!(!out.join("n1000").exists(), "nothing was run");
+}
+
+/// `calibrate.seeds_within_decades` must be a number above zero (or inf): anything else is
+/// refused before a run, naming the key and what it allows.
+#[test]
+fn a_seed_cut_off_that_is_not_above_zero_is_refused_naming_the_key() {
+    for value in ["0", "-1", "nan"] {
+        let dir = scratch(&format!("calibrate-seed-cutoff-{value}"));
+        let study = edge_study(&dir, &format!("seeds_within_decades = {value}\n"));
+        let out = dir.join("out");
+        let o = calibrate(&study, &out);
+        assert!(!o.status.success(), "{value} was accepted");
+        let err = stderr(&o);
+        assert!(
+            err.contains("calibrate.seeds_within_decades") && err.contains("allowed: a number > 0"),
+            "{value}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(
+            !out.join("calibration.json").exists(),
+            "nothing was written"
+        );
+    }
 }
 
 /// A study of the calibration grid over eps at 400 particles (the scene's other keys at the

@@ -70,6 +70,7 @@ fn settings_of(
         seeds: cfg.seeds.clone(),
         max_batches: args.max_batches.unwrap_or(cfg.max_batches),
         noise_floor: cfg.noise_floor,
+        seeds_within_decades: cfg.seeds_within_decades,
         prior: match &args.coarse {
             Some(c) => Some(ego::prior_of(first, c)?),
             None => None,
@@ -80,11 +81,12 @@ fn settings_of(
 /// The search's first line on the console.
 fn announce(first: &Refinement, settings: &ego::EgoSettings, rule: ExtendRule, keys: &[String]) {
     log::info!(
-        "search: efficient global optimisation over {} (log10 for {:?}), batches of {} at seeds {:?}, at most {} batches a box, noise floor {}; {}",
+        "search: efficient global optimisation over {} (log10 for {:?}), batches of {} at seeds {:?}{}, at most {} batches a box, noise floor {}; {}",
         keys.join(", "),
         first.dims.iter().filter(|d| d.log).map(|d| d.key.as_str()).collect::<Vec<_>>(),
         settings.batch,
         settings.seeds,
+        ego::screening(settings),
         settings.max_batches,
         settings.noise_floor,
         if rule.extend {
@@ -112,8 +114,6 @@ struct Walk<'s, 'a> {
     first: &'s Refinement<'a>,
     settings: ego::EgoSettings,
     rule: ExtendRule,
-    /// The seeds every point runs at.
-    seeds: Vec<Option<u64>>,
     /// Every point scored so far, with its runs' observables.
     scored: Vec<ego::Scored>,
     /// The current box.
@@ -177,7 +177,6 @@ impl<'s, 'a> Walk<'s, 'a> {
             first,
             settings,
             rule,
-            seeds,
             scored,
             dims,
             values,
@@ -266,7 +265,7 @@ impl<'s, 'a> Walk<'s, 'a> {
             &self.dims,
             &self.values,
             &self.scored,
-            &self.seeds,
+            &self.settings,
             self.extension,
         )?;
         self.scored.extend(evs);
@@ -432,18 +431,19 @@ pub(super) fn outside_sides(
 }
 
 /// Runs the new grid points of an extended box (`dims`, its grid values `values`): those of
-/// the lattice of `values` not scored yet, at every seed of the search. Returns their
-/// evaluations and the runs simulated.
+/// the lattice of `values` not scored yet, at the search's seeds as screened
+/// ([`ego::run_points_screened`]). Returns their evaluations and the runs simulated.
 fn extension_points(
     stage: &Stage,
     first: &Refinement,
     dims: &[Dim],
     values: &[Vec<f64>],
     scored: &[ego::Scored],
-    seeds: &[Option<u64>],
+    settings: &ego::EgoSettings,
     extension: usize,
 ) -> Result<(Vec<ego::Scored>, usize)> {
     let problem = stage.problem(first.fixed.clone(), dims.to_vec());
+    let seeds = ego::seed_list(settings);
     let seen: Vec<Vec<f64>> = scored
         .iter()
         .filter_map(|(e, _)| ego::coords(&problem, &e.params))
@@ -455,11 +455,19 @@ fn extension_points(
     let label = EvalStage::Extend(extension);
     if problem.progress {
         log::info!(
-            "{label}: the box is now {}; {} new grid point(s) at {} seed(s)",
+            "{label}: the box is now {}; {} new grid point(s) at {} seed(s){}",
             fmt_bounds(&bounds_of(dims)),
             points.len(),
-            seeds.len()
+            seeds.len(),
+            ego::screening(settings)
         );
     }
-    ego::run_points(&problem, label, &points, seeds)
+    ego::run_points_screened(
+        &problem,
+        label,
+        &points,
+        &seeds,
+        settings,
+        ego::lowest(scored),
+    )
 }

@@ -54,6 +54,10 @@ fn default_noise_floor() -> f64 {
     0.02
 }
 
+fn default_seeds_within_decades() -> f64 {
+    1.0
+}
+
 /// The search after the grid.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -119,6 +123,11 @@ pub struct CalibrateConfig {
     /// with one seed it is the noise.
     #[serde(default = "default_noise_floor")]
     pub noise_floor: f64,
+    /// ego: the seeds after the first run only at points whose first seed's objective is
+    /// within this many decades of the lowest objective measured so far (`inf`: every seed at
+    /// every point).
+    #[serde(default = "default_seeds_within_decades")]
+    pub seeds_within_decades: f64,
     /// ego: steps each side of the box may move beyond the grid when the answer touches it (a
     /// decade on a log axis, the grid's spacing on a linear one).
     #[serde(default = "default_max_extensions")]
@@ -184,6 +193,13 @@ impl CalibrateConfig {
             bail!(
                 "study key `calibrate.noise_floor`: {} (allowed: a number >= 0)",
                 cfg.noise_floor
+            );
+        }
+        if cfg.seeds_within_decades.is_nan() || cfg.seeds_within_decades <= 0.0 {
+            bail!(
+                "study key `calibrate.seeds_within_decades`: {} (allowed: a number > 0, or inf to \
+                 run every seed at every point)",
+                cfg.seeds_within_decades
             );
         }
         if cfg.max_extensions > 10 {

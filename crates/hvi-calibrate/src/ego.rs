@@ -2,13 +2,16 @@
 //! global optimisation over the refined axes ([`hvi_analysis::surrogate`]), every point run at
 //! the study's seeds through the run store, a batch of points at once.
 //!
-//! 1. The grid's points are the first observations (at every seed when `calibrate.seeds` names
-//!    several; the runs at the scene's own seed are the grid's).
+//! 1. The grid's points are the first observations (at the seeds when `calibrate.seeds` names
+//!    several; the runs at the scene's own seed are the grid's). With several seeds a point
+//!    runs at the first, and at the others only when its objective is within
+//!    `calibrate.seeds_within_decades` decades of the lowest so far ([`run_points_screened`]):
+//!    so it is for the grid, an extended box's new points and every batch.
 //! 2. Each batch: the model is of log10 J (J spans decades over a grid); its noise is the
 //!    standard error of a seed mean's log10 J (pooled over the points, at least
 //!    `calibrate.noise_floor`); the kriging model proposes
-//!    `calibrate.batch` points by expected improvement; they run together (each at every
-//!    seed) through the store and are scored on their seed-mean observables.
+//!    `calibrate.batch` points by expected improvement; they run together (at the seeds as
+//!    screened) through the store and are scored on their seed-mean observables.
 //! 3. The search stops converged when the largest expected improvement left is below the
 //!    noise (on a coarser level's prior: under the model on the prior and under the model of
 //!    the level's own points alone, [`hvi_analysis::surrogate::step`]), or not converged after
@@ -45,6 +48,9 @@ pub(super) struct EgoSettings {
     pub max_batches: usize,
     /// The least noise assumed for the objective (a seed mean's standard error).
     pub noise_floor: f64,
+    /// The seeds after the first run only at points whose first seed's objective is within
+    /// this many decades of the lowest so far ([`run_points_screened`]; infinite: all).
+    pub seeds_within_decades: f64,
     /// A coarser resolution's model of log10 J: the search models the difference from it.
     pub prior: Option<Prior>,
 }
@@ -127,12 +133,76 @@ pub(super) fn seeded_grid(
     let grid_points: Vec<BTreeMap<String, f64>> = scored_grid
         .map(|(e, _)| refined(problem, &e.params))
         .collect();
-    run_points(
+    run_points_screened(
         problem,
         EvalStage::GridSeeds,
         &grid_points,
         &seed_list(settings),
+        settings,
+        f64::INFINITY,
     )
+}
+
+/// The lowest objective among `evaluations` (infinite when none is scored).
+pub(super) fn lowest(evaluations: &[Scored]) -> f64 {
+    evaluations
+        .iter()
+        .map(|(e, _)| e.objective)
+        .filter(|j| j.is_finite())
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// How the seeds are screened, for the search's first line (empty with one seed or none).
+pub(super) fn screening(settings: &EgoSettings) -> String {
+    if settings.seeds.len() < 2 {
+        String::new()
+    } else if settings.seeds_within_decades.is_finite() {
+        format!(
+            " (the seeds after the first only where the first's J is within {} decade(s) of the lowest)",
+            settings.seeds_within_decades
+        )
+    } else {
+        " (every seed at every point)".to_string()
+    }
+}
+
+/// Runs `points` at the first of `seeds`, then at every seed only the points whose first
+/// seed's objective is within `settings.seeds_within_decades` decades of the lowest so far
+/// (`lowest`, or the batch's own lowest): a point a decade or more above the answer is ranked
+/// by one run (the seed scatter of log10 J is a few hundredths of a decade), and the scatter is
+/// measured, and the seed means taken, where the answer is decided. A point that failed or was
+/// not scored keeps its one run. Every decision is a function of the runs, so a resumed
+/// calibration makes the same ones from the store. Returns the evaluations in `points`' order
+/// and the runs simulated.
+pub(super) fn run_points_screened(
+    problem: &Refinement,
+    stage: EvalStage,
+    points: &[BTreeMap<String, f64>],
+    seeds: &[Option<u64>],
+    settings: &EgoSettings,
+    lowest_so_far: f64,
+) -> Result<(Vec<Scored>, usize)> {
+    if seeds.len() < 2 || settings.seeds_within_decades.is_infinite() {
+        return run_points(problem, stage, points, seeds);
+    }
+    let (mut first, ran) = run_points(problem, stage, points, &seeds[..1])?;
+    let cutoff = log_objective(lowest_so_far.min(lowest(&first))) + settings.seeds_within_decades;
+    let chosen: Vec<usize> = (0..first.len())
+        .filter(|&k| {
+            let e = &first[k].0;
+            e.score.is_some() && e.objective.is_finite() && log_objective(e.objective) <= cutoff
+        })
+        .collect();
+    if chosen.is_empty() {
+        return Ok((first, ran));
+    }
+    let again: Vec<BTreeMap<String, f64>> = chosen.iter().map(|&k| points[k].clone()).collect();
+    let (more, ran_more) = run_points(problem, stage, &again, seeds)?;
+    for (&k, (mut e, observables)) in chosen.iter().zip(more) {
+        e.step = first[k].0.step;
+        first[k] = (e, observables);
+    }
+    Ok((first, ran + ran_more))
 }
 
 /// Runs the search over the problem's box from the observations so far (`evaluations`, each
@@ -173,7 +243,14 @@ pub(super) fn search(
             .map(|x| problem.values(x))
             .collect();
         let label = EvalStage::Search(first_batch + progress.batch);
-        let (evs, n) = run_points(problem, label, &points, &seeds)?;
+        let (evs, n) = run_points_screened(
+            problem,
+            label,
+            &points,
+            &seeds,
+            settings,
+            lowest(&evaluations),
+        )?;
         if problem.progress {
             for (e, _) in &evs {
                 log::info!("{label}: {}  J = {:.4}", fmt_params(&e.params), e.objective);

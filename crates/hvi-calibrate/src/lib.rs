@@ -598,6 +598,11 @@ fn label_of(
         "batch": cfg.batch,
         "max_batches": args.max_batches.unwrap_or(cfg.max_batches),
         "noise_floor": cfg.noise_floor,
+        "seeds_within_decades": if cfg.seeds_within_decades.is_finite() {
+            serde_json::json!(cfg.seeds_within_decades)
+        } else {
+            serde_json::json!("inf")
+        },
         "max_extensions": cfg.max_extensions,
         "extend": args.extend,
         "max_iters": args.max_iters.unwrap_or(cfg.max_iters),
