@@ -5,7 +5,7 @@
 //! 1. The grid's points are the first observations (at the seeds when `calibrate.seeds` names
 //!    several; the runs at the scene's own seed are the grid's). With several seeds a point
 //!    runs at the first, and at the others only when its objective is within
-//!    `calibrate.seeds_within_decades` decades of the lowest so far ([`run_points_screened`]):
+//!    `calibrate.seeds_within_decades` decades of the lowest so far (`run_points_screened`):
 //!    so it is for the grid, an extended box's new points and every batch.
 //! 2. Each batch: the model is of log10 J (J spans decades over a grid); its noise is the
 //!    standard error of a seed mean's log10 J (pooled over the points, at least
