@@ -846,6 +846,11 @@ fn calibrate_runs_the_further_seeds_only_near_the_lowest_objective() {
         one > 0 && both > 0,
         "{one} points at one seed, {both} at two: {evals:?}"
     );
+    assert!(
+        stderr(&o).contains(&format!("{one} of them at one seed")),
+        "{}",
+        stderr(&o)
+    );
     // The paper's fit (a grid point here) runs at both seeds before the search: its second
     // seed is one more run when the screening gave its grid point one seed.
     let paper = evals

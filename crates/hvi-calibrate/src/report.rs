@@ -206,9 +206,30 @@ fn cost_line(r: &CalibrationResult) -> String {
     } else {
         format!(" ({})", after.join(", "))
     };
+    // Scored points left at one seed where others ran at several
+    // (calibrate.seeds_within_decades).
+    let most = r
+        .refinement
+        .iter()
+        .map(|e| e.seeds.len())
+        .max()
+        .unwrap_or(0);
+    let one = r
+        .refinement
+        .iter()
+        .filter(|e| most > 1 && e.seeds.len() == 1 && e.score.is_some())
+        .count();
+    let screened = if one > 0 {
+        format!(
+            " ({one} of them at one seed, more than calibrate.seeds_within_decades decades \
+             above the lowest J when they ran)"
+        )
+    } else {
+        String::new()
+    };
     format!(
         "{} simulated by this invocation, {} of them after the grid{after}; {} points evaluated \
-         after the grid; wall time {:.1} s",
+         after the grid{screened}; wall time {:.1} s",
         r.runs_made,
         r.refinement_runs,
         r.refinement.len(),
