@@ -110,7 +110,8 @@ pub struct CalibrateConfig {
     /// The search after the grid: `ego` (default) or `nelder-mead`.
     #[serde(default)]
     pub method: Method,
-    /// ego: points per batch (run together; a batch of runs x seeds keeps every core busy).
+    /// ego: points per batch (run together at the first seed, then at the further seeds where
+    /// they are near the answer).
     #[serde(default = "default_batch")]
     pub batch: usize,
     /// ego: the seeds every point runs at (empty: the scene's seed only).
