@@ -227,8 +227,9 @@ pub struct CalibrateArgs {
     /// such instead of extending the axis beyond the grid (see docs/calibration.md).
     #[arg(long)]
     pub no_extend: bool,
-    /// The seeds every point of the surrogate search runs at, e.g. `1,2,3` (overrides
-    /// calibrate.seeds; one seed: the noise is calibrate.noise_floor).
+    /// The seeds of the surrogate search, e.g. `1,2,3` (overrides calibrate.seeds): every
+    /// point runs at the first, and at the others within calibrate.seeds_within_decades of the
+    /// lowest J so far; one seed: the noise is calibrate.noise_floor.
     #[arg(long, value_delimiter = ',', value_name = "SEEDS")]
     pub seeds: Option<Vec<u64>>,
     /// Run every batch of runs (the grid, each search batch) as a Slurm job array and wait for
