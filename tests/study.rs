@@ -792,13 +792,13 @@ fn calibrate_runs_the_further_seeds_only_near_the_lowest_objective() {
     let dir = scratch("calibrate-screened");
     let targets = dir.join("targets.toml");
     edge_targets(&targets);
-    let text = format!(
-        "[study]\nname = \"screened\"\nscene = \"{}\"\n\n[[axes]]\nkey = \"material.eps_j\"\nvalues = [1e-4, 1e-3, 1e-2, 0.1, 1.0]\n\n[tiers.quick]\nset = [\"resolution.particles=2000\", \"material.kappa_n_m=4.56e6\", \"analysis.width=cylindrical\"]\n\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nbatch = 2\nmax_batches = 1\nmax_extensions = 0\n",
-        repo().join("studies/scenes/calibration.toml").display(),
-        targets.display()
+    let study = eps_study(
+        &dir,
+        "screened",
+        "[1e-4, 1e-3, 1e-2, 0.1, 1.0]",
+        &targets,
+        "seeds = [1, 2]\nbatch = 2\nmax_batches = 1\nmax_extensions = 0\n",
     );
-    let study = dir.join("screened.toml");
-    std::fs::write(&study, text).expect("study");
     let out = dir.join("out");
     let o = calibrate(&study, &out);
     assert_ok(&o);
@@ -898,12 +898,25 @@ fn edge_targets(targets: &Path) {
 
 /// The edge study over eps at 2000 particles (R read cylindrically) against `targets`.
 fn edge_study_with(dir: &Path, targets: &Path, extra: &str) -> PathBuf {
+    eps_study(
+        dir,
+        "edge",
+        "[0.01, 0.1, 1.0]",
+        targets,
+        &format!("seeds = [1, 2]\nbatch = 2\nmax_batches = 3\n{extra}"),
+    )
+}
+
+/// A study `name` over eps at the values `values` (a TOML array) on the calibration scene at
+/// 2000 particles (kappa 4.56e6 N/m, R read cylindrically), calibrated against `targets` with
+/// the rest of its `[calibrate]` section `calibrate`; written to `dir/<name>.toml`.
+fn eps_study(dir: &Path, name: &str, values: &str, targets: &Path, calibrate: &str) -> PathBuf {
     let text = format!(
-        "[study]\nname = \"edge\"\nscene = \"{}\"\n\n[[axes]]\nkey = \"material.eps_j\"\nvalues = [0.01, 0.1, 1.0]\n\n[tiers.quick]\nset = [\"resolution.particles=2000\", \"material.kappa_n_m=4.56e6\", \"analysis.width=cylindrical\"]\n\n[calibrate]\ntargets = \"{}\"\nseeds = [1, 2]\nbatch = 2\nmax_batches = 3\n{extra}",
+        "[study]\nname = \"{name}\"\nscene = \"{}\"\n\n[[axes]]\nkey = \"material.eps_j\"\nvalues = {values}\n\n[tiers.quick]\nset = [\"resolution.particles=2000\", \"material.kappa_n_m=4.56e6\", \"analysis.width=cylindrical\"]\n\n[calibrate]\ntargets = \"{}\"\n{calibrate}",
         repo().join("studies/scenes/calibration.toml").display(),
         targets.display()
     );
-    let path = dir.join("edge.toml");
+    let path = dir.join(format!("{name}.toml"));
     std::fs::write(&path, text).expect("study");
     path
 }
