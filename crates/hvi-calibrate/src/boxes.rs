@@ -226,7 +226,7 @@ impl<'s, 'a> Walk<'s, 'a> {
         let at = ego::coords(problem, &p.best.params);
         let sides = p.region.as_ref().map(|r| &r.sides);
         let mut edges = edges_of(&self.dims, at.as_deref(), sides);
-        identify::settle_flat_sides(&mut edges, &self.dims, &self.values, &self.scored);
+        identify::settle_flat_sides(&mut edges, &self.dims, &self.values, &self.scored, p.noise);
         let before = bounds_of(&self.dims);
         if edges.is_empty() || !self.extend(problem, &mut edges)? {
             return Ok(false);
@@ -285,7 +285,13 @@ impl<'s, 'a> Walk<'s, 'a> {
         let sides = o.region.as_ref().map(|r| &r.sides);
         let mut edges = edges_of(&self.dims, at.as_deref(), sides);
         self.pulled_by_anchor(problem, &o.best, &mut edges);
-        identify::settle_flat_sides(&mut edges, &self.dims, &self.values, &o.evaluations);
+        identify::settle_flat_sides(
+            &mut edges,
+            &self.dims,
+            &self.values,
+            &o.evaluations,
+            o.noise,
+        );
         let moved_now = !edges.is_empty() && self.extend(problem, &mut edges)?;
         self.boxes.push(SearchedBox {
             bounds: bounds_of(&problem.dims),

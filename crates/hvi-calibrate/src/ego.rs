@@ -468,7 +468,7 @@ fn observations(problem: &Refinement, evaluations: &[Scored]) -> Vec<Observation
 /// deviation per target), and its seed scatter grows with it, so that in log10 the noise is
 /// about the same everywhere and the model is not ruled by the worst points. J is floored at
 /// 1e-6 (every target met exactly).
-fn log_objective(j: f64) -> f64 {
+pub(super) fn log_objective(j: f64) -> f64 {
     j.max(1e-6).log10()
 }
 

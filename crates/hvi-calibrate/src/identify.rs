@@ -4,13 +4,16 @@
 //! An answer on a side of the box is not always a failure. When every target is met at the
 //! side itself, the targets bound the parameter from the other side only, and the answer is
 //! that bound ("eps <= 1e-4 J, not identified below the box's 1e-5 J"). When the targets are
-//! met at the side and one step inside it, moving the side out cannot narrow the parameter
-//! (the objective does not rise across a whole step): the search stops extending that side and
-//! says so, instead of spending runs to reach its limit.
+//! met at the side and one step inside it, and the objective is flat across that step (the
+//! lowest J on the side's line is not below the lowest a step inside by more than the noise of
+//! their difference), moving the side out cannot narrow the parameter: the search stops
+//! extending that side and says so, instead of spending runs to reach its limit. Where the
+//! targets are met but J still falls toward the side, the optimum may lie beyond it, and the
+//! side moves out like any other.
 
 use std::collections::BTreeMap;
 
-use crate::ego::Scored;
+use crate::ego::{log_objective, Scored};
 use crate::problem::Dim;
 pub use crate::result::Identified;
 use crate::result::{fmt_value, Edge, Evaluation, ParamRegion, SearchedBox, Side, TargetsMet};
@@ -72,26 +75,54 @@ pub(super) fn meets_every_target(e: &Evaluation) -> bool {
         .is_some_and(|s| !s.terms.is_empty() && s.terms.iter().all(|t| t.term <= 1.0))
 }
 
-/// Whether some scored point with `key` at `value` (in the parameter's unit) meets every
-/// target.
-fn met_at(scored: &[Scored], key: &str, value: f64) -> bool {
-    scored.iter().any(|(e, _)| {
+/// The scored points with `key` at `value` (in the parameter's unit): the line of the box
+/// through that value.
+fn on_line<'a>(
+    scored: &'a [Scored],
+    key: &'a str,
+    value: f64,
+) -> impl Iterator<Item = &'a Evaluation> + 'a {
+    scored.iter().map(|(e, _)| e).filter(move |e| {
         e.params
             .get(key)
             .is_some_and(|&v| (v - value).abs() <= 1e-5 * value.abs().max(v.abs()))
-            && meets_every_target(e)
     })
 }
 
+/// Whether some scored point with `key` at `value` (in the parameter's unit) meets every
+/// target.
+fn met_at(scored: &[Scored], key: &str, value: f64) -> bool {
+    on_line(scored, key, value).any(meets_every_target)
+}
+
+/// The lowest log10 J of the scored points with `key` at `value` (the objective's profile
+/// along the other axes), when one was scored.
+fn profile_at(scored: &[Scored], key: &str, value: f64) -> Option<f64> {
+    on_line(scored, key, value)
+        .filter(|e| e.score.is_some())
+        .map(|e| log_objective(e.objective))
+        .min_by(f64::total_cmp)
+}
+
+/// How far (in log10 J) the profile at a side may lie below the profile a step inside and
+/// still count as flat: two standard deviations of the difference of two seed means, each of
+/// standard error `noise`.
+pub(super) fn flat_within(noise: f64) -> f64 {
+    2.0 * std::f64::consts::SQRT_2 * noise
+}
+
 /// Marks each edge whose side's value holds a point meeting every target (`targets_met`), and
-/// settles those where the targets are met one step inside as well: the objective does not rise
-/// across that step, so the side is not moved out (its `limit` says why). `dims` is the box,
-/// `values` its axes' grid values in the search's coordinates (ascending).
+/// settles those where the targets are met one step inside as well and the objective is flat
+/// across that step (its lowest log10 J on the side's line is not below the lowest a step inside
+/// by more than [`flat_within`] of the search's `noise`): the side is not moved out (its
+/// `limit` says why). Where J still falls toward the side, the side is left to move. `dims` is
+/// the box, `values` its axes' grid values in the search's coordinates (ascending).
 pub(super) fn settle_flat_sides(
     edges: &mut [Edge],
     dims: &[Dim],
     values: &[Vec<f64>],
     scored: &[Scored],
+    noise: f64,
 ) {
     for edge in edges.iter_mut() {
         let Some(k) = dims.iter().position(|d| d.key == edge.key) else {
@@ -107,10 +138,17 @@ pub(super) fn settle_flat_sides(
         edge.targets_met = met_at(scored, &edge.key, edge.value);
         if edge.limit.is_none() && edge.targets_met {
             if let Some(&u) = inner {
-                if met_at(scored, &edge.key, value(u)) {
+                let falls = match (
+                    profile_at(scored, &edge.key, edge.value),
+                    profile_at(scored, &edge.key, value(u)),
+                ) {
+                    (Some(side), Some(inside)) => inside - side > flat_within(noise),
+                    _ => false,
+                };
+                if met_at(scored, &edge.key, value(u)) && !falls {
                     edge.limit = Some(format!(
                         "the targets do not bound it on this side: every target is met at {} = \
-                         {} and a step inside, at {}",
+                         {} and a step inside, at {}, and J is flat across that step",
                         edge.key,
                         fmt_value(edge.value),
                         fmt_value(value(u))
@@ -215,6 +253,10 @@ mod tests {
     }
 
     fn scored(eps: f64, terms: &[f64]) -> Scored {
+        scored_j(eps, terms, 0.1)
+    }
+
+    fn scored_j(eps: f64, terms: &[f64], objective: f64) -> Scored {
         let e = Evaluation {
             stage: crate::result::EvalStage::Extend(0),
             step: 0,
@@ -231,7 +273,7 @@ mod tests {
                     })
                     .collect(),
             }),
-            objective: 0.0,
+            objective,
             status: "completed".into(),
             cached: false,
             dir: None,
@@ -256,6 +298,7 @@ mod tests {
             &dims,
             &values,
             &[scored(1e-3, &[0.5]), scored(1e-2, &[1.5])],
+            0.02,
         );
         assert!(e[0].targets_met && e[0].limit.is_none());
         // Met a step inside too: settled.
@@ -264,6 +307,7 @@ mod tests {
             &dims,
             &values,
             &[scored(1e-3, &[0.5]), scored(1e-2, &[0.9])],
+            0.02,
         );
         let limit = e[0].limit.clone().expect("settled");
         assert!(limit.contains("do not bound it"), "{limit}");
@@ -277,7 +321,42 @@ mod tests {
             &dims,
             &values,
             &[scored(1e-3, &[1.2]), scored(1e-2, &[0.1])],
+            0.02,
         );
         assert!(!e[0].targets_met && e[0].limit.is_none());
+    }
+
+    /// The paper-resolution calibration's case (reports/seed-screening): every target met at
+    /// the side and a step inside, but J six times lower at the side. The optimum may lie
+    /// beyond it, so the side must stay free to move.
+    #[test]
+    fn a_side_where_the_targets_are_met_but_j_still_falls_is_not_settled() {
+        let dims: Vec<Dim> = vec![Dim::new("material.eps_j", true, -3.0, 0.0)];
+        let values = vec![vec![-3.0, -2.0, -1.0, 0.0]];
+        let fresh = || {
+            vec![Edge {
+                limit: None,
+                ..edge(Side::Low, 1e-3, false)
+            }]
+        };
+        let falling = [
+            scored_j(1e-3, &[0.3], 0.0335),
+            scored_j(1e-2, &[0.9], 0.21),
+            // A second point on the inner line, worse still: the profile is the lowest.
+            scored_j(1e-2, &[0.95], 0.4),
+        ];
+        let mut e = fresh();
+        settle_flat_sides(&mut e, &dims, &values, &falling, 0.033);
+        assert!(e[0].targets_met, "{e:?}");
+        assert!(e[0].limit.is_none(), "J falls toward the side: {e:?}");
+        // Within the noise of the difference (log10 0.0335/0.03 = 0.048 < 2 sqrt2 0.033): flat.
+        let flat = [scored_j(1e-3, &[0.3], 0.03), scored_j(1e-2, &[0.9], 0.0335)];
+        let mut e = fresh();
+        settle_flat_sides(&mut e, &dims, &values, &flat, 0.033);
+        assert!(e[0].limit.is_some(), "{e:?}");
+        // The same fall under a noise that covers it: flat too.
+        let mut e = fresh();
+        settle_flat_sides(&mut e, &dims, &values, &falling, 0.3);
+        assert!(e[0].limit.is_some(), "{e:?}");
     }
 }
