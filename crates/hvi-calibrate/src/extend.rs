@@ -3,7 +3,8 @@
 //!
 //! A side is touched when the chosen point lies on it, or when the confidence region reaches
 //! it (the parameter may then lie beyond). Each touched side moves out by one step of its axis:
-//! a decade on a log axis, the grid's spacing on a linear one. The new grid points (the
+//! the grid's spacing at that side, in log10 on a log axis (a decade when the axis has one
+//! value). The new grid points (the
 //! extended axis's new value with every grid value of the other axes) run at the search's seeds
 //! before the search goes on in the larger box. A side stops moving at a limit, which the
 //! calibration then states: `calibrate.max_extensions` steps beyond the grid, or a value the
@@ -108,15 +109,14 @@ pub(super) fn grid_coords(plan: &Plan, dims: &[Dim]) -> Result<Vec<Vec<f64>>> {
         .collect()
 }
 
-/// One step of an axis beyond its side: a decade on a log axis, else the grid's spacing there
-/// (the distance between the two outermost values on that side).
+/// One step of an axis beyond its side, in the search's coordinates: the grid's spacing there
+/// (the distance between the two outermost values on that side; in log10 on a log axis, so a
+/// kappa grid in factor-2 steps moves by a factor 2). A log axis with one value moves by a
+/// decade; a linear one has no step.
 pub(super) fn step_of(log: bool, values: &[f64], side: Side) -> Option<f64> {
-    if log {
-        return Some(1.0);
-    }
     let n = values.len();
     if n < 2 {
-        return None;
+        return log.then_some(1.0);
     }
     let d = match side {
         Side::Low => values[1] - values[0],
@@ -289,8 +289,18 @@ mod tests {
     }
 
     #[test]
-    fn a_log_axis_moves_by_a_decade_and_a_linear_one_by_its_spacing() {
+    fn an_axis_moves_by_its_grid_spacing_at_the_side() {
         assert_eq!(step_of(true, &[-2.0, -1.0, 0.0], Side::High), Some(1.0));
+        // kappa in factor-2 steps (log10): a factor 2 at either side, not a decade.
+        let kappa: Vec<f64> = [1.14e6, 2.28e6, 4.56e6, 9.12e6]
+            .iter()
+            .map(|k: &f64| k.log10())
+            .collect();
+        for side in [Side::Low, Side::High] {
+            let step = step_of(true, &kappa, side).expect("a step");
+            assert!((step - 2f64.log10()).abs() < 1e-12, "{step}");
+        }
+        assert_eq!(step_of(true, &[6.0], Side::High), Some(1.0));
         assert_eq!(
             step_of(false, &[1.3, 1.5, 1.8], Side::High),
             Some(0.30000000000000004)
