@@ -330,6 +330,7 @@ impl<'s, 'a> Walk<'s, 'a> {
                     ),
                     limit: None,
                     targets_met: false,
+                    falling: None,
                 });
             }
         }

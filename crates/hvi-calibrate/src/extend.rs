@@ -83,6 +83,7 @@ pub(super) fn edges_of(
                 touched_by: touched_by.into(),
                 limit: None,
                 targets_met: false,
+                falling: None,
             });
         }
     }
@@ -226,9 +227,15 @@ pub(super) fn limit_line(edges: &[Edge]) -> Option<String> {
         .filter(|e| e.limit.is_some())
         .map(|e| {
             if e.targets_met {
+                let falling = e.falling.map_or(String::new(), |(side, inside)| {
+                    format!(
+                        ", and J still falls toward it ({side:.4} there against {inside:.4} a \
+                         step inside): the objective's optimum may lie beyond"
+                    )
+                });
                 return format!(
                     "every target is met at the box's {} side, {} = {}: the targets do not bound \
-                     it {} ({})",
+                     it {} ({}){falling}",
                     e.side.name(),
                     e.key,
                     fmt_value(e.value),

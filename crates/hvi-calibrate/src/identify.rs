@@ -95,12 +95,12 @@ fn met_at(scored: &[Scored], key: &str, value: f64) -> bool {
     on_line(scored, key, value).any(meets_every_target)
 }
 
-/// The lowest log10 J of the scored points with `key` at `value` (the objective's profile
-/// along the other axes), when one was scored.
+/// The lowest J of the scored points with `key` at `value` (the objective's profile along the
+/// other axes), when one was scored.
 fn profile_at(scored: &[Scored], key: &str, value: f64) -> Option<f64> {
     on_line(scored, key, value)
         .filter(|e| e.score.is_some())
-        .map(|e| log_objective(e.objective))
+        .map(|e| e.objective)
         .min_by(f64::total_cmp)
 }
 
@@ -138,14 +138,18 @@ pub(super) fn settle_flat_sides(
         edge.targets_met = met_at(scored, &edge.key, edge.value);
         if edge.limit.is_none() && edge.targets_met {
             if let Some(&u) = inner {
-                let falls = match (
+                edge.falling = match (
                     profile_at(scored, &edge.key, edge.value),
                     profile_at(scored, &edge.key, value(u)),
                 ) {
-                    (Some(side), Some(inside)) => inside - side > flat_within(noise),
-                    _ => false,
+                    (Some(side), Some(inside))
+                        if log_objective(inside) - log_objective(side) > flat_within(noise) =>
+                    {
+                        Some((side, inside))
+                    }
+                    _ => None,
                 };
-                if met_at(scored, &edge.key, value(u)) && !falls {
+                if met_at(scored, &edge.key, value(u)) && edge.falling.is_none() {
                     edge.limit = Some(format!(
                         "the targets do not bound it on this side: every target is met at {} = \
                          {} and a step inside, at {}, and J is flat across that step",
@@ -172,6 +176,7 @@ mod tests {
             touched_by: "best point".into(),
             limit: Some("a limit".into()),
             targets_met: met,
+            falling: None,
         }
     }
 
@@ -349,6 +354,14 @@ mod tests {
         settle_flat_sides(&mut e, &dims, &values, &falling, 0.033);
         assert!(e[0].targets_met, "{e:?}");
         assert!(e[0].limit.is_none(), "J falls toward the side: {e:?}");
+        assert_eq!(e[0].falling, Some((0.0335, 0.21)));
+        // At its limit, the side says so.
+        e[0].limit = Some("calibrate.max_extensions = 2 steps beyond the grid reached".into());
+        let line = crate::extend::limit_line(&e).expect("a limit");
+        assert!(
+            line.contains("J still falls toward it (0.0335 there against 0.2100 a step inside)"),
+            "{line}"
+        );
         // Within the noise of the difference (log10 0.0335/0.03 = 0.048 < 2 sqrt2 0.033): flat.
         let flat = [scored_j(1e-3, &[0.3], 0.03), scored_j(1e-2, &[0.9], 0.0335)];
         let mut e = fresh();

@@ -505,6 +505,11 @@ pub struct Edge {
     /// from the other side only (docs/calibration.md, "What the targets determine").
     #[serde(default)]
     pub targets_met: bool,
+    /// Where every target is met at the side and a step inside but J still falls toward the
+    /// side beyond the noise: the lowest J on the side's line and a step inside (the optimum
+    /// may lie beyond the side, which therefore moves out).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub falling: Option<(f64, f64)>,
 }
 
 impl Edge {
