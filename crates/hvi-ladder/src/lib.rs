@@ -1133,6 +1133,7 @@ mod tests {
             touched_by: "confidence region".into(),
             limit: None,
             targets_met: false,
+            falling: None,
         });
         assert!(!verdict(&dims, &edge).converged);
     }
