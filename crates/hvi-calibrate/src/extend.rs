@@ -3,8 +3,8 @@
 //!
 //! A side is touched when the chosen point lies on it, or when the confidence region reaches
 //! it (the parameter may then lie beyond). Each touched side moves out by one step of its axis:
-//! the grid's spacing at that side, in log10 on a log axis (a decade when the axis has one
-//! value). The new grid points (the
+//! the grid's spacing at that side, in log10 on a log axis and at most a decade (a decade
+//! when the axis has one value). The new grid points (the
 //! extended axis's new value with every grid value of the other axes) run at the search's seeds
 //! before the search goes on in the larger box. A side stops moving at a limit, which the
 //! calibration then states: `calibrate.max_extensions` steps beyond the grid, or a value the
@@ -111,9 +111,10 @@ pub(super) fn grid_coords(plan: &Plan, dims: &[Dim]) -> Result<Vec<Vec<f64>>> {
 }
 
 /// One step of an axis beyond its side, in the search's coordinates: the grid's spacing there
-/// (the distance between the two outermost values on that side; in log10 on a log axis, so a
-/// kappa grid in factor-2 steps moves by a factor 2). A log axis with one value moves by a
-/// decade; a linear one has no step.
+/// (the distance between the two outermost values on that side), on a log axis in log10 and
+/// at most a decade (a kappa grid in factor-2 steps moves by a factor 2, a grid in decades or
+/// coarser by a decade). A log axis with one value moves by a decade; a linear one has no
+/// step.
 pub(super) fn step_of(log: bool, values: &[f64], side: Side) -> Option<f64> {
     let n = values.len();
     if n < 2 {
@@ -123,6 +124,7 @@ pub(super) fn step_of(log: bool, values: &[f64], side: Side) -> Option<f64> {
         Side::Low => values[1] - values[0],
         Side::High => values[n - 1] - values[n - 2],
     };
+    let d = if log { d.min(1.0) } else { d };
     (d > 0.0).then_some(d)
 }
 
@@ -308,6 +310,8 @@ mod tests {
             assert!((step - 2f64.log10()).abs() < 1e-12, "{step}");
         }
         assert_eq!(step_of(true, &[6.0], Side::High), Some(1.0));
+        // A log grid coarser than a decade moves by a decade.
+        assert_eq!(step_of(true, &[-4.4, -2.2], Side::Low), Some(1.0));
         assert_eq!(
             step_of(false, &[1.3, 1.5, 1.8], Side::High),
             Some(0.30000000000000004)
