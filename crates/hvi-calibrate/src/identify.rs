@@ -107,7 +107,7 @@ fn profile_at(scored: &[Scored], key: &str, value: f64) -> Option<f64> {
 /// How far (in log10 J) the profile at a side may lie below the profile a step inside and
 /// still count as flat: two standard deviations of the difference of two seed means, each of
 /// standard error `noise`.
-pub(super) fn flat_within(noise: f64) -> f64 {
+fn flat_within(noise: f64) -> f64 {
     2.0 * std::f64::consts::SQRT_2 * noise
 }
 
