@@ -358,9 +358,30 @@ fn a_failed_run_is_recorded_and_the_study_goes_on() {
     let log = std::fs::read_to_string(out.join("study.log")).expect("study.log");
     assert!(log.contains(": FAILED after "), "{log}");
     assert!(log.contains(": completed in "), "{log}");
-    // Failed runs are tried again; completed ones are not.
+    // The engine's verdict on the scene is the run's result: its record says so, and a study
+    // run again keeps it rather than repeating it (a failure that may not recur, a full disk
+    // say, runs again: `a_full_disk_gives_an_error_naming_the_file_and_leaves_a_consistent_store`).
+    let record: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            out.join(rows[1]["dir"].as_str().expect("dir"))
+                .join("record.json"),
+        )
+        .expect("record.json"),
+    )
+    .expect("json");
+    assert_eq!(record["reproducible"], true, "{record}");
+    let completed = std::fs::read_to_string(
+        out.join(rows[0]["dir"].as_str().expect("dir"))
+            .join("record.json"),
+    )
+    .expect("record.json");
+    assert!(!completed.contains("reproducible"), "{completed}");
     let o = sweep(&study, &out, &[]);
-    assert_eq!(counts(&o), (2, 1, 1, 1), "{}", stderr(&o));
+    assert_ok(&o);
+    assert_eq!(counts(&o), (2, 2, 0, 1), "{}", stderr(&o));
+    let log = std::fs::read_to_string(out.join("study.log")).expect("study.log");
+    assert_eq!(log.matches(": FAILED after ").count(), 1, "{log}");
+    assert_eq!(results(&out)[1]["status"], "failed");
 }
 
 /// `hvi-study ARGS`, its output.

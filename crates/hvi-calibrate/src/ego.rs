@@ -537,10 +537,7 @@ pub fn run_points(
     // Which runs the store held before this batch: a point is `cached` when all of its were.
     let mut stored = Vec::with_capacity(jobs.len());
     for j in &jobs {
-        stored.push(matches!(
-            problem.store.record(&j.fingerprint)?,
-            Some(r) if r.status == RunStatus::Completed
-        ));
+        stored.push(matches!(problem.store.record(&j.fingerprint)?, Some(r) if r.is_final()));
     }
     let report = problem.runner.execute(
         problem.store,

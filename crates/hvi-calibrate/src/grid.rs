@@ -157,8 +157,7 @@ pub(super) fn stored_before(plan: &Plan, out: &Path) -> Result<Vec<bool>> {
         .iter()
         .map(|r| {
             // A damaged record counts as not stored (the sweep repairs and re-runs it).
-            Ok(matches!(store.record(&r.fingerprint),
-                Ok(Some(rec)) if rec.status == RunStatus::Completed))
+            Ok(matches!(store.record(&r.fingerprint), Ok(Some(rec)) if rec.is_final()))
         })
         .collect()
 }

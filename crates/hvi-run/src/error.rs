@@ -395,6 +395,20 @@ pub fn as_run_error<'a>(e: &'a (dyn StdError + 'static)) -> Option<&'a RunError>
         .or_else(|| e.downcast_ref::<Box<RunError>>().map(|b| &**b))
 }
 
+/// Whether `e` is a failure that running the same scene again repeats: the first engine error
+/// in its chain, when that one is reproducible ([`hvi_engine::error::EngineError::is_reproducible`]).
+/// A store keeps such a failure as the run's result rather than running it again.
+pub fn is_reproducible(e: &(dyn StdError + 'static)) -> bool {
+    std::iter::successors(Some(e), |&e| e.source())
+        .find_map(|c| match as_run_error(c) {
+            Some(RunError::Engine(engine)) => Some(engine.is_reproducible()),
+            _ => c
+                .downcast_ref::<hvi_engine::error::EngineError>()
+                .map(hvi_engine::error::EngineError::is_reproducible),
+        })
+        .unwrap_or(false)
+}
+
 /// Exit code of a bad input or any other error: 2.
 pub const EXIT_ERROR: u8 = 2;
 /// Exit code of a scheduler or external program that refused or failed (EX_UNAVAILABLE): 69.
@@ -444,6 +458,26 @@ mod tests {
 
     fn full_disk() -> std::io::Error {
         std::io::Error::new(ErrorKind::StorageFull, "No space left on device")
+    }
+
+    #[test]
+    fn only_the_engines_verdict_on_the_scene_is_reproducible() {
+        use hvi_engine::error::EngineError;
+        let unstable = RunError::from(EngineError::Unstable {
+            step: 42,
+            time_s: 1e-7,
+            reason: "two particles 0.338 sigma apart".into(),
+        })
+        .context("run stopped early; what it had is in x");
+        assert!(is_reproducible(&unstable));
+        let rejected = RunError::from(EngineError::invalid("material.eps_j", -1, "> 0"));
+        assert!(is_reproducible(&rejected));
+        let foreign = RunError::from(EngineError::StateMismatch("another scene".into()))
+            .context("resuming from the checkpoint");
+        assert!(!is_reproducible(&foreign));
+        let disk = RunError::write(Path::new("x/record.json"), full_disk()).context("run 3");
+        assert!(!is_reproducible(&disk));
+        assert!(!is_reproducible(&RunError::Input("bad".into())));
     }
 
     #[test]

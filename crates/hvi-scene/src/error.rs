@@ -43,6 +43,14 @@ pub enum EngineError {
 }
 
 impl EngineError {
+    /// Whether running the same scene on the same engine fails the same way: the engine's
+    /// verdict on the scene itself (an instability, a rejected value, overlapping bodies), which
+    /// the engine reaches bit-identically at any thread count. A saved state that does not fit
+    /// is a damaged or foreign file, not the scene's, and is not.
+    pub fn is_reproducible(&self) -> bool {
+        !matches!(self, EngineError::StateMismatch(_))
+    }
+
     /// Shorthand for [`EngineError::InvalidValue`].
     pub fn invalid(key: &str, value: impl std::fmt::Display, allowed: impl Into<String>) -> Self {
         EngineError::InvalidValue {

@@ -342,7 +342,7 @@ fn look_up(store: &Store, jobs: &[Job]) -> Result<(Vec<Option<Record>>, Vec<usiz
     let mut pending: Vec<usize> = Vec::new();
     for (i, job) in jobs.iter().enumerate() {
         match store.record(&job.fingerprint)? {
-            Some(r) if r.status == RunStatus::Completed => records.push(Some(r)),
+            Some(r) if r.is_final() => records.push(Some(r)),
             _ => {
                 records.push(None);
                 if !pending

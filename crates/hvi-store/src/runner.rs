@@ -109,8 +109,7 @@ impl SlurmBatches {
         // name it).
         let mut done_before = HashSet::new();
         for r in &plan.runs {
-            if matches!(store.record(&r.fingerprint)?, Some(rec) if rec.status == RunStatus::Completed)
-            {
+            if matches!(store.record(&r.fingerprint)?, Some(rec) if rec.is_final()) {
                 done_before.insert(r.fingerprint.as_str());
             }
         }
@@ -226,8 +225,12 @@ fn no_result(job: &Job, queue: &QueueView) -> Record {
         ),
         None => "it has no result and Slurm is not running it".to_string(),
     };
-    // Not run here: no time, no threads.
-    Record::of(job, Some(why), Default::default(), 0.0, 0)
+    // Not run here: no time, no threads; it may end otherwise when submitted again.
+    let failure = crate::store::Failure {
+        message: why,
+        reproducible: false,
+    };
+    Record::of(job, Some(failure), Default::default(), 0.0, 0)
 }
 
 /// A plan of these jobs (each run once, in order): the study's `template` with the jobs'

@@ -582,6 +582,8 @@ pub fn sbatch(script: &Path) -> Result<String> {
 struct Pending {
     /// Completed runs.
     done: usize,
+    /// Failed runs whose failure the engine repeats (kept, not submitted again).
+    kept: usize,
     /// Failed runs (submitted again).
     failed: usize,
     /// Plan indices to submit.
@@ -598,16 +600,18 @@ fn pending(plan: &Plan, out: &Path) -> Result<Pending> {
     } else {
         None
     };
-    let (mut done, mut failed, mut todo) = (0, 0, Vec::new());
+    let (mut done, mut kept, mut failed, mut todo) = (0, 0, 0, Vec::new());
     for r in &plan.runs {
         let rec = match &store {
             Some(s) => s.record(&r.fingerprint)?,
             None => None,
         };
-        match rec.map(|r| r.status) {
-            Some(RunStatus::Completed) => done += 1,
-            // A failed run is run again, as a local run would.
-            Some(RunStatus::Failed) => {
+        match rec {
+            Some(r) if r.status == RunStatus::Completed => done += 1,
+            // A failure the engine repeats is the run's result, as in a local run.
+            Some(r) if r.is_final() => kept += 1,
+            // Any other failed run is run again, as a local run would.
+            Some(_) => {
                 failed += 1;
                 todo.push(r.index);
             }
@@ -637,6 +641,7 @@ fn pending(plan: &Plan, out: &Path) -> Result<Pending> {
     jobs.dedup();
     Ok(Pending {
         done,
+        kept,
         failed,
         todo,
         in_queue: (jobs, queued),
@@ -653,6 +658,13 @@ impl Pending {
             plan.runs.len(),
             self.done
         );
+        if self.kept > 0 {
+            let _ = write!(
+                line,
+                ", {} failed for good (an instability or a rejected value: kept)",
+                self.kept
+            );
+        }
         if self.failed > 0 {
             let _ = write!(line, ", {} failed (submitted again)", self.failed);
         }

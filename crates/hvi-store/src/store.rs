@@ -83,6 +83,12 @@ pub struct Record {
     pub status: RunStatus,
     /// The error, when it failed.
     pub error: Option<String>,
+    /// A failure the engine repeats on the same scene (an instability, a value the scene
+    /// rejects: [`hvi_run::error::is_reproducible`]): the run's result, kept when a study runs
+    /// again. False for a completed run and for a failure that may not recur (a panic, a
+    /// damaged checkpoint), which runs again; absent in records of earlier versions.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub reproducible: bool,
     /// What was measured (also for a failed run, where the summary has anything).
     pub observables: Observables,
     /// Wall time of the run, s.
@@ -124,11 +130,17 @@ impl Record {
         Ok(digest.iter().map(|b| format!("{b:02x}")).collect())
     }
 
+    /// Whether the run is finished for good: completed, or failed in a way running it again
+    /// repeats ([`Record::reproducible`]). A study runs again only the runs that are not.
+    pub fn is_final(&self) -> bool {
+        self.status == RunStatus::Completed || self.reproducible
+    }
+
     /// The unsealed record of `job` computed here now: completed, or failed with `error`, in
     /// `wall_seconds` on `threads` threads.
     pub(crate) fn of(
         job: &Job,
-        error: Option<String>,
+        error: Option<Failure>,
         observables: Observables,
         wall_seconds: f64,
         threads: usize,
@@ -144,7 +156,8 @@ impl Record {
             } else {
                 RunStatus::Failed
             },
-            error,
+            reproducible: error.as_ref().is_some_and(|f| f.reproducible),
+            error: error.map(|f| f.message),
             observables,
             wall_seconds,
             threads,
@@ -159,6 +172,15 @@ impl Record {
         self.checksum = Some(self.digest()?);
         Ok(self)
     }
+}
+
+/// Why a run failed, as its record keeps it.
+#[derive(Debug, Clone)]
+pub(crate) struct Failure {
+    /// The error in words.
+    pub message: String,
+    /// Whether running it again fails the same way ([`Record::reproducible`]).
+    pub reproducible: bool,
 }
 
 /// A run to execute: its scene and its identity.
@@ -578,7 +600,7 @@ impl Store {
     pub fn execute(&self, job: &Job, threads: usize) -> Result<Record> {
         let _claim = crate::lock::lock_run(&self.dir(&job.fingerprint))?;
         if let Some(rec) = self.record(&job.fingerprint)? {
-            if rec.status == RunStatus::Completed {
+            if rec.is_final() {
                 self.elsewhere.fetch_add(1, Ordering::Relaxed);
                 return Ok(rec);
             }
@@ -736,7 +758,7 @@ impl Store {
         job: &Job,
         tmp: &Path,
         outcome: std::thread::Result<Result<(Option<u64>, u64)>>,
-    ) -> Result<Option<String>> {
+    ) -> Result<Option<Failure>> {
         if let Ok(Ok((Some(step), steps))) = &outcome {
             log::info!(
                 "run store: run {} resumed from its checkpoint at base step {step}",
@@ -764,18 +786,25 @@ impl Store {
         Ok(match outcome {
             Ok(Ok(_)) => None,
             // The run wrote into the temporary directory; its message names the final one.
-            Ok(Err(e)) => Some(format!("{e:#}").replace(
-                &tmp.display().to_string(),
-                &self.dir(&job.fingerprint).display().to_string(),
-            )),
-            Err(panic) => Some(format!(
-                "panic: {}",
-                panic
-                    .downcast_ref::<String>()
-                    .cloned()
-                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
-                    .unwrap_or_else(|| "(no message)".into())
-            )),
+            Ok(Err(e)) => Some(Failure {
+                message: format!("{e:#}").replace(
+                    &tmp.display().to_string(),
+                    &self.dir(&job.fingerprint).display().to_string(),
+                ),
+                reproducible: hvi_run::error::is_reproducible(&e),
+            }),
+            // A panic is a defect, not the scene's verdict: the run is tried again.
+            Err(panic) => Some(Failure {
+                message: format!(
+                    "panic: {}",
+                    panic
+                        .downcast_ref::<String>()
+                        .cloned()
+                        .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                        .unwrap_or_else(|| "(no message)".into())
+                ),
+                reproducible: false,
+            }),
         })
     }
 
@@ -817,7 +846,7 @@ impl Store {
         if dest.exists() {
             match self.record(fingerprint) {
                 // Another process finished the same run first: keep its result.
-                Ok(Some(r)) if r.status == RunStatus::Completed => {
+                Ok(Some(r)) if r.is_final() => {
                     fs::remove_dir_all(tmp)?;
                     return Ok(());
                 }
@@ -886,6 +915,7 @@ mod tests {
             params: serde_json::Map::new(),
             status: RunStatus::Completed,
             error: None,
+            reproducible: false,
             observables: Observables::default(),
             wall_seconds: 1.0,
             threads: 1,

@@ -580,7 +580,9 @@ fn execute_runs(
         };
         let progress = format!("accuracy [{}/{}] {label}", k + 1, planned.len());
         let prior = store.record(&run.job.fingerprint)?;
-        let cached = matches!(&prior, Some(r) if r.status == RunStatus::Completed);
+        let cached = prior
+            .as_ref()
+            .is_some_and(hvi_store::store::Record::is_final);
         if !cached {
             log::info!("{progress} ({}) ...", v.sets.join(" "));
             store.execute(&run.job, threads)?;

@@ -68,7 +68,8 @@ pub fn open_plan(args: &StudyOptions, write: bool) -> Result<(Plan, PathBuf)> {
 pub enum RunState {
     /// Completed: its result is in the store.
     Done,
-    /// Failed (recorded; a new sweep or submission runs it again).
+    /// Failed (recorded; a new sweep or submission runs it again unless the failure is
+    /// reproducible: `Record::reproducible`).
     Failed(String),
     /// Running: in Slurm (job, task), or in progress in the store (process, host).
     Running(String),
@@ -369,6 +370,7 @@ fn missing_record(plan: &Plan, i: usize) -> Record {
         params: serde_json::Map::new(),
         status: RunStatus::Failed,
         error: Some("missing: no result in the store".into()),
+        reproducible: false,
         observables: Observables::default(),
         wall_seconds: f64::NAN,
         threads: 0,
