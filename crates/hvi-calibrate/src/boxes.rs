@@ -10,7 +10,8 @@ use hvi_store::store::Record;
 use crate::config::{CalibrateConfig, Method};
 use crate::ego;
 use crate::extend::{
-    bounds_of, edges_of, extend, grid_coords, limit_line, new_lattice_points, ExtendRule,
+    bounds_of, edges_of, extend, grid_coords, limit_line, new_lattice_points, values_near,
+    ExtendRule,
 };
 use crate::grid::Grid;
 use crate::identify;
@@ -241,7 +242,7 @@ impl<'s, 'a> Walk<'s, 'a> {
                 .into(),
             edges,
         });
-        self.run_extension()?;
+        self.run_extension(at.as_deref())?;
         Ok(true)
     }
 
@@ -257,13 +258,14 @@ impl<'s, 'a> Walk<'s, 'a> {
         )
     }
 
-    /// Runs the extended box's new grid points.
-    fn run_extension(&mut self) -> Result<()> {
+    /// Runs the extended box's new grid points next to the answer `at` (in the search's
+    /// coordinates; every new point without one).
+    fn run_extension(&mut self, at: Option<&[f64]>) -> Result<()> {
         let (evs, n) = extension_points(
             self.stage,
             self.first,
             &self.dims,
-            &self.values,
+            &values_near(&self.values, at),
             &self.scored,
             &self.settings,
             self.extension,
@@ -305,7 +307,7 @@ impl<'s, 'a> Walk<'s, 'a> {
             return Ok(Some(self.outcome(o, edges)));
         }
         self.scored = o.evaluations;
-        self.run_extension()?;
+        self.run_extension(at.as_deref())?;
         Ok(None)
     }
 
@@ -437,8 +439,8 @@ pub(super) fn outside_sides(
         .collect()
 }
 
-/// Runs the new grid points of an extended box (`dims`, its grid values `values`): those of
-/// the lattice of `values` not scored yet, at the search's seeds as screened
+/// Runs the new grid points of an extended box (`dims`, the grid values to run among
+/// `values`): those of the lattice of `values` not scored yet, at the search's seeds as screened
 /// ([`ego::run_points_screened`]). Returns their evaluations and the runs simulated.
 fn extension_points(
     stage: &Stage,

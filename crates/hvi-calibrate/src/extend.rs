@@ -4,9 +4,10 @@
 //! A side is touched when the chosen point lies on it, or when the confidence region reaches
 //! it (the parameter may then lie beyond). Each touched side moves out by one step of its axis:
 //! the grid's spacing at that side, in log10 on a log axis and at most a decade (a decade
-//! when the axis has one value). The new grid points (the
-//! extended axis's new value with every grid value of the other axes) run at the search's seeds
-//! before the search goes on in the larger box. A side stops moving at a limit, which the
+//! when the axis has one value). The new grid points next to the answer (those of the larger
+//! box's lattice within one grid step of it on every axis, [`values_near`]) run at the search's
+//! seeds before the search goes on in the larger box; the surrogate's expected improvement
+//! decides whether anything farther along the new side is worth a run. A side stops moving at a limit, which the
 //! calibration then states: `calibrate.max_extensions` steps beyond the grid, or a value the
 //! scene rejects (outside the key's allowed range).
 
@@ -199,6 +200,26 @@ pub(super) fn extend(
     Ok(any)
 }
 
+/// The values of each axis within one grid step of `near` (the grid value nearest to it and
+/// its neighbours on either side); every value where `near` is None.
+pub(super) fn values_near(values: &[Vec<f64>], near: Option<&[f64]>) -> Vec<Vec<f64>> {
+    let Some(near) = near else {
+        return values.to_vec();
+    };
+    values
+        .iter()
+        .zip(near)
+        .map(|(axis, &u)| {
+            let Some(k) = (0..axis.len())
+                .min_by(|&a, &b| (axis[a] - u).abs().total_cmp(&(axis[b] - u).abs()))
+            else {
+                return Vec::new();
+            };
+            axis[k.saturating_sub(1)..(k + 2).min(axis.len())].to_vec()
+        })
+        .collect()
+}
+
 /// Every point of the lattice of `values` (one list per axis) that `seen` does not hold, in
 /// the search's coordinates.
 pub(super) fn new_lattice_points(values: &[Vec<f64>], seen: &[Vec<f64>]) -> Vec<Vec<f64>> {
@@ -332,6 +353,36 @@ mod tests {
             .collect();
         let new = new_lattice_points(&values, &seen);
         assert_eq!(new, vec![vec![1.0, 6.0], vec![1.0, 7.0]]);
+    }
+
+    #[test]
+    fn the_values_near_a_point_are_its_nearest_grid_value_and_the_neighbours() {
+        let values = vec![vec![-3.0, -2.0, -1.0, 0.0], vec![6.0, 6.3, 6.6, 6.9, 7.2]];
+        // The answer on the grid at (-2, 6.9): one step either way, clipped at the ends.
+        let near = values_near(&values, Some(&[-2.0, 6.9]));
+        assert_eq!(near, vec![vec![-3.0, -2.0, -1.0], vec![6.6, 6.9, 7.2]]);
+        // Off the grid: from the nearest value.
+        let near = values_near(&values, Some(&[-0.2, 6.05]));
+        assert_eq!(near, vec![vec![-1.0, 0.0], vec![6.0, 6.3]]);
+        assert_eq!(values_near(&values, None), values);
+        // After two sides moved (eps down to -3, kappa up to 7.2), the points of the new
+        // lines next to the answer are the ones to run; the far ends of both lines are not.
+        let seen: Vec<Vec<f64>> = [-2.0, -1.0, 0.0]
+            .iter()
+            .flat_map(|&a| [6.0, 6.3, 6.6, 6.9].map(|k| vec![a, k]))
+            .collect();
+        let new = new_lattice_points(&values_near(&values, Some(&[-2.0, 6.9])), &seen);
+        assert_eq!(
+            new,
+            vec![
+                vec![-3.0, 6.6],
+                vec![-3.0, 6.9],
+                vec![-3.0, 7.2],
+                vec![-2.0, 7.2],
+                vec![-1.0, 7.2]
+            ]
+        );
+        assert_eq!(new_lattice_points(&values, &seen).len(), 8);
     }
 
     #[test]
