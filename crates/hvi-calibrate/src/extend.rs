@@ -5,10 +5,10 @@
 //! it (the parameter may then lie beyond). Each touched side moves out by one step of its axis:
 //! the grid's spacing at that side, in log10 on a log axis and at most a decade (a decade
 //! when the axis has one value). The new grid points next to the answer (those of the larger
-//! box's lattice within one grid step of it on every axis, [`values_near`]) run at the search's
-//! seeds before the search goes on in the larger box; the surrogate's expected improvement
-//! decides whether anything farther along the new side is worth a run. A side stops moving at a limit, which the
-//! calibration then states: `calibrate.max_extensions` steps beyond the grid, or a value the
+//! box's lattice within one grid step of it on every axis) run at the search's seeds before the
+//! search goes on in the larger box; the surrogate's expected improvement decides whether
+//! anything farther along the new side is worth a run. A side stops moving at a limit, which
+//! the calibration then states: `calibrate.max_extensions` steps beyond the grid, or a value the
 //! scene rejects (outside the key's allowed range).
 
 use std::collections::BTreeMap;
