@@ -810,3 +810,33 @@ fn sbatch_missing_or_failing_is_a_clear_error_and_a_job_id_is_recorded() {
     assert!(results(&out).iter().all(|r| r["status"] == "missing"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A run the engine stops (an instability) is the run's result: `submit` counts it as failed
+/// for good and submits nothing for it, as a local sweep run again does not run it again.
+#[test]
+fn a_reproducible_failure_is_not_submitted_again() {
+    let dir = scratch("failed-for-good");
+    // A ledger tolerance of 1e-14 trips at the first energy sample: that run is "unstable".
+    let text = format!(
+        "[study]\nname = \"fails\"\nscene = \"{}\"\n\n\
+         [[axes]]\nkey = \"run.max_energy_drift\"\nvalues = [0.05, 1e-14]\n\n\
+         [tiers.quick]\nset = [\"resolution.particles=400\", \"run.end_time_s=2e-6\"]\n",
+        repo().join("studies/scenes/default.toml").display()
+    );
+    let study = dir.join("fails.toml");
+    std::fs::write(&study, text).expect("study file");
+    let out = dir.join("out");
+    let (study, out) = (study.to_str().expect("path"), out.to_str().expect("path"));
+    ok(hvi(&["sweep", study, "--out", out, "--quiet"], &[]));
+    let o = ok(hvi(
+        &["submit", study, "--out", out, "--slurm", "--dry-run"],
+        &[],
+    ));
+    let err = stderr(&o);
+    assert!(
+        err.contains("2 runs, 1 done, 1 failed for good") && err.contains("nothing to submit"),
+        "{err}"
+    );
+    assert!(!err.contains("submitted again"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
