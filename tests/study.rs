@@ -379,6 +379,7 @@ fn a_failed_run_is_recorded_and_the_study_goes_on() {
     let o = sweep(&study, &out, &[]);
     assert_ok(&o);
     assert_eq!(counts(&o), (2, 2, 0, 1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("kept, not run again"), "{}", stderr(&o));
     let log = std::fs::read_to_string(out.join("study.log")).expect("study.log");
     assert_eq!(log.matches(": FAILED after ").count(), 1, "{log}");
     assert_eq!(results(&out)[1]["status"], "failed");

@@ -65,8 +65,14 @@ pub fn print_failures(records: &[hvi_store::store::Record]) {
     for (i, r) in records.iter().enumerate() {
         if r.status == RunStatus::Failed {
             log::info!(
-                "run {i} failed: {}",
-                r.error.as_deref().unwrap_or("(no message)")
+                "run {i} failed: {}{}",
+                r.error.as_deref().unwrap_or("(no message)"),
+                if r.reproducible {
+                    " (the engine fails this scene the same way every time: kept, not run \
+                     again; remove its directory to run it again)"
+                } else {
+                    " (runs again when the study is run again)"
+                }
             );
         }
     }
@@ -95,7 +101,7 @@ pub fn run_unit(
     let job = job(&plan, index)?;
     let store = Store::open(dir)?.with_checkpoint_every(checkpoint_every);
     let record = match store.record(&job.fingerprint)? {
-        Some(r) if r.status == RunStatus::Completed => {
+        Some(r) if r.is_final() => {
             log::info!("run {index}: already done");
             r
         }
