@@ -380,6 +380,10 @@ fn a_failed_run_is_recorded_and_the_study_goes_on() {
     assert_ok(&o);
     assert_eq!(counts(&o), (2, 2, 0, 1), "{}", stderr(&o));
     assert!(stderr(&o).contains("kept, not run again"), "{}", stderr(&o));
+    let o = hvi_study(&["status".as_ref(), out.as_os_str()]);
+    assert_ok(&o);
+    let line = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(line.contains("2 runs: 1 done, 1 failed for good"), "{line}");
     let log = std::fs::read_to_string(out.join("study.log")).expect("study.log");
     assert_eq!(log.matches(": FAILED after ").count(), 1, "{log}");
     assert_eq!(results(&out)[1]["status"], "failed");

@@ -271,8 +271,23 @@ pub fn status(args: &StatusOptions) -> Result<()> {
     let (plan, dir) = open_plan(&args.study, false)?;
     let survey = survey(&plan, &dir)?;
     let (done, failed, running, pending, queued) = survey.counts();
+    // Failures the engine repeats stay as they are; the others run again.
+    let kept = survey
+        .runs
+        .iter()
+        .filter(|(r, s)| {
+            matches!(s, RunState::Failed(_)) && r.as_ref().is_some_and(|r| r.reproducible)
+        })
+        .count();
+    let failed = match (kept, failed - kept) {
+        (0, _) => format!("{failed} failed"),
+        (_, 0) => format!("{failed} failed for good (an instability or a rejected value: kept)"),
+        (k, again) => {
+            format!("{failed} failed ({k} for good, kept; {again} run again when the study does)")
+        }
+    };
     let mut s = format!(
-        "study `{}` at tier `{}` in {}: {} runs: {done} done, {failed} failed, {running} running, {pending} pending",
+        "study `{}` at tier `{}` in {}: {} runs: {done} done, {failed}, {running} running, {pending} pending",
         plan.study,
         plan.tier,
         dir.display(),
