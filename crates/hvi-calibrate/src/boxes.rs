@@ -10,8 +10,7 @@ use hvi_store::store::Record;
 use crate::config::{CalibrateConfig, Method};
 use crate::ego;
 use crate::extend::{
-    bounds_of, edges_of, extend, grid_coords, limit_line, new_lattice_points, values_near,
-    ExtendRule,
+    bounds_of, edges_of, extend, grid_coords, limit_line, new_points_near, ExtendRule,
 };
 use crate::grid::Grid;
 use crate::identify;
@@ -242,7 +241,8 @@ impl<'s, 'a> Walk<'s, 'a> {
                 .into(),
             edges,
         });
-        self.run_extension(at.as_deref())?;
+        let centres: Vec<Vec<f64>> = at.into_iter().collect();
+        self.run_extension(&centres)?;
         Ok(true)
     }
 
@@ -258,17 +258,41 @@ impl<'s, 'a> Walk<'s, 'a> {
         )
     }
 
-    /// Runs the extended box's new grid points next to the answer `at` (in the search's
-    /// coordinates; every new point without one).
-    fn run_extension(&mut self, at: Option<&[f64]>) -> Result<()> {
-        let (evs, n) = extension_points(
-            self.stage,
-            self.first,
-            &self.dims,
-            &values_near(&self.values, at),
-            &self.scored,
+    /// Runs the extended box's new grid points: those of its lattice not scored yet within a
+    /// grid step of `centres` (the answer, and a better point beyond the box that pulled a side;
+    /// in the search's coordinates; every new point without a centre: [`new_points_near`]), at
+    /// the search's seeds as screened ([`ego::run_points_screened`]).
+    fn run_extension(&mut self, centres: &[Vec<f64>]) -> Result<()> {
+        let problem = self
+            .stage
+            .problem(self.first.fixed.clone(), self.dims.clone());
+        let seeds = ego::seed_list(&self.settings);
+        let seen: Vec<Vec<f64>> = self
+            .scored
+            .iter()
+            .filter_map(|(e, _)| ego::coords(&problem, &e.params))
+            .collect();
+        let points: Vec<BTreeMap<String, f64>> = new_points_near(&self.values, &seen, centres)
+            .iter()
+            .map(|x| problem.values(x))
+            .collect();
+        let label = EvalStage::Extend(self.extension);
+        if problem.progress {
+            log::info!(
+                "{label}: the box is now {}; {} new grid point(s) at {} seed(s){}",
+                fmt_bounds(&bounds_of(&self.dims)),
+                points.len(),
+                seeds.len(),
+                ego::screening(&self.settings)
+            );
+        }
+        let (evs, n) = ego::run_points_screened(
+            &problem,
+            label,
+            &points,
+            &seeds,
             &self.settings,
-            self.extension,
+            ego::lowest(&self.scored),
         )?;
         self.scored.extend(evs);
         self.runs += n;
@@ -307,17 +331,28 @@ impl<'s, 'a> Walk<'s, 'a> {
             return Ok(Some(self.outcome(o, edges)));
         }
         self.scored = o.evaluations;
-        self.run_extension(at.as_deref())?;
+        let centres: Vec<Vec<f64>> = at
+            .into_iter()
+            .chain(
+                self.better_anchor(&o.best)
+                    .and_then(|a| ego::coords(problem, &a.params)),
+            )
+            .collect();
+        self.run_extension(&centres)?;
         Ok(None)
+    }
+
+    /// The anchor, while it waits outside the box, when it scores below `best`.
+    fn better_anchor(&self, best: &Evaluation) -> Option<&Evaluation> {
+        self.anchor
+            .as_ref()
+            .map(|a| &a.0)
+            .filter(|a| a.objective < best.objective)
     }
 
     /// A better point outside the box (the anchor) pulls the sides between them out.
     fn pulled_by_anchor(&self, problem: &Refinement, best: &Evaluation, edges: &mut Vec<Edge>) {
-        let Some((a, _)) = self
-            .anchor
-            .as_ref()
-            .filter(|a| a.0.objective < best.objective)
-        else {
+        let Some(a) = self.better_anchor(best) else {
             return;
         };
         for (key, side, value) in outside_sides(&self.dims, problem, a) {
@@ -437,46 +472,4 @@ pub(super) fn outside_sides(
             },
         )
         .collect()
-}
-
-/// Runs the new grid points of an extended box (`dims`, the grid values to run among
-/// `values`): those of the lattice of `values` not scored yet, at the search's seeds as screened
-/// ([`ego::run_points_screened`]). Returns their evaluations and the runs simulated.
-fn extension_points(
-    stage: &Stage,
-    first: &Refinement,
-    dims: &[Dim],
-    values: &[Vec<f64>],
-    scored: &[ego::Scored],
-    settings: &ego::EgoSettings,
-    extension: usize,
-) -> Result<(Vec<ego::Scored>, usize)> {
-    let problem = stage.problem(first.fixed.clone(), dims.to_vec());
-    let seeds = ego::seed_list(settings);
-    let seen: Vec<Vec<f64>> = scored
-        .iter()
-        .filter_map(|(e, _)| ego::coords(&problem, &e.params))
-        .collect();
-    let points: Vec<BTreeMap<String, f64>> = new_lattice_points(values, &seen)
-        .iter()
-        .map(|x| problem.values(x))
-        .collect();
-    let label = EvalStage::Extend(extension);
-    if problem.progress {
-        log::info!(
-            "{label}: the box is now {}; {} new grid point(s) at {} seed(s){}",
-            fmt_bounds(&bounds_of(dims)),
-            points.len(),
-            seeds.len(),
-            ego::screening(settings)
-        );
-    }
-    ego::run_points_screened(
-        &problem,
-        label,
-        &points,
-        &seeds,
-        settings,
-        ego::lowest(scored),
-    )
 }

@@ -5,7 +5,8 @@
 //! it (the parameter may then lie beyond). Each touched side moves out by one step of its axis:
 //! the grid's spacing at that side, in log10 on a log axis and at most a decade (a decade
 //! when the axis has one value). The new grid points next to the answer (those of the larger
-//! box's lattice within one grid step of it on every axis) run at the search's seeds before the
+//! box's lattice within one grid step of it on every axis, or of a better point beyond the box
+//! that pulled a side) run at the search's seeds before the
 //! search goes on in the larger box; the surrogate's expected improvement decides whether
 //! anything farther along the new side is worth a run. A side stops moving at a limit, which
 //! the calibration then states: `calibrate.max_extensions` steps beyond the grid, or a value the
@@ -201,11 +202,8 @@ pub(super) fn extend(
 }
 
 /// The values of each axis within one grid step of `near` (the grid value nearest to it and
-/// its neighbours on either side); every value where `near` is None.
-pub(super) fn values_near(values: &[Vec<f64>], near: Option<&[f64]>) -> Vec<Vec<f64>> {
-    let Some(near) = near else {
-        return values.to_vec();
-    };
+/// its neighbours on either side).
+fn values_near(values: &[Vec<f64>], near: &[f64]) -> Vec<Vec<f64>> {
     values
         .iter()
         .zip(near)
@@ -220,9 +218,29 @@ pub(super) fn values_near(values: &[Vec<f64>], near: Option<&[f64]>) -> Vec<Vec<
         .collect()
 }
 
+/// The points of the lattice of `values` that `seen` does not hold and that lie within one grid
+/// step of one of `centres` on every axis ([`new_lattice_points`] when there is no centre), in
+/// the search's coordinates and the lattice's order.
+pub(super) fn new_points_near(
+    values: &[Vec<f64>],
+    seen: &[Vec<f64>],
+    centres: &[Vec<f64>],
+) -> Vec<Vec<f64>> {
+    let near: Vec<Vec<Vec<f64>>> = centres.iter().map(|c| values_near(values, c)).collect();
+    new_lattice_points(values, seen)
+        .into_iter()
+        .filter(|p| {
+            near.is_empty()
+                || near
+                    .iter()
+                    .any(|n| p.iter().zip(n).all(|(x, axis)| axis.contains(x)))
+        })
+        .collect()
+}
+
 /// Every point of the lattice of `values` (one list per axis) that `seen` does not hold, in
 /// the search's coordinates.
-pub(super) fn new_lattice_points(values: &[Vec<f64>], seen: &[Vec<f64>]) -> Vec<Vec<f64>> {
+fn new_lattice_points(values: &[Vec<f64>], seen: &[Vec<f64>]) -> Vec<Vec<f64>> {
     let mut points: Vec<Vec<f64>> = vec![Vec::new()];
     for axis in values {
         points = points
@@ -356,24 +374,27 @@ mod tests {
     }
 
     #[test]
-    fn the_values_near_a_point_are_its_nearest_grid_value_and_the_neighbours() {
+    fn the_new_points_are_those_within_a_grid_step_of_a_centre() {
         let values = vec![vec![-3.0, -2.0, -1.0, 0.0], vec![6.0, 6.3, 6.6, 6.9, 7.2]];
-        // The answer on the grid at (-2, 6.9): one step either way, clipped at the ends.
-        let near = values_near(&values, Some(&[-2.0, 6.9]));
-        assert_eq!(near, vec![vec![-3.0, -2.0, -1.0], vec![6.6, 6.9, 7.2]]);
-        // Off the grid: from the nearest value.
-        let near = values_near(&values, Some(&[-0.2, 6.05]));
-        assert_eq!(near, vec![vec![-1.0, 0.0], vec![6.0, 6.3]]);
-        assert_eq!(values_near(&values, None), values);
+        // One step either way of the nearest value, clipped at the ends; off the grid, from
+        // the nearest value.
+        assert_eq!(
+            values_near(&values, &[-2.0, 6.9]),
+            vec![vec![-3.0, -2.0, -1.0], vec![6.6, 6.9, 7.2]]
+        );
+        assert_eq!(
+            values_near(&values, &[-0.2, 6.05]),
+            vec![vec![-1.0, 0.0], vec![6.0, 6.3]]
+        );
         // After two sides moved (eps down to -3, kappa up to 7.2), the points of the new
-        // lines next to the answer are the ones to run; the far ends of both lines are not.
+        // lines next to the answer at (-2, 6.9) are the ones to run; the far ends are not.
         let seen: Vec<Vec<f64>> = [-2.0, -1.0, 0.0]
             .iter()
             .flat_map(|&a| [6.0, 6.3, 6.6, 6.9].map(|k| vec![a, k]))
             .collect();
-        let new = new_lattice_points(&values_near(&values, Some(&[-2.0, 6.9])), &seen);
+        let answer = vec![-2.0, 6.9];
         assert_eq!(
-            new,
+            new_points_near(&values, &seen, std::slice::from_ref(&answer)),
             vec![
                 vec![-3.0, 6.6],
                 vec![-3.0, 6.9],
@@ -382,7 +403,13 @@ mod tests {
                 vec![-1.0, 7.2]
             ]
         );
-        assert_eq!(new_lattice_points(&values, &seen).len(), 8);
+        // A second centre (a better point that pulled a side, say) adds the points near it.
+        let near_both = new_points_near(&values, &seen, &[answer, vec![-3.0, 6.0]]);
+        assert_eq!(near_both.len(), 7, "{near_both:?}");
+        assert!(near_both.contains(&vec![-3.0, 6.0]) && near_both.contains(&vec![-3.0, 6.3]));
+        assert!(!near_both.contains(&vec![0.0, 7.2]));
+        // No centre: every new point.
+        assert_eq!(new_points_near(&values, &seen, &[]).len(), 8);
     }
 
     #[test]

@@ -659,11 +659,7 @@ impl Pending {
             self.done
         );
         if self.kept > 0 {
-            let _ = write!(
-                line,
-                ", {} failed for good (an instability or a rejected value: kept)",
-                self.kept
-            );
+            let _ = write!(line, ", {} {}", self.kept, crate::store::FAILED_FOR_GOOD);
         }
         if self.failed > 0 {
             let _ = write!(line, ", {} failed (submitted again)", self.failed);

@@ -174,6 +174,10 @@ impl Record {
     }
 }
 
+/// How a count of runs kept as failed for good ([`Record::reproducible`]) reads after its
+/// number, in `submit`'s and `status`'s lines.
+pub const FAILED_FOR_GOOD: &str = "failed for good (an instability or a rejected value: kept)";
+
 /// Why a run failed, as its record keeps it.
 #[derive(Debug, Clone)]
 pub(crate) struct Failure {

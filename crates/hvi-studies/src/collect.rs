@@ -281,7 +281,7 @@ pub fn status(args: &StatusOptions) -> Result<()> {
         .count();
     let failed = match (kept, failed - kept) {
         (0, _) => format!("{failed} failed"),
-        (_, 0) => format!("{failed} failed for good (an instability or a rejected value: kept)"),
+        (_, 0) => format!("{failed} {}", hvi_store::store::FAILED_FOR_GOOD),
         (k, again) => {
             format!("{failed} failed ({k} for good, kept; {again} run again when the study does)")
         }
