@@ -1041,6 +1041,132 @@ fn extension_points(c: &serde_json::Value) -> Vec<&serde_json::Value> {
         .collect()
 }
 
+/// `initial_design = "corners"`: the grid stage runs the box's ends and centre (3 of 5 eps
+/// values), the extension runs the skipped grid point next to the answer, the answer and the
+/// last box are the full grid's, with fewer runs, and a second invocation runs nothing.
+#[test]
+fn a_corner_design_runs_fewer_grid_points_and_fills_the_skipped_ones_near_the_answer() {
+    let dir = scratch("calibrate-corners");
+    let targets = dir.join("targets.toml");
+    edge_targets(&targets);
+    let calibrate_section = "seeds = [1, 2]\nbatch = 2\nmax_batches = 3\n";
+    let values = "[0.002, 0.005, 0.02, 0.05, 0.2]";
+    let full = eps_study(&dir, "full", values, &targets, calibrate_section);
+    let corners = eps_study(
+        &dir,
+        "corners",
+        values,
+        &targets,
+        &format!("{calibrate_section}initial_design = \"corners\"\n"),
+    );
+    let eps = |e: &serde_json::Value| e["params"]["material.eps_j"].as_f64().expect("eps");
+    let (out_full, out_corners) = (dir.join("full-out"), dir.join("corners-out"));
+    assert_ok(&calibrate(&full, &out_full));
+    let o = calibrate(&corners, &out_corners);
+    assert_ok(&o);
+    let c = calibration_json(&out_corners);
+    assert_eq!(
+        c["initial_design"],
+        serde_json::json!({"name": "corners", "points": 3, "grid_points": 5})
+    );
+    assert!(
+        stderr(&o).contains("the grid stage ran the corners design, 3 of the grid's 5 points"),
+        "{}",
+        stderr(&o)
+    );
+    // The grid stage: the two ends and the value nearest the centre (in log10: 0.02 J).
+    let grid: Vec<f64> = c["refinement"]
+        .as_array()
+        .expect("refinement")
+        .iter()
+        .filter(|e| e["stage"] == "grid-seeds")
+        .map(eps)
+        .collect();
+    assert_eq!(grid, vec![0.002, 0.02, 0.2], "{}", stderr(&o));
+    let rows = std::fs::read_to_string(out_corners.join("results.csv")).expect("results.csv");
+    assert_eq!(rows.lines().count(), 1 + 3, "{rows}");
+    // The answer touched the low side: the first extension ran a step below the box and the
+    // grid's skipped 5e-3 J, one grid step from the answer.
+    let first: Vec<f64> = extension_points(&c)
+        .into_iter()
+        .filter(|e| e["stage"] == "extend-0")
+        .map(eps)
+        .collect();
+    assert!(
+        first.iter().any(|&e| e < 0.002) && first.contains(&0.005),
+        "extend-0 ran {first:?}"
+    );
+    // The full grid's calibration ends at the same point in the same box.
+    let f = calibration_json(&out_full);
+    assert_eq!(c["best"]["params"], f["best"]["params"], "{}", stderr(&o));
+    let last = |c: &serde_json::Value| c["boxes"].as_array().and_then(|b| b.last()).cloned();
+    assert_eq!(
+        last(&c).map(|b| b["bounds"].clone()),
+        last(&f).map(|b| b["bounds"].clone())
+    );
+    assert_ne!(c["label"], f["label"], "the design is part of the label");
+    assert!(
+        c["runs_made"].as_u64() < f["runs_made"].as_u64(),
+        "{} runs against {}",
+        c["runs_made"],
+        f["runs_made"]
+    );
+
+    let o = calibrate(&corners, &out_corners);
+    assert_ok(&o);
+    let c2 = calibration_json(&out_corners);
+    assert_eq!(c2["runs_made"], 0, "{}", stderr(&o));
+    assert_eq!(c2["best"]["params"], c["best"]["params"]);
+}
+
+/// A corner design over two axes draws its maps and snapshots from the points it ran, each
+/// evaluation of the grid at the search's seeds keeping its grid run's index.
+#[test]
+fn a_corner_design_over_two_axes_draws_its_maps() {
+    let dir = scratch("calibrate-corners-maps");
+    let targets = dir.join("targets.toml");
+    edge_targets(&targets);
+    let study = eps_study(
+        &dir,
+        "corners2",
+        "[0.002, 0.02, 0.2]",
+        &targets,
+        "seeds = [1, 2]\nbatch = 1\nmax_batches = 1\nmax_extensions = 0\ninitial_design = \"corners\"\n",
+    );
+    let text = std::fs::read_to_string(&study).expect("study");
+    let two_axes = text
+        .replace(
+            "\n\n[tiers.quick]",
+            "\n\n[[axes]]\nkey = \"material.kappa_n_m\"\nvalues = [1.14e6, 4.56e6]\n\n[tiers.quick]",
+        )
+        .replace("\"material.kappa_n_m=4.56e6\", ", "");
+    std::fs::write(&study, two_axes).expect("study");
+    let out = dir.join("out");
+    let o = calibrate(&study, &out);
+    assert_ok(&o);
+    let c = calibration_json(&out);
+    assert_eq!(c["initial_design"]["points"], 5, "{}", stderr(&o));
+    for file in [
+        "map_R.png",
+        "map_va.png",
+        "map_objective.png",
+        "snapshots.png",
+    ] {
+        assert!(out.join(file).exists(), "{file} missing:\n{}", stderr(&o));
+    }
+    // The grid stage's run indices, and the same indices on the grid at the seeds.
+    let evals = std::fs::read_to_string(out.join("evaluations.csv")).expect("evaluations.csv");
+    let steps = |stage: &str| -> Vec<String> {
+        evals
+            .lines()
+            .filter(|l| l.starts_with(&format!("{stage},")))
+            .map(|l| l.split(',').nth(1).unwrap_or("").to_string())
+            .collect()
+    };
+    assert_eq!(steps("grid"), vec!["0", "1", "2", "4", "5"], "{evals}");
+    assert_eq!(steps("grid-seeds"), steps("grid"), "{evals}");
+}
+
 /// The map of R after the box moved shows every box searched (the new grid points' seed
 /// means), not only the study's grid, and says so.
 #[test]

@@ -80,6 +80,29 @@ impl Method {
     }
 }
 
+/// Which of the study grid's points the grid stage runs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum InitialDesign {
+    /// Every point of the grid.
+    #[default]
+    Grid,
+    /// The corners of the searched axes' box and the grid point nearest its centre, at every
+    /// value of the axes not searched ([`crate::design`]); the rest of the grid stays the
+    /// lattice the box extends on and fills in near the answer.
+    Corners,
+}
+
+impl InitialDesign {
+    /// The name as the study file and calibration.json spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            InitialDesign::Grid => "grid",
+            InitialDesign::Corners => "corners",
+        }
+    }
+}
+
 /// `[calibrate]` of a study file.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -110,6 +133,10 @@ pub struct CalibrateConfig {
     /// The search after the grid: `ego` (default) or `nelder-mead`.
     #[serde(default)]
     pub method: Method,
+    /// The grid stage's points: `grid` (default, every point) or `corners` (the searched box's
+    /// corners and centre).
+    #[serde(default)]
+    pub initial_design: InitialDesign,
     /// ego: points per batch (run together at the first seed, then at the further seeds where
     /// they are near the answer).
     #[serde(default = "default_batch")]

@@ -130,17 +130,23 @@ pub(super) fn seeded_grid(
             .collect();
         return Ok((evaluations, 0));
     }
-    let grid_points: Vec<BTreeMap<String, f64>> = scored_grid
-        .map(|(e, _)| refined(problem, &e.params))
-        .collect();
-    run_points_screened(
+    let (steps, grid_points): (Vec<usize>, Vec<BTreeMap<String, f64>>) = scored_grid
+        .map(|(e, _)| (e.step, refined(problem, &e.params)))
+        .unzip();
+    let (mut evaluations, runs) = run_points_screened(
         problem,
         EvalStage::GridSeeds,
         &grid_points,
         &seed_list(settings),
         settings,
         f64::INFINITY,
-    )
+    )?;
+    // Each point keeps its grid run's index (the maps slice the grid at the best one's), also
+    // where a failed grid run or the initial design leaves points out.
+    for ((e, _), step) in evaluations.iter_mut().zip(steps) {
+        e.step = step;
+    }
+    Ok((evaluations, runs))
 }
 
 /// The lowest objective among `evaluations` (infinite when none is scored).

@@ -4,12 +4,14 @@
 //! paper's fit scored at the same tier; and the report ([`mod@report`]).
 //!
 //! - [`config`]: the study's `[calibrate]` section and the method it names;
+//! - [`design`]: which of the grid's points the grid stage runs;
 //! - [`problem`]: a parameter point as a run through the store, scored;
 //! - [`result`]: what `calibration.json` holds;
 //! - [`shots`]: the shot's impact, checked against the study's scene and filled into it.
 
 mod boxes;
 pub mod config;
+pub mod design;
 pub mod ego;
 pub mod extend;
 pub mod grid;
@@ -29,7 +31,7 @@ use hvi_store::exec::thread_split;
 use hvi_store::runner::{Runner, SlurmBatches};
 use hvi_store::slurm::SlurmOptions;
 
-pub use config::{CalibrateConfig, Method};
+pub use config::{CalibrateConfig, InitialDesign, Method};
 pub use grid::score_table;
 pub use report::report;
 pub use result::{
@@ -170,8 +172,12 @@ pub fn calibrate_plan(
     let (refine_keys, dims) = refined_axes(plan, &cfg)?;
     let runner = runner_of(args)?;
 
-    let grid = grid_stage(&plans, out, &runner, &targets, progress)?;
-    let best_run = plan.run(grid.best)?;
+    // The grid stage runs the design's points of every shot's grid; the study's grid stays
+    // the lattice the box extends on.
+    let (designs, design) = design::design_plans(&plans, &dims, cfg.initial_design);
+    let design_refs: Vec<_> = designs.iter().collect();
+    let grid = grid_stage(&design_refs, out, &runner, &targets, progress)?;
+    let best_run = designs[0].run(grid.best)?;
     let fixed = fixed_overrides(&plans, &best_run.values, |k| refine_keys.contains(k))?;
     let store = runner.store(out)?;
     let stage = Stage {
@@ -204,16 +210,10 @@ pub fn calibrate_plan(
         paper.3.clone(),
     )?;
     let answer = Answer::of(&grid, &search, &paper.1);
-    let held_out = match held_out.first() {
-        Some(h) => Some(shots::predict_held_out(
-            &stage,
-            h,
-            &best_run.values,
-            &refine_keys,
-            &answer.best,
-        )?),
-        None => None,
-    };
+    let held_out = held_out
+        .first()
+        .map(|h| shots::predict_held_out(&stage, h, &best_run.values, &refine_keys, &answer.best))
+        .transpose()?;
     let found = Found {
         args,
         plan,
@@ -222,13 +222,14 @@ pub fn calibrate_plan(
         label: label_of(&cfg, args, method, &search, &first_box)?,
         held_out,
         grid_runs: grid.ran,
+        design,
         paper,
         search,
         answer,
         wall_seconds: t0.elapsed().as_secs_f64(),
     };
     let result = found.into_result();
-    publish(out, plan, &grid, &result, &cfg, progress)?;
+    publish(out, &designs[0], &grid, &result, &cfg, progress)?;
     Ok(result)
 }
 
@@ -290,6 +291,7 @@ struct Found<'a> {
     label: String,
     held_out: Option<result::HeldOut>,
     grid_runs: usize,
+    design: result::DesignUse,
     paper: PaperPoint,
     search: SearchOutcome,
     answer: Answer,
@@ -339,6 +341,7 @@ impl Found<'_> {
             surface: search.surface,
             region: search.region,
             best_spread: search.spread,
+            initial_design: Some(self.design),
             runs_made: self.grid_runs + search.runs + paper_runs,
             wall_seconds: self.wall_seconds,
             prior: self
@@ -619,6 +622,11 @@ fn label_of(
     }
     if let Some(h) = &args.hold_out {
         settings["hold_out"] = serde_json::json!(h);
+    }
+    // Only when not the default, so that the labels of grid-design calibrations stay what
+    // they were.
+    if cfg.initial_design != InitialDesign::Grid {
+        settings["initial_design"] = serde_json::json!(cfg.initial_design.name());
     }
     // Only when given, so that the labels of calibrations without overrides stay what they were.
     if !args.study.sets.is_empty() {

@@ -65,7 +65,7 @@ impl<'a> MapFrame<'a> {
     ) -> Result<MapFrame<'a>> {
         let (ax, ay) = map_axes(plan)?;
         let (kx, ky) = (&plan.axes[ax].key, &plan.axes[ay].key);
-        let slice = result.best_grid.step;
+        let slice = crate::design::position(plan, result.best_grid.step)?;
         Ok(MapFrame {
             plan,
             records,

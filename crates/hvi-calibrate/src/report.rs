@@ -227,9 +227,16 @@ fn cost_line(r: &CalibrationResult) -> String {
     } else {
         String::new()
     };
+    let design = match &r.initial_design {
+        Some(d) if d.points < d.grid_points => format!(
+            "; the grid stage ran the {} design, {} of the grid's {} points",
+            d.name, d.points, d.grid_points
+        ),
+        _ => String::new(),
+    };
     format!(
         "{} simulated by this invocation, {} of them after the grid{after}; {} points evaluated \
-         after the grid{screened}; wall time {:.1} s",
+         after the grid{screened}{design}; wall time {:.1} s",
         r.runs_made,
         r.refinement_runs,
         r.refinement.len(),
@@ -602,7 +609,7 @@ pub(super) fn calibration_snapshots(
     result: &CalibrationResult,
 ) -> Result<PathBuf> {
     let axes = hvi_studies::figures::map_axes(plan)?;
-    let slice = result.best_grid.step;
+    let slice = crate::design::position(plan, result.best_grid.step)?;
     let (cols, rows, tiles) = hvi_studies::figures::plan_tiles(plan, out, axes, slice, |i| {
         let r = &records[i];
         let f = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.2}"));

@@ -171,6 +171,17 @@ pub fn shot_means(
     means
 }
 
+/// The grid stage's design as a calibration used it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct DesignUse {
+    /// `grid` or `corners`.
+    pub name: String,
+    /// Grid points the stage ran (per shot).
+    pub points: usize,
+    /// Points of the study's grid.
+    pub grid_points: usize,
+}
+
 /// What `calibrate` writes into calibration.json.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CalibrationResult {
@@ -248,6 +259,10 @@ pub struct CalibrationResult {
     /// At the best point, each target's observable over the seeds.
     #[serde(default)]
     pub best_spread: Vec<Spread>,
+    /// The grid stage's design (`calibrate.initial_design`) and how many of the study grid's
+    /// points it ran (None in files written before the key).
+    #[serde(default)]
+    pub initial_design: Option<DesignUse>,
     /// Runs simulated by this invocation (grid, search and the paper's point).
     #[serde(default)]
     pub runs_made: usize,

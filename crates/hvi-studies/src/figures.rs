@@ -94,7 +94,8 @@ pub fn label(plan: &Plan, k: usize, log: bool) -> String {
 
 /// The tiles of a plan's runs over axes (ax, ay) at run `slice_run`'s other axis values, with
 /// the column and row headers: each tile the run's cloud at the analysis time from its kept
-/// state (`state.bin`; none for a run without one).
+/// state (`state.bin`; none for a run without one). `verdict(k)` frames and captions the run at
+/// position k of `plan.runs` (a plan may hold a subset of a study's runs).
 pub fn plan_tiles(
     plan: &Plan,
     dir: &Path,
@@ -116,7 +117,7 @@ pub fn plan_tiles(
     let rows = ys.iter().map(|&i| label(ay, i)).collect();
     let slice = &plan.run(slice_run)?.coords;
     let mut tiles = Vec::new();
-    for run in &plan.runs {
+    for (position, run) in plan.runs.iter().enumerate() {
         let others = run
             .coords
             .iter()
@@ -127,7 +128,7 @@ pub fn plan_tiles(
         }
         let col = xs.iter().position(|&i| i == run.coords[ax]).unwrap_or(0);
         let row = ys.iter().position(|&i| i == run.coords[ay]).unwrap_or(0);
-        let (frame, caption) = verdict(run.index);
+        let (frame, caption) = verdict(position);
         let kept = hvi_run::state::read_state(&dir.join(&run.dir).join(STATE_FILE))?;
         tiles.push(Tile {
             col,
