@@ -1119,7 +1119,8 @@ fn a_corner_design_runs_fewer_grid_points_and_fills_the_skipped_ones_near_the_an
     assert_eq!(c2["best"]["params"], c["best"]["params"]);
 }
 
-/// A corner design over two axes draws its maps and snapshots from the points it ran, each
+/// A corner design over two axes (`--initial-design corners`) draws its maps and snapshots
+/// from the points it ran, each
 /// evaluation of the grid at the search's seeds keeping its grid run's index.
 #[test]
 fn a_corner_design_over_two_axes_draws_its_maps() {
@@ -1131,7 +1132,7 @@ fn a_corner_design_over_two_axes_draws_its_maps() {
         "corners2",
         "[0.002, 0.02, 0.2]",
         &targets,
-        "seeds = [1, 2]\nbatch = 1\nmax_batches = 1\nmax_extensions = 0\ninitial_design = \"corners\"\n",
+        "seeds = [1, 2]\nbatch = 1\nmax_batches = 1\nmax_extensions = 0\n",
     );
     let text = std::fs::read_to_string(&study).expect("study");
     let two_axes = text
@@ -1141,8 +1142,9 @@ fn a_corner_design_over_two_axes_draws_its_maps() {
         )
         .replace("\"material.kappa_n_m=4.56e6\", ", "");
     std::fs::write(&study, two_axes).expect("study");
+    // The command line's design, over the study's (the default, every point).
     let out = dir.join("out");
-    let o = calibrate(&study, &out);
+    let o = calibrate_with(&study, &out, &["--initial-design", "corners"]);
     assert_ok(&o);
     let c = calibration_json(&out);
     assert_eq!(c["initial_design"]["points"], 5, "{}", stderr(&o));

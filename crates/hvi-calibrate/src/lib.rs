@@ -66,6 +66,8 @@ pub struct CalibrateOptions {
     pub max_batches: Option<usize>,
     /// The seeds of the surrogate search (None: `calibrate.seeds`).
     pub seeds: Option<Vec<u64>>,
+    /// The grid stage's points (None: `calibrate.initial_design`).
+    pub initial_design: Option<InitialDesign>,
     /// Extend an axis whose side the optimum or its region touches (false: report the edge).
     pub extend: bool,
     /// Run each batch as a Slurm job array with these options, asking the queue every so many
@@ -133,6 +135,7 @@ impl CalibrateOptions {
             max_iters: None,
             max_batches: None,
             seeds: None,
+            initial_design: None,
             extend: true,
             slurm: None,
             coarse: None,
@@ -361,12 +364,15 @@ impl Found<'_> {
     }
 }
 
-/// The study's `[calibrate]`, with the command line's seeds.
+/// The study's `[calibrate]`, with the command line's seeds and initial design.
 fn config_of(study: &hvi_store::spec::Study, args: &CalibrateOptions) -> Result<CalibrateConfig> {
     let mut cfg = CalibrateConfig::of(study)?;
     if let Some(seeds) = &args.seeds {
         cfg.seeds = seeds.clone();
         cfg.check_seeds("--seeds")?;
+    }
+    if let Some(design) = args.initial_design {
+        cfg.initial_design = design;
     }
     Ok(cfg)
 }

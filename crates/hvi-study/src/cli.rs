@@ -11,7 +11,7 @@ use hvi_store::plan::Plan;
 use hvi_store::slurm::SlurmOptions;
 use hvi_store::spec::Study;
 
-use hvi_calibrate::config::Method;
+use hvi_calibrate::config::{InitialDesign, Method};
 use hvi_calibrate::CalibrateOptions;
 use hvi_fidelity::FidelityOptions;
 use hvi_ladder::LadderOptions;
@@ -217,6 +217,10 @@ pub struct CalibrateArgs {
     /// The search after the grid (overrides calibrate.method).
     #[arg(long, value_enum)]
     pub method: Option<MethodArg>,
+    /// The grid stage's points (overrides calibrate.initial_design): every grid point, or the
+    /// searched box's corners and centre (docs/calibration.md, "Stages").
+    #[arg(long, value_enum)]
+    pub initial_design: Option<InitialDesignArg>,
     /// Nelder-Mead iterations at most (overrides calibrate.max_iters).
     #[arg(long)]
     pub max_iters: Option<u64>,
@@ -306,6 +310,7 @@ impl CalibrateArgs {
             max_iters: self.max_iters,
             max_batches: self.max_batches,
             seeds: self.seeds.clone(),
+            initial_design: self.initial_design.map(InitialDesign::from),
             extend: !self.no_extend,
             slurm,
             coarse: None,
@@ -886,6 +891,25 @@ impl From<MethodArg> for Method {
         match m {
             MethodArg::Ego => Method::Ego,
             MethodArg::NelderMead => Method::NelderMead,
+        }
+    }
+}
+
+/// `--initial-design`: the grid stage's points ([`InitialDesign`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum InitialDesignArg {
+    /// Every point of the study's grid.
+    Grid,
+    /// The corners of the searched axes' box and the grid point nearest its centre; the
+    /// skipped grid points near the answer run when the box moves.
+    Corners,
+}
+
+impl From<InitialDesignArg> for InitialDesign {
+    fn from(d: InitialDesignArg) -> InitialDesign {
+        match d {
+            InitialDesignArg::Grid => InitialDesign::Grid,
+            InitialDesignArg::Corners => InitialDesign::Corners,
         }
     }
 }
