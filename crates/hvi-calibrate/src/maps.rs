@@ -14,7 +14,7 @@ use hvi_engine::scene::Width;
 use hvi_plot::contour::{contour_plot, ContourPlot, Marker};
 use hvi_store::plan::Plan;
 use hvi_store::store::Record;
-use hvi_studies::figures::{conditions, field_of, label, map_axes, sorted_axis};
+use hvi_studies::figures::{conditions, field_of, label, map_axes};
 use plotters::style::RGBColor;
 
 /// Draws the calibration's maps into `dir`: `map_R`, `map_va`, `map_objective` (.png, .svg).
@@ -336,6 +336,24 @@ fn seed_mean_field(f: &MapFrame) -> Result<Option<(Field, Vec<u64>)>> {
     Ok(Some((field, seeds)))
 }
 
+/// Where the grid stage's runs sit on the map: each run of the plan at the slice's values of
+/// the other axes, as (x, y).
+fn grid_runs_on_slice(f: &MapFrame) -> Vec<(f64, f64)> {
+    let (ax, ay) = f.axes;
+    let slice = &f.plan.runs[f.slice].coords;
+    f.plan
+        .runs
+        .iter()
+        .filter(|r| {
+            r.coords
+                .iter()
+                .enumerate()
+                .all(|(k, &c)| k == ax || k == ay || c == slice[k])
+        })
+        .filter_map(|r| Some((r.values[ax].as_f64()?, r.values[ay].as_f64()?)))
+        .collect()
+}
+
 /// The objective, in log10 (it spans decades), with the refinement's points and the optimum:
 /// the surrogate search's final model where there is one (it shows the valleys between grid
 /// points that the search found), else over the grid at the search's seeds when it ran them
@@ -347,19 +365,9 @@ fn objective_map(f: &MapFrame) -> Result<ContourPlot> {
         .surface
         .as_ref()
         .filter(|s| (&s.keys.0, &s.keys.1) == (kx, ky));
-    // With the model's field, the grid's runs are drawn where they are.
-    let samples = match surface {
-        Some(_) => {
-            let xs = sorted_axis(f.plan, f.axes.0)?;
-            let ys = sorted_axis(f.plan, f.axes.1)?;
-            Some(
-                ys.iter()
-                    .flat_map(|&(y, _)| xs.iter().map(move |&(x, _)| (x, y)))
-                    .collect(),
-            )
-        }
-        None => None,
-    };
+    // With the model's field, the grid's runs are drawn where they are (the grid stage's: with
+    // a corner design, not every grid point).
+    let samples = surface.map(|_| grid_runs_on_slice(f));
     let seed_means = match surface {
         Some(_) => None,
         None => seed_mean_field(f)?,
