@@ -1112,6 +1112,18 @@ fn a_corner_design_runs_fewer_grid_points_and_fills_the_skipped_ones_near_the_an
         f["runs_made"]
     );
 
+    // `status` says why the skipped grid value (0.05 J) is pending.
+    let o = hvi_study(&["status".as_ref(), out_corners.as_os_str()]);
+    let said = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        said.contains("5 runs: 4 done, 0 failed, 0 running, 1 pending"),
+        "{said}"
+    );
+    assert!(
+        said.contains("ran the corners design (3 of the grid's 5 points)"),
+        "{said}"
+    );
+
     let o = calibrate(&corners, &out_corners);
     assert_ok(&o);
     let c2 = calibration_json(&out_corners);

@@ -1,5 +1,6 @@
-//! The calibration's first stage: every run of the study's grid, through the store, scored
-//! against the targets; `results.csv/json` gain the objective and its terms.
+//! The calibration's first stage: the runs of the study's grid that its initial design picks
+//! ([`crate::design`]), through the store, scored against the targets; `results.csv/json`
+//! gain the objective and its terms.
 
 use std::path::Path;
 
@@ -67,8 +68,8 @@ pub(super) struct Grid {
     pub(super) best: usize,
 }
 
-/// Stage 1: the grid of every shot (`plans`, the study's grid at each shot's impact, the first
-/// the study's own), run (or reused) through the store and scored together per grid point;
+/// Stage 1: the grid of every shot (`plans`, the design's points of the study's grid at each
+/// shot's impact, the first the study's own), run (or reused) through the store and scored together per grid point;
 /// `results.csv/json` (the first shot's runs) and, with several shots, `results-<shot>.csv/json`
 /// gain the objective and the terms.
 pub(super) fn grid_stage(

@@ -14,7 +14,7 @@ use hvi_engine::scene::Width;
 use hvi_plot::contour::{contour_plot, ContourPlot, Marker};
 use hvi_store::plan::Plan;
 use hvi_store::store::Record;
-use hvi_studies::figures::{conditions, field_of, label, map_axes};
+use hvi_studies::figures::{conditions, field_of, label, map_axes, on_slice};
 use plotters::style::RGBColor;
 
 /// Draws the calibration's maps into `dir`: `map_R`, `map_va`, `map_objective` (.png, .svg).
@@ -344,12 +344,7 @@ fn grid_runs_on_slice(f: &MapFrame) -> Vec<(f64, f64)> {
     f.plan
         .runs
         .iter()
-        .filter(|r| {
-            r.coords
-                .iter()
-                .enumerate()
-                .all(|(k, &c)| k == ax || k == ay || c == slice[k])
-        })
+        .filter(|r| on_slice(&r.coords, slice, f.axes))
         .filter_map(|r| Some((r.values[ax].as_f64()?, r.values[ay].as_f64()?)))
         .collect()
 }

@@ -297,6 +297,11 @@ pub fn status(args: &StatusOptions) -> Result<()> {
         let _ = write!(s, " ({queued} queued in Slurm)");
     }
     s.push('\n');
+    if pending > 0 {
+        if let Some(line) = design_line(&dir) {
+            let _ = writeln!(s, "{line}");
+        }
+    }
     let (done_beyond, running_beyond) = survey.beyond_plan;
     if done_beyond + running_beyond > 0 {
         let _ = writeln!(
@@ -315,6 +320,24 @@ pub fn status(args: &StatusOptions) -> Result<()> {
     }
     log::info!(target: hvi_run::STDOUT, "{}", s.trim_end_matches('\n'));
     Ok(())
+}
+
+/// Why grid runs are pending after a calibration whose grid stage ran a sparser design
+/// (`calibrate.initial_design`, read from the directory's calibration.json): they were left
+/// out on purpose. None without such a calibration.
+fn design_line(dir: &Path) -> Option<String> {
+    let text = std::fs::read_to_string(dir.join("calibration.json")).ok()?;
+    let c: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let d = &c["initial_design"];
+    let (points, of) = (d["points"].as_u64()?, d["grid_points"].as_u64()?);
+    (points < of).then(|| {
+        format!(
+            "the calibration here ran the {} design ({points} of the grid's {of} points): grid \
+             runs it left out count as pending; `sweep` or `calibrate --initial-design grid` \
+             runs them",
+            d["name"].as_str().unwrap_or("?")
+        )
+    })
 }
 
 /// The Slurm jobs of a study, a line each, and the queue's note.

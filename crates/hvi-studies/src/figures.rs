@@ -46,6 +46,15 @@ pub fn sorted_axis(plan: &Plan, k: usize) -> Result<Vec<(f64, usize)>> {
     Ok(v)
 }
 
+/// Whether a run with axis indices `coords` lies on the slice through `slice` (another run's
+/// indices) over axes (ax, ay): every other axis at the slice's value.
+pub fn on_slice(coords: &[usize], slice: &[usize], (ax, ay): (usize, usize)) -> bool {
+    coords
+        .iter()
+        .enumerate()
+        .all(|(k, &c)| k == ax || k == ay || c == slice[k])
+}
+
 /// The field of `value(record)` over axes (ax, ay) of a plan, at the other axes' values of
 /// run `slice_run`. Failed or missing runs are NaN. Axis values are sorted.
 pub fn field_of(
@@ -60,12 +69,7 @@ pub fn field_of(
     let slice = &plan.run(slice_run)?.coords;
     let mut z = vec![vec![f64::NAN; xs.len()]; ys.len()];
     for (run, rec) in plan.runs.iter().zip(records) {
-        let others_match = run
-            .coords
-            .iter()
-            .enumerate()
-            .all(|(k, &c)| k == ax || k == ay || c == slice[k]);
-        if !others_match || rec.status != RunStatus::Completed {
+        if !on_slice(&run.coords, slice, (ax, ay)) || rec.status != RunStatus::Completed {
             continue;
         }
         let col = xs.iter().position(|&(_, i)| i == run.coords[ax]);
@@ -118,12 +122,7 @@ pub fn plan_tiles(
     let slice = &plan.run(slice_run)?.coords;
     let mut tiles = Vec::new();
     for (position, run) in plan.runs.iter().enumerate() {
-        let others = run
-            .coords
-            .iter()
-            .enumerate()
-            .all(|(k, &c)| k == ax || k == ay || c == slice[k]);
-        if !others {
+        if !on_slice(&run.coords, slice, (ax, ay)) {
             continue;
         }
         let col = xs.iter().position(|&i| i == run.coords[ax]).unwrap_or(0);
