@@ -7,7 +7,7 @@
 //! stride the engine takes; then the same shares by the stiffness bound and the closing speed
 //! (the rate at which a pair's distance falls) instead of the relative speed, and the
 //! smallest stride allowed anywhere by each bound. reports/multirate and
-//! reports/closing-speed are its results.
+//! reports/stride-rule are its results.
 //!
 //! `cargo run --release -p hvi-engine --example pair_speeds -- PARTICLES [TIMES_US...]`
 use hvi_engine::paper;
