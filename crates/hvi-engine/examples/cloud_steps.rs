@@ -9,14 +9,8 @@ use hvi_engine::scene::SceneSpec;
 use hvi_engine::sim::Simulation;
 
 fn main() {
-    // Inside a pool, as `hvi-study` runs: the stepping thread is one of the workers, so the
-    // kernels' parallel loops do not wake a pool from outside at every call (which costs a
-    // tenth of a small scene's time on one thread), and the other workers spin between the
-    // loops (`hvi_engine::threads`). RAYON_NUM_THREADS sets the count.
-    rayon::ThreadPoolBuilder::new()
-        .build()
-        .expect("a thread pool")
-        .install(|| hvi_engine::threads::with_awake_workers(run));
+    // As `hvi-study` runs a scene; RAYON_NUM_THREADS sets the thread count.
+    hvi_engine::threads::in_pool(run);
 }
 
 fn run() {

@@ -16,10 +16,8 @@ use hvi_engine::sim::Simulation;
 use hvi_engine::state::{BONDS_PER_PARTICLE, INDEX_MASK, NO_BOND};
 
 fn main() {
-    rayon::ThreadPoolBuilder::new()
-        .build()
-        .expect("a thread pool")
-        .install(|| hvi_engine::threads::with_awake_workers(run));
+    // As `hvi-study` runs a scene; RAYON_NUM_THREADS sets the thread count.
+    hvi_engine::threads::in_pool(run);
 }
 
 fn run() {

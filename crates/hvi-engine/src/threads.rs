@@ -37,6 +37,18 @@ thread_local! {
 /// without those that have not (a worker busy with other work, say).
 const START_WAIT: Duration = Duration::from_millis(50);
 
+/// Runs `body` as `hvi-study` runs a scene: inside a new rayon pool (`RAYON_NUM_THREADS`
+/// threads, or one per core), on one of its workers, with the others spinning between the
+/// kernels' loops ([`with_awake_workers`]). A step loop run from outside a pool instead wakes
+/// the pool at every parallel loop, which costs a tenth of a small scene's time on one
+/// thread. For the engine's examples and tools.
+pub fn in_pool<R: Send>(body: impl FnOnce() -> R + Send) -> R {
+    rayon::ThreadPoolBuilder::new()
+        .build()
+        .expect("a thread pool")
+        .install(|| with_awake_workers(body))
+}
+
 /// Runs `body` on this thread while the other workers of the current rayon pool spin instead
 /// of sleeping between parallel loops (see the module's doc). With one thread, or when called
 /// inside another such closure, it runs `body` alone.
