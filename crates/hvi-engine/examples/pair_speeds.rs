@@ -4,8 +4,8 @@
 //! interacting pairs (listed pairs and bond partners) would allow under the adaptive step's
 //! displacement bound (relative speed) and stiffness bound (its closest pair), and prints the
 //! share of particles allowing less than 2, 4, 8, 16, 32 and 64 base steps, beside the global
-//! stride the engine takes; then the same shares by the stiffness bound and the closing speed
-//! (the rate at which a pair's distance falls) instead of the relative speed, and the
+//! stride the engine takes; then the same shares by the relative speed alone and by the
+//! closing speed (the rate at which a pair's distance falls) with the stiffness bound, and the
 //! smallest stride allowed anywhere by each bound. reports/multirate and
 //! reports/stride-rule are its results.
 //!
@@ -14,6 +14,9 @@ use hvi_engine::paper;
 use hvi_engine::scene::SceneSpec;
 use hvi_engine::sim::Simulation;
 use hvi_engine::state::{BONDS_PER_PARTICLE, INDEX_MASK, NO_BOND};
+
+/// The strides (base steps) the shares are counted below.
+const BOUNDS: [u64; 6] = [2, 4, 8, 16, 32, 64];
 
 fn main() {
     // As `hvi-study` runs a scene; RAYON_NUM_THREADS sets the thread count.
@@ -31,17 +34,12 @@ fn run() {
         times = vec![0.5e-6, 1e-6, 2e-6, 4e-6, 8e-6, 16e-6, 24e-6, 31e-6];
     }
     let spec = SceneSpec::calibration(n, paper::ANALYSIS_TIME_S);
-    let disp = spec.run.stride_displacement_over_sigma;
     let mut sim = Simulation::new(spec.build().expect("valid")).expect("starts");
-    let disp_m = disp * sim.derived.sigma_m;
-    let min_mass = sim
-        .particles
-        .mass
-        .iter()
-        .fold(f64::INFINITY, |a, &b| a.min(b));
-    let bounds = [2u64, 4, 8, 16, 32, 64];
+    let disp_m = spec.run.stride_displacement_over_sigma * sim.derived.sigma_m;
     println!(
-        "{} particles, dt {:.3e} s; columns: tau us, steps, stride, share of particles allowing < {bounds:?} base steps (speed or stiffness), share by speed alone < same",
+        "{} particles, dt {:.3e} s; columns: tau us, steps, stride taken, share of particles \
+         allowing < {BOUNDS:?} base steps by relative speed or stiffness | by relative speed \
+         alone | by closing speed or stiffness | the smallest stride allowed by each bound",
         sim.particles.len(),
         sim.dt
     );
@@ -49,64 +47,112 @@ fn run() {
         while sim.tau_s() < t {
             sim.step_once().expect("stable");
         }
-        let p = &sim.particles;
-        let nl = sim.neighbour_list();
-        let np = p.len();
-        let mut below = [0usize; 6];
-        let mut below_speed = [0usize; 6];
-        let mut below_closing = [0usize; 6];
-        let (mut min_speed, mut min_closing, mut min_stiff) =
-            (f64::INFINITY, f64::INFINITY, f64::INFINITY);
-        for i in 0..np {
-            let vi = p.vel[i];
-            let pi = p.pos[i];
-            let mut w2: f64 = 0.0;
-            let mut c: f64 = 0.0;
-            let mut r2min = f64::INFINITY;
-            let mut visit = |j: usize| {
-                let dv = vi - p.vel[j];
-                let d = pi - p.pos[j];
-                w2 = w2.max(dv.length_squared());
-                // Closing speed: -(d . dv) / |d|.
-                c = c.max(-d.dot(dv) / d.length());
-                r2min = r2min.min(d.length_squared());
-            };
-            for &j in nl.of(i) {
-                visit(j as usize);
-            }
-            for &s in &p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE] {
-                if s != NO_BOND {
-                    visit((s & INDEX_MASK) as usize);
-                }
-            }
-            let by_speed = disp_m / (w2.sqrt() * sim.dt);
-            let k = sim.materials.stiffness_at(r2min);
-            let by_stiff = hvi_engine::step::stiffness_step_s(min_mass, k) / sim.dt;
-            let allowed = by_speed.min(by_stiff);
-            let by_closing = disp_m / (c * sim.dt);
-            min_speed = min_speed.min(by_speed);
-            min_closing = min_closing.min(by_closing);
-            min_stiff = min_stiff.min(by_stiff);
-            for (b, &bound) in bounds.iter().enumerate() {
-                below[b] += usize::from(allowed < bound as f64);
-                below_speed[b] += usize::from(by_speed < bound as f64);
-                below_closing[b] += usize::from(by_closing.min(by_stiff) < bound as f64);
-            }
-        }
-        let share = |c: &[usize; 6]| {
-            c.iter()
-                .map(|&c| format!("{:.4}", c as f64 / np as f64))
-                .collect::<Vec<_>>()
-                .join(" ")
-        };
+        let tally = Tally::of(&sim, disp_m);
         println!(
-            "{:6.2} {:6} {:3}  {}  | {} | closing+stiff {} | min by speed {min_speed:.1} closing {min_closing:.1} stiffness {min_stiff:.1}",
+            "{:6.2} {:6} {:3}  {}",
             sim.tau_s() * 1e6,
             sim.steps_taken,
             sim.stride,
-            share(&below),
-            share(&below_speed),
-            share(&below_closing)
+            tally.line(sim.particles.len())
         );
+    }
+}
+
+/// The strides particle `i`'s own pairs allow, base steps: by their largest relative speed,
+/// by their largest closing speed (each moving at most `disp_m` per step), and by the
+/// stiffness bound at its closest pair.
+struct Allowed {
+    by_speed: f64,
+    by_closing: f64,
+    by_stiffness: f64,
+}
+
+impl Allowed {
+    fn of(sim: &Simulation, i: usize, disp_m: f64, min_mass: f64) -> Self {
+        let p = &sim.particles;
+        let (pi, vi) = (p.pos[i], p.vel[i]);
+        let (mut w2, mut closing, mut r2min): (f64, f64, f64) = (0.0, 0.0, f64::INFINITY);
+        let slots = &p.bonds[i * BONDS_PER_PARTICLE..(i + 1) * BONDS_PER_PARTICLE];
+        let bonded = slots
+            .iter()
+            .filter(|&&s| s != NO_BOND)
+            .map(|&s| (s & INDEX_MASK) as usize);
+        for j in sim
+            .neighbour_list()
+            .of(i)
+            .iter()
+            .map(|&j| j as usize)
+            .chain(bonded)
+        {
+            let (d, dv) = (pi - p.pos[j], vi - p.vel[j]);
+            w2 = w2.max(dv.length_squared());
+            closing = closing.max(-d.dot(dv) / d.length());
+            r2min = r2min.min(d.length_squared());
+        }
+        let k = sim.materials.stiffness_at(r2min);
+        Allowed {
+            by_speed: disp_m / (w2.sqrt() * sim.dt),
+            by_closing: disp_m / (closing * sim.dt),
+            by_stiffness: hvi_engine::step::stiffness_step_s(min_mass, k) / sim.dt,
+        }
+    }
+}
+
+/// Counts of particles allowing less than each of [`BOUNDS`], and the smallest strides.
+#[derive(Default)]
+struct Tally {
+    below: [usize; 6],
+    below_speed: [usize; 6],
+    below_closing: [usize; 6],
+    min_speed: f64,
+    min_closing: f64,
+    min_stiffness: f64,
+}
+
+impl Tally {
+    fn of(sim: &Simulation, disp_m: f64) -> Self {
+        let min_mass = sim
+            .particles
+            .mass
+            .iter()
+            .fold(f64::INFINITY, |a, &b| a.min(b));
+        let mut t = Tally {
+            min_speed: f64::INFINITY,
+            min_closing: f64::INFINITY,
+            min_stiffness: f64::INFINITY,
+            ..Default::default()
+        };
+        for i in 0..sim.particles.len() {
+            let a = Allowed::of(sim, i, disp_m, min_mass);
+            t.min_speed = t.min_speed.min(a.by_speed);
+            t.min_closing = t.min_closing.min(a.by_closing);
+            t.min_stiffness = t.min_stiffness.min(a.by_stiffness);
+            for (b, &bound) in BOUNDS.iter().enumerate() {
+                let bound = bound as f64;
+                t.below[b] += usize::from(a.by_speed.min(a.by_stiffness) < bound);
+                t.below_speed[b] += usize::from(a.by_speed < bound);
+                t.below_closing[b] += usize::from(a.by_closing.min(a.by_stiffness) < bound);
+            }
+        }
+        t
+    }
+
+    /// The shares of `n` particles and the smallest strides, as one line.
+    fn line(&self, n: usize) -> String {
+        let share = |c: &[usize; 6]| {
+            c.iter()
+                .map(|&c| format!("{:.4}", c as f64 / n as f64))
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        format!(
+            "{}  | {} | {} | smallest by speed {:.1}, closing {:.1}, stiffness {:.1}",
+            share(&self.below),
+            share(&self.below_speed),
+            share(&self.below_closing),
+            self.min_speed,
+            self.min_closing,
+            self.min_stiffness
+        )
     }
 }
