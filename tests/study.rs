@@ -766,7 +766,7 @@ fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_n
     assert!(md.contains("| `material.eps_j` |"), "{md}");
     let csv = std::fs::read_to_string(out.join("evaluations.csv")).expect("evaluations.csv");
     let header = csv.lines().next().unwrap_or("");
-    assert!(header.contains(",seeds,status,cached,dir"), "{header}");
+    assert!(header.contains(",seeds,status,cached,screened,dir"), "{header}");
     // The model's prediction over the two searched axes, the map's background.
     let surface = std::fs::read_to_string(out.join("surrogate.csv")).expect("surrogate.csv");
     let rows: Vec<&str> = surface.lines().collect();
@@ -2294,9 +2294,11 @@ fn a_calibration_whose_targets_bound_eps_from_above_only_reports_the_bound() {
 #[test]
 fn calibrate_adds_its_tier_settings_and_sweep_does_not() {
     let dir = scratch("calibrate-tier-set");
+    // Without the screen, which would send the runs far from the target on in free flight
+    // from 8 us.
     let study = edge_study(
         &dir,
-        "\n[calibrate.tier_set]\nquick = [\"run.free_flight_after_s=2e-5\"]\n",
+        "screen = false\n\n[calibrate.tier_set]\nquick = [\"run.free_flight_after_s=2e-5\"]\n",
     );
     let cutoffs = |out: &Path| -> Vec<Option<f64>> {
         let mut v = Vec::new();
@@ -2340,4 +2342,101 @@ fn calibrate_adds_its_tier_settings_and_sweep_does_not() {
         "{}",
         stderr(&o)
     );
+}
+
+/// Every run's summary in a study directory's store.
+fn summaries(out: &Path) -> Vec<serde_json::Value> {
+    let mut v = Vec::new();
+    for e in std::fs::read_dir(out.join("runs")).expect("runs") {
+        let run = e.expect("entry").path();
+        if run.is_dir() && run.join("summary.json").is_file() {
+            let text = std::fs::read_to_string(run.join("summary.json")).expect("summary");
+            v.push(serde_json::from_str(&text).expect("json"));
+        }
+    }
+    v
+}
+
+/// The `screened` column of evaluations.csv, by row.
+fn screened_column(out: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(out.join("evaluations.csv")).expect("evaluations.csv");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let k = header
+        .iter()
+        .position(|h| *h == "screened")
+        .expect("a screened column");
+    lines
+        .map(|l| l.split(',').nth(k).unwrap_or("").to_string())
+        .collect()
+}
+
+/// The screen (docs/calibration.md, "The screen"): by default every run the calibration makes
+/// carries a window on R, the target's tolerance widened by 2 % of its value, and goes on in
+/// free flight from 8 us exactly when what free flight gives lies outside it; the answer's
+/// runs are full. Runs the store holds without a screen (a sweep's) are taken as they are, and
+/// `screen = false` runs everything in full.
+#[test]
+fn calibrate_screens_the_runs_far_from_the_targets_and_reuses_full_ones() {
+    let dir = scratch("calibrate-screen");
+    let study = edge_study(&dir, "");
+    let out = dir.join("screened");
+    let o = calibrate(&study, &out);
+    assert_ok(&o);
+    assert!(stderr(&o).contains("screen (shot 1)"), "{}", stderr(&o));
+    // The target: R = 1.2 within 0.1, one target, so the window is 1.2 -+ (0.1 + 0.024).
+    let (lo, hi) = (1.2 - 0.124, 1.2 + 0.124);
+    let (mut far, mut near) = (0, 0);
+    for s in summaries(&out) {
+        let w = &s["scene"]["run"]["screen_length_ratio"];
+        assert!((w[0].as_f64().unwrap() - lo).abs() < 1e-9, "{w}");
+        assert!((w[1].as_f64().unwrap() - hi).abs() < 1e-9, "{w}");
+        let screen = &s["screen"];
+        let r = screen["length_ratio"].as_f64().expect("the probe's R");
+        let outside = !(lo..=hi).contains(&r);
+        assert_eq!(screen["free_flight"].as_bool(), Some(outside), "{screen}");
+        let coasted = s["ballistic_cutoff_tau_s"].as_f64();
+        if outside {
+            far += 1;
+            assert_eq!(coasted, screen["tau_s"].as_f64());
+            // What free flight gave at the end, to round-off (the probe coasts in one step).
+            let end = s["cloud"]["length_ratio"].as_f64().expect("R");
+            assert!(
+                (end - r).abs() <= 1e-12 * r,
+                "{end} against the probe's {r}"
+            );
+        } else {
+            near += 1;
+            assert_eq!(coasted, None);
+        }
+    }
+    assert!(far > 0 && near > 0, "{far} runs screened, {near} in full");
+    let c = calibration_json(&out);
+    let best_dir = c["best"]["dir"].as_str().expect("best dir");
+    let best: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join(best_dir).join("summary.json")).expect("summary"),
+    )
+    .expect("json");
+    assert_eq!(
+        best["screen"]["free_flight"], false,
+        "the answer's run is full"
+    );
+    let column = screened_column(&out);
+    assert!(column.iter().any(|x| x == "1") && column.iter().any(|x| x == "0"));
+
+    // A store that holds the grid in full: the calibration takes those runs as they are.
+    let reused = dir.join("reused");
+    assert_ok(&sweep(&study, &reused, &[]));
+    let o = calibrate(&study, &reused);
+    assert_ok(&o);
+    let (total, cached, ..) = counts(&o);
+    assert_eq!((total, cached), (3, 3), "{}", stderr(&o));
+    let grid_rows = screened_column(&reused);
+    assert!(grid_rows[..3].iter().all(String::is_empty), "{grid_rows:?}");
+
+    let off = edge_study(&dir, "screen = false\n");
+    let full = dir.join("full");
+    assert_ok(&calibrate(&off, &full));
+    assert!(summaries(&full).iter().all(|s| s.get("screen").is_none()));
+    assert!(screened_column(&full).iter().all(String::is_empty));
 }

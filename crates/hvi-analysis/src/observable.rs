@@ -85,6 +85,9 @@ pub enum Observable {
     CentralCraterDiameter,
     /// 1 when the central crater is large (at least 5 times the median), else 0.
     LargeCentralCrater,
+    /// 1 when the run's screen found it outside its window and it went on in free flight, 0
+    /// when it went on in full; absent without a screen (`run.screen_after_s`).
+    Screened,
 }
 
 /// What names and explains an observable.
@@ -119,7 +122,7 @@ const fn def(
 }
 
 /// Every observable, in table order (a plain table: the one place an observable is named).
-pub const DEFINITIONS: [Definition; 30] = {
+pub const DEFINITIONS: [Definition; 31] = {
     use Observable::*;
     [
         def(Particles, "particles", "N", "1", "particles in the run"),
@@ -326,6 +329,14 @@ pub const DEFINITIONS: [Definition; 30] = {
             "large central crater",
             "1",
             "1 if the central crater is at least 5 times the median, else 0",
+        ),
+        def(
+            Screened,
+            "screened",
+            "screened",
+            "1",
+            "1 if the run's screen (`run.screen_after_s`) sent it on in free flight, 0 if it \
+             went on in full; absent without a screen (a seed mean between)",
         ),
     ]
 };

@@ -58,6 +58,18 @@ fn default_seeds_within_decades() -> f64 {
     1.0
 }
 
+fn default_screen_after_s() -> f64 {
+    8e-6
+}
+
+fn default_screen_above() -> f64 {
+    0.25
+}
+
+fn default_screen_allowance() -> f64 {
+    0.02
+}
+
 /// The search after the grid.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -181,6 +193,21 @@ pub struct CalibrateConfig {
     /// run the tier without them.
     #[serde(default)]
     pub tier_set: BTreeMap<String, Vec<String>>,
+    /// The screen (`crate::screen`): whether runs whose length ratio or va/v0 alone puts J
+    /// above `screen_above` go on in free flight from `screen_after_s` instead of in full.
+    #[serde(default = "default_true")]
+    pub screen: bool,
+    /// The screen's time after first contact, s.
+    #[serde(default = "default_screen_after_s")]
+    pub screen_after_s: f64,
+    /// The objective a run's screened term alone must put J above (never below the term of
+    /// a missed target, 1).
+    #[serde(default = "default_screen_above")]
+    pub screen_above: f64,
+    /// How far each window is widened on each side, as a fraction of the target's value: what
+    /// free flight may move the screened observables.
+    #[serde(default = "default_screen_allowance")]
+    pub screen_allowance: f64,
 }
 
 impl CalibrateConfig {
@@ -249,6 +276,7 @@ impl CalibrateConfig {
         }
         cfg.check_seeds("study key `calibrate.seeds`")?;
         cfg.check_tier_set(study)?;
+        cfg.check_screen()?;
         match (&cfg.targets, cfg.shots.len()) {
             (Some(_), n) if n > 0 => bail!(
                 "study keys `calibrate.targets` and `calibrate.shots` are both given (allowed: \
@@ -261,6 +289,31 @@ impl CalibrateConfig {
             _ => {}
         }
         Ok(cfg)
+    }
+
+    /// The screen's keys, each in its range.
+    fn check_screen(&self) -> Result<()> {
+        if !(self.screen_after_s.is_finite() && self.screen_after_s > 0.0) {
+            bail!(
+                "study key `calibrate.screen_after_s`: {} (allowed: a time after first contact > 0 s, \
+                 below the runs' end time)",
+                self.screen_after_s
+            );
+        }
+        if !(self.screen_above.is_finite() && self.screen_above > 0.0) {
+            bail!(
+                "study key `calibrate.screen_above`: {} (allowed: a number > 0; `screen = false` \
+                 turns the screen off)",
+                self.screen_above
+            );
+        }
+        if !(0.0..1.0).contains(&self.screen_allowance) {
+            bail!(
+                "study key `calibrate.screen_allowance`: {} (allowed: 0 <= a fraction < 1)",
+                self.screen_allowance
+            );
+        }
+        Ok(())
     }
 
     /// `calibrate.tier_set`: each name a tier of the study, each entry an override of a key

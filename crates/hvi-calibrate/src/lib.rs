@@ -21,6 +21,7 @@ pub mod nelder_mead;
 pub mod problem;
 pub mod report;
 pub mod result;
+pub mod screen;
 pub mod shots;
 
 use std::collections::BTreeMap;
@@ -179,7 +180,8 @@ pub fn calibrate_plan(
     // the lattice the box extends on.
     let (designs, design) = design::design_plans(&plans, &dims, cfg.initial_design);
     let design_refs: Vec<_> = designs.iter().collect();
-    let grid = grid_stage(&design_refs, out, &runner, &targets, progress)?;
+    let screen = screen_of(&cfg, &targets, progress);
+    let grid = grid_stage(&design_refs, out, &runner, &targets, &screen, progress)?;
     let best_run = designs[0].run(grid.best)?;
     let fixed = fixed_overrides(&plans, &best_run.values, |k| refine_keys.contains(k))?;
     let store = runner.store(out)?;
@@ -193,6 +195,7 @@ pub fn calibrate_plan(
         runner: &runner,
         out,
         progress,
+        screen: &screen,
     };
     let first_box = bounds_of(&dims);
     let problem = stage.problem(fixed, dims);
@@ -215,15 +218,14 @@ pub fn calibrate_plan(
     let answer = Answer::of(&grid, &search, &paper.1);
     let held_out = held_out
         .first()
-        .map(|h| shots::predict_held_out(&stage, h, &best_run.values, &refine_keys, &answer.best))
-        .transpose()?;
+        .map(|h| shots::predict_held_out(&stage, h, &best_run.values, &refine_keys, &answer.best));
     let found = Found {
         args,
         plan,
         targets: &targets,
         out,
         label: label_of(&cfg, args, method, &search, &first_box)?,
-        held_out,
+        held_out: held_out.transpose()?,
         grid_runs: grid.ran,
         design,
         paper,
@@ -379,6 +381,49 @@ fn config_of(study: &hvi_store::spec::Study, args: &CalibrateOptions) -> Result<
 
 /// Names each shot with the impact it is simulated at (with progress), and prints every
 /// shot's resolution warnings (always).
+/// The calibration's screen of `cfg` over the shots' `targets`, said on the log (which runs
+/// it sends on in free flight: docs/calibration.md, "The screen").
+fn screen_of(
+    cfg: &CalibrateConfig,
+    targets: &[hvi_analysis::score::Targets],
+    progress: bool,
+) -> screen::Screen {
+    let screen = screen::Screen::of(cfg, targets);
+    if progress && screen.is_on() {
+        announce_screen(&screen);
+    }
+    screen
+}
+
+fn announce_screen(screen: &screen::Screen) {
+    let show = |w: Option<[f64; 2]>| {
+        w.map(|[lo, hi]| {
+            if lo == f64::MIN {
+                format!("at most {hi:.4}")
+            } else {
+                format!("[{lo:.4}, {hi:.4}]")
+            }
+        })
+    };
+    for (shot, w) in screen.windows.iter().enumerate() {
+        let parts: Vec<String> = [
+            show(w.length_ratio).map(|s| format!("R {s}")),
+            show(w.front_velocity_ratio).map(|s| format!("va/v0 {s}")),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        if !parts.is_empty() {
+            log::info!(
+                "screen (shot {}): a run whose free flight from tau = {:.1} us gives R or va/v0 outside {} goes on in free flight (calibrate.screen)",
+                shot + 1,
+                screen.after_s * 1e6,
+                parts.join(", ")
+            );
+        }
+    }
+}
+
 fn announce(study: &hvi_store::spec::Study, shots: &[ShotPlan], progress: bool) -> Result<()> {
     if progress {
         for s in shots {

@@ -21,6 +21,7 @@ use crate::config::CalibrateConfig;
 pub use crate::result::fmt_term;
 use crate::result::EvalStage;
 use crate::result::{shot_means, Evaluation};
+use crate::screen::Screen;
 
 /// The cost of a point outside the grid's box or with an invalid scene (no run is made).
 pub const OUTSIDE_COST: f64 = 10.0 * MISSING_TERM;
@@ -66,6 +67,8 @@ pub struct Refinement<'a> {
     pub(super) progress: bool,
     pub(super) log: RefCell<Vec<Evaluation>>,
     pub(super) ran: RefCell<usize>,
+    /// The screen of the runs it makes.
+    pub(super) screen: &'a Screen,
 }
 
 impl Refinement<'_> {
@@ -134,13 +137,14 @@ impl Refinement<'_> {
             Ok(s) => s,
             Err(e) => return Ok(Err(format!("invalid scene: {e:#}"))),
         };
-        Ok(Ok(Job {
+        let job = Job {
             fingerprint: fingerprint(&scene, &self.plan.tier)?,
             scene,
             study: self.plan.study.clone(),
             tier: self.plan.tier.clone(),
             params: job_params,
-        }))
+        };
+        Ok(Ok(self.screen.apply(shot, job, self.store)?))
     }
 
     /// Evaluates a parameter point (by key) at the scene's seed, running each shot's run the
@@ -368,6 +372,8 @@ pub struct Stage<'a> {
     pub out: &'a Path,
     /// Progress on the log.
     pub progress: bool,
+    /// The screen of the runs it makes ([`Screen::off`]: every run in full).
+    pub screen: &'a Screen,
 }
 
 impl<'a> Stage<'a> {
@@ -386,6 +392,7 @@ impl<'a> Stage<'a> {
             progress: self.progress,
             log: RefCell::new(Vec::new()),
             ran: RefCell::new(0),
+            screen: self.screen,
         }
     }
 }

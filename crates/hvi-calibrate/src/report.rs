@@ -534,7 +534,7 @@ pub(super) fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluatio
         header.extend(keys.iter().cloned());
         header.push("objective".into());
         header.extend(names.iter().map(|n| format!("score_{n}")));
-        header.extend(["seeds", "status", "cached", "dir"].map(String::from));
+        header.extend(["seeds", "status", "cached", "screened", "dir"].map(String::from));
         csv.write_record(&header)?;
         for e in grid
             .iter()
@@ -568,6 +568,11 @@ pub(super) fn write_outputs(out: &Path, r: &CalibrationResult, grid: &[Evaluatio
             );
             row.push(e.status.clone());
             row.push(e.cached.to_string());
+            // The share of its runs the screen sent on in free flight (empty: no screen).
+            row.push(
+                e.mean(Observable::Screened)
+                    .map_or(String::new(), |x| x.to_string()),
+            );
             row.push(e.dir.clone().unwrap_or_default());
             csv.write_record(&row)?;
         }

@@ -8,7 +8,7 @@
 //! error naming both values and where the study's came from. An axis over one of the shot's
 //! keys is refused: each condition is a shot of its own.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use hvi_analysis::score::Targets;
 use hvi_analysis::shot::ImpactKey;
@@ -17,6 +17,7 @@ use hvi_run::error::{Result, RunError};
 use hvi_run::scene_file::apply_overrides;
 use hvi_store::plan::Plan;
 use hvi_store::spec::{json_to_override, override_key, Study};
+use hvi_store::store::Store;
 
 use crate::problem::{fixed_overrides, Stage};
 use crate::result::EvalStage;
@@ -145,12 +146,35 @@ pub fn plans_of(
     }
     let out =
         out.ok_or_else(|| RunError::Input("study key `calibrate.shots` is empty".to_string()))?;
+    screen_plans(study, &mut plans, hold_out, &out)?;
     let first = plans
         .iter()
         .find(|p| Some(p.targets.shot.id.as_str()) != hold_out)
         .ok_or_else(|| RunError::Input("no shot left to calibrate on".to_string()))?;
     first.plan.write(&out)?;
     Ok((plans, out))
+}
+
+/// The calibrated shots' plans as the calibration's screen runs them
+/// ([`crate::screen::Screen::apply_to_plan`]; the held-out shot's is run in full).
+fn screen_plans(
+    study: &Study,
+    plans: &mut [ShotPlan],
+    hold_out: Option<&str>,
+    out: &Path,
+) -> Result<()> {
+    let calibrated = |p: &ShotPlan| Some(p.targets.shot.id.as_str()) != hold_out;
+    let targets: Vec<Targets> = plans
+        .iter()
+        .filter(|p| calibrated(p))
+        .map(|p| p.targets.clone())
+        .collect();
+    let screen = crate::screen::Screen::of(&crate::CalibrateConfig::of(study)?, &targets);
+    let store = Store::existing(out).ok();
+    for (shot, p) in plans.iter_mut().filter(|p| calibrated(p)).enumerate() {
+        screen.apply_to_plan(shot, &mut p.plan, store.as_ref())?;
+    }
+    Ok(())
 }
 
 /// Runs the held-out shot at the calibrated point (the best grid run's values beside the
@@ -166,6 +190,8 @@ pub(super) fn predict_held_out(
     let fixed = fixed_overrides(&[&held.plan], best_values, |k| refine_keys.contains(k))?;
     let targets = [held.targets.clone()];
     let plans = [&held.plan];
+    // A prediction is run in full.
+    let off = crate::screen::Screen::off();
     let own = Stage {
         study: stage.study,
         plan: &held.plan,
@@ -176,6 +202,7 @@ pub(super) fn predict_held_out(
         runner: stage.runner,
         out: stage.out,
         progress: stage.progress,
+        screen: &off,
     };
     let problem = own.problem(fixed, Vec::new());
     let seeds = crate::ego::seeds_of(&best.seeds);

@@ -1057,16 +1057,21 @@ impl CloudObserver {
                 .saturating_mul(self.track_every)
                 .min(self.last_step.max(step + 1))
         });
-        let front = self
-            .front_steps
-            .iter()
-            .copied()
-            .filter(|&s| self.measure_cloud && s > step)
-            .min();
+        let front = self.next_front(step);
         match (track, front) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         }
+    }
+
+    /// The first front time after `step`, in base steps, if the cloud is measured and one
+    /// follows: what a measurement of the cloud at the end needs besides the end itself.
+    pub fn next_front(&self, step: u64) -> Option<u64> {
+        self.front_steps
+            .iter()
+            .copied()
+            .filter(|&s| self.measure_cloud && s > step)
+            .min()
     }
 
     fn track_due(&self, step: u64) -> bool {

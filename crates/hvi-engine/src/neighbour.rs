@@ -61,7 +61,7 @@ const CELL_CHUNK: usize = 256;
 const LANES: usize = 8;
 
 /// The neighbour list in compressed-row form over the current particle order.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 pub struct NeighbourList {
     /// `start[i]..start[i + 1]` indexes `neighbours` for particle i.
     pub start: Vec<u32>,
@@ -128,9 +128,38 @@ pub struct NeighbourList {
     /// Per block: the largest squared displacement relative to the frame since the build, as
     /// the bits of a non-negative f64 (their order is the numbers' order), as
     /// [`Self::measure_block_displacement`] last measured it.
-    block_disp: Vec<AtomicU64>,
+    block_disp: AtomicBits,
     /// [`Self::stale_by_blocks`]'s buffer: each block's displacement plus the look-ahead.
     block_reach: Vec<f64>,
+}
+
+/// Numbers written from several threads at once (as the bits of non-negative f64s); a clone
+/// copies the values as they are.
+#[derive(Debug, Default)]
+struct AtomicBits(Vec<AtomicU64>);
+
+impl Clone for AtomicBits {
+    fn clone(&self) -> Self {
+        AtomicBits(
+            self.0
+                .iter()
+                .map(|a| AtomicU64::new(a.load(Ordering::Relaxed)))
+                .collect(),
+        )
+    }
+}
+
+impl std::ops::Deref for AtomicBits {
+    type Target = Vec<AtomicU64>;
+    fn deref(&self) -> &Vec<AtomicU64> {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for AtomicBits {
+    fn deref_mut(&mut self) -> &mut Vec<AtomicU64> {
+        &mut self.0
+    }
 }
 
 #[inline]
@@ -372,7 +401,7 @@ impl NeighbourList {
         if self.block_disp.is_empty() {
             return;
         }
-        for a in &self.block_disp {
+        for a in self.block_disp.iter() {
             a.store(0, Ordering::Relaxed);
         }
         let disp = &self.block_disp;
@@ -1144,7 +1173,7 @@ fn block_keys_of<'k>(pos: &[DVec3], block: f64, keys: &'k mut Vec<u64>) -> &'k [
 /// Runs of particles in one block (`keys` each particle's block key): each run's first
 /// particle (and `n` after the last), key and dense block index, the blocks numbered in order of
 /// first appearance.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 struct BlockRuns {
     start: Vec<u32>,
     keys: Vec<u64>,
@@ -1218,7 +1247,7 @@ fn adjacent_blocks(blocks: &[(u64, DVec3, u32)]) -> Vec<(u32, u32, f64)> {
 
 /// The pairs (i, j > i) one chunk of cells found, in order, with the largest j among them
 /// and the largest squared relative speed measured.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 struct ChunkPairs {
     pairs: Vec<(u32, u32)>,
     max_j: u32,

@@ -170,7 +170,9 @@ struct BondPartial {
     min_r2: f64,
 }
 
-/// A running simulation.
+/// A running simulation. Cloning copies the whole state (a probe of what free flight from now
+/// would give: `hvi_run`'s screen).
+#[derive(Clone)]
 pub struct Simulation {
     /// Particle state (reordered along the cell grid at each neighbour build).
     pub particles: Particles,

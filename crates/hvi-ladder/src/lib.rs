@@ -592,6 +592,8 @@ fn check_run(
     let targets: Vec<_> = shots.iter().map(|s| s.targets.clone()).collect();
     let plans: Vec<&Plan> = shots.iter().map(|s| &s.plan).collect();
     let plan = plans[0];
+    // The check is run in full.
+    let off = hvi_calibrate::screen::Screen::off();
     let stage = Stage {
         study: &one,
         plan,
@@ -602,6 +604,7 @@ fn check_run(
         runner: &runner,
         out: &out,
         progress,
+        screen: &off,
     };
     let first = plan.run(0)?;
     let fixed = fixed_overrides(&plans, &first.values, |k| params.contains_key(k))?;

@@ -46,6 +46,7 @@ pub mod output;
 pub mod progress;
 pub mod run;
 pub mod scene_file;
+pub mod screen;
 pub mod start;
 pub mod state;
 

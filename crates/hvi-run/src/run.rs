@@ -24,6 +24,7 @@ use crate::output::{
     write_atomic_bytes, write_csv_atomic, write_lammps_data, DumpFormat, Trajectory,
     TrajectoryState,
 };
+use crate::screen::{screen_step, ScreenReport};
 use hvi_analysis::observable::{Observable, Observables};
 use hvi_plot::render::{self, Frame, SceneInfo};
 
@@ -283,6 +284,10 @@ pub struct Summary {
     /// Time since first contact at which free flight began, by the ballistic cut-off's gate or
     /// at `run.free_flight_after_s`, s (null when it did not).
     pub ballistic_cutoff_tau_s: Option<f64>,
+    /// What the screen measured (`run.screen_after_s`, [`crate::screen`]); absent when the
+    /// scene has no screen or the run ended before it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub screen: Option<ScreenReport>,
     /// Energy ledger.
     pub energy: EnergySummary,
     /// Momentum.
@@ -360,6 +365,7 @@ impl Summary {
                 Observable::LargeCentralCrater => {
                     wit.map(|w| if w.large_central_crater { 1.0 } else { 0.0 })
                 }
+                Observable::Screened => self.screen.map(|s| if s.free_flight { 1.0 } else { 0.0 }),
             };
             o.set(k, value);
         }
@@ -513,6 +519,7 @@ pub fn run_scene(spec: &SceneSpec, opts: &RunOptions) -> Result<RunOutcome> {
         step_wall_s: step_wall,
         cloud: cloud.as_ref().map(|c| c.report.clone()),
         error: run.failure.as_ref().map(|e| e.to_string()),
+        screen: run.screen,
     };
     let summary = summarise(spec, &sim, counts, measured);
     write_atomic_bytes(
@@ -656,6 +663,8 @@ struct Gathered {
     break_history: Vec<(f64, u64)>,
     /// The instability that stopped the run.
     failure: Option<EngineError>,
+    /// What the screen measured, once it has looked.
+    screen: Option<ScreenReport>,
     /// Files and progress.
     output_time: Duration,
     /// Frame captures and pictures.
@@ -698,6 +707,8 @@ struct Saved {
     trajectory: Option<TrajectoryState>,
     next_dump: u64,
     break_history: Vec<(f64, u64)>,
+    #[serde(default)]
+    screen: Option<ScreenReport>,
     output_time: Duration,
     render_time: Duration,
     wall: Duration,
@@ -761,6 +772,7 @@ impl Gathered {
             next_dump: opts.dump_every.unwrap_or(u64::MAX),
             break_history: Vec::new(),
             failure: None,
+            screen: None,
             output_time: Duration::ZERO,
             render_time: Duration::ZERO,
             checkpoint: None,
@@ -799,10 +811,12 @@ impl Gathered {
             run.continuation = Some(Continuation {
                 path: path.clone(),
                 key: continuation_key(spec, opts)?,
+                // The screen measures at the end: from it on, runs to other ends part.
                 before: run
                     .observer
                     .as_ref()
-                    .map_or(sim.derived.steps, CloudObserver::first_end_dependent_step),
+                    .map_or(sim.derived.steps, CloudObserver::first_end_dependent_step)
+                    .min(screen_step(&spec.run, &sim.derived).unwrap_or(u64::MAX)),
                 written: false,
             });
         }
@@ -977,6 +991,7 @@ impl Gathered {
         self.trajectory = trajectory;
         self.next_dump = saved.next_dump;
         self.break_history = saved.break_history;
+        self.screen = saved.screen;
         self.output_time = saved.output_time;
         self.render_time = saved.render_time;
         self.wall_before = saved.wall;
@@ -1001,6 +1016,7 @@ impl Gathered {
             trajectory,
             next_dump: self.next_dump,
             break_history: self.break_history.clone(),
+            screen: self.screen,
             output_time: self.output_time,
             render_time: self.render_time,
             wall: self.wall_before + self.wall0.elapsed(),
@@ -1126,6 +1142,7 @@ impl Gathered {
         let mut next_thermo = next_multiple(sim.step, thermo_every);
         let mut progress_written: Option<Instant> = None;
         let free_flight = free_flight_step(&spec.run, &d);
+        let screen = screen_step(&spec.run, &d);
         while sim.step < d.steps {
             if opts.progress_file && progress_written.is_none_or(|t| t.elapsed() >= PROGRESS_EVERY)
             {
@@ -1165,13 +1182,7 @@ impl Gathered {
             if (at_multiple(s, energy_every) || s == d.steps) && !self.sample_energy(sim) {
                 break;
             }
-            if sim.coasting_since().is_none() {
-                if free_flight.is_some_and(|f| s >= f) {
-                    self.begin_free_flight(sim, opts.progress);
-                } else if spec.run.ballistic_cutoff && at_multiple(s, energy_every) {
-                    self.consider_cutoff(sim, &spec.run, opts.progress);
-                }
-            }
+            self.consider_free_flight(sim, &spec.run, opts.progress, [screen, free_flight]);
             self.observe(sim);
             if self.trajectory.is_some() && (s >= self.next_dump || s == d.steps) {
                 self.next_dump = next_multiple(s, dump_every);
@@ -1183,6 +1194,33 @@ impl Gathered {
             }
         }
         Ok(())
+    }
+
+    /// After a step, while the run computes forces: the screen at its step ([`crate::screen`]),
+    /// then free flight at `run.free_flight_after_s` or by the ballistic cut-off's gate at an
+    /// energy sample. `at` holds the screen's and free flight's steps.
+    fn consider_free_flight(
+        &mut self,
+        sim: &mut Simulation,
+        run: &RunSettings,
+        progress: bool,
+        at: [Option<u64>; 2],
+    ) {
+        let s = sim.step;
+        let [screen, free_flight] = at;
+        if sim.coasting_since().is_none()
+            && self.screen.is_none()
+            && screen.is_some_and(|f| s >= f)
+        {
+            self.screen_now(sim, run, progress);
+        }
+        if sim.coasting_since().is_none() {
+            if free_flight.is_some_and(|f| s >= f) {
+                self.begin_free_flight(sim, progress);
+            } else if run.ballistic_cutoff && at_multiple(s, run.energy_every) {
+                self.consider_cutoff(sim, run, progress);
+            }
+        }
     }
 
     /// The next base step after `s` at which the scene samples something (the end, an energy
@@ -1265,6 +1303,28 @@ impl Gathered {
                 sim.tau_s() * 1e6
             );
         }
+        self.output_time += t.elapsed();
+    }
+
+    /// The screen ([`crate::screen`]), once, at `run.screen_after_s`.
+    fn screen_now(&mut self, sim: &mut Simulation, run: &RunSettings, progress: bool) {
+        let t = Instant::now();
+        let report = crate::screen::screen(sim, run, self.observer.as_ref());
+        if progress {
+            let show = |x: Option<f64>| x.map_or("none".to_string(), |x| format!("{x:.4}"));
+            log::info!(
+                "screen at tau = {:.3} us: free flight from here gives R = {}, va/v0 = {}: {}",
+                report.tau_s * 1e6,
+                show(report.length_ratio),
+                show(report.front_velocity_ratio),
+                if report.free_flight {
+                    "outside the screen's window, the run goes on in free flight"
+                } else {
+                    "inside, the run goes on in full"
+                }
+            );
+        }
+        self.screen = Some(report);
         self.output_time += t.elapsed();
     }
 
@@ -1519,6 +1579,7 @@ struct Measured {
     step_wall_s: f64,
     cloud: Option<CloudReport>,
     error: Option<String>,
+    screen: Option<ScreenReport>,
 }
 
 /// `summary.json` of the run.
@@ -1557,6 +1618,7 @@ fn summarise(spec: &SceneSpec, sim: &Simulation, counts: Counts, m: Measured) ->
         ballistic_cutoff_tau_s: sim
             .coasting_since()
             .map(|step| step as f64 * d.dt_s - d.contact_time_s),
+        screen: m.screen,
         energy: m.energy,
         momentum: m.momentum,
         derived: d,

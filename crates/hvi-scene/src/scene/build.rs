@@ -520,6 +520,57 @@ mod tests {
         assert!(matches!(with(-1e-3), Err(EngineError::Overlap { .. })));
     }
 
+    /// The screen's keys: a time inside the run with at least one window, each window in
+    /// order; every refusal names the key and what is allowed.
+    #[test]
+    fn a_bad_screen_is_refused_naming_its_key() {
+        let with = |after: Option<f64>, r: Option<[f64; 2]>, va: Option<[f64; 2]>| {
+            let mut spec = SceneSpec::calibration(2000.0, 4e-6);
+            spec.run.screen_after_s = after;
+            spec.run.screen_length_ratio = r;
+            spec.run.screen_front_velocity_ratio = va;
+            spec.build().err().map(|e| e.to_string())
+        };
+        assert_eq!(with(Some(1e-6), Some([1.0, 2.0]), None), None);
+        assert_eq!(with(Some(1e-6), None, Some([0.5, 0.9])), None);
+        assert_eq!(with(None, None, None), None);
+        for (err, key, allowed) in [
+            (
+                with(Some(5e-6), Some([1.0, 2.0]), None),
+                "run.screen_after_s",
+                "below run.end_time_s",
+            ),
+            (
+                with(Some(0.0), Some([1.0, 2.0]), None),
+                "run.screen_after_s",
+                "> 0",
+            ),
+            (
+                with(Some(1e-6), None, None),
+                "run.screen_after_s",
+                "run.screen_length_ratio",
+            ),
+            (
+                with(None, Some([1.0, 2.0]), None),
+                "run.screen_after_s",
+                "when a screen window",
+            ),
+            (
+                with(Some(1e-6), Some([2.0, 1.0]), None),
+                "run.screen_length_ratio",
+                "low < high",
+            ),
+            (
+                with(Some(1e-6), None, Some([f64::NAN, 1.0])),
+                "run.screen_front_velocity_ratio",
+                "finite",
+            ),
+        ] {
+            let err = err.expect("refused");
+            assert!(err.contains(key) && err.contains(allowed), "{err}");
+        }
+    }
+
     /// eq. 12 scales eps with sigma^3, the printed eqs. 5/6 with sigma; kappa with sigma in
     /// both, and at the reference sigma the two agree.
     #[test]

@@ -386,6 +386,28 @@ pub const KEYS: &[Key] = &[
         default: "unset",
     },
     Key {
+        name: "run.screen_after_s",
+        meaning: "the screen: at the first energy sample at or after this time after first \
+                  contact the run measures, on a copy, what free flight from then would give \
+                  at the analysis time; outside a window below it goes on in free flight \
+                  (skips the rest of the physics); `hvi-study calibrate` sets it \
+                  (docs/calibration.md, \"The screen\")",
+        allowed: Allowed::Text("a number > 0 and below run.end_time_s, with a window; or unset"),
+        default: "unset",
+    },
+    Key {
+        name: "run.screen_length_ratio",
+        meaning: "the screen's window on the length ratio (the scene's reading)",
+        allowed: Allowed::Text("[low, high], finite, low < high; or unset"),
+        default: "unset",
+    },
+    Key {
+        name: "run.screen_front_velocity_ratio",
+        meaning: "the screen's window on va / v0",
+        allowed: Allowed::Text("[low, high], finite, low < high; or unset"),
+        default: "unset",
+    },
+    Key {
         name: "run.absorbing_band_over_d",
         meaning: "width over D of a band inside the plate's lateral edge that damps outgoing \
                   stress waves (a sponge layer; sphere on plate only, less than half the \

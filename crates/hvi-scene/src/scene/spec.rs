@@ -362,6 +362,22 @@ pub struct RunSettings {
     /// written when unset, so runs without it keep their fingerprints.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub free_flight_after_s: Option<f64>,
+    /// The screen: at the first energy sample at or after this time after first contact, s,
+    /// the run measures what free flight
+    /// from then would give at the analysis time (on a copy of the state), and when that
+    /// measurement lies outside a window below, the run goes on in free flight from then
+    /// (as `free_flight_after_s` would) instead of computing the rest. A study that only
+    /// needs to know that a run is far from its targets (`hvi-study calibrate`) skips the
+    /// work it does not need. Omitted from the scene as written when unset.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub screen_after_s: Option<f64>,
+    /// The screen's window on the length ratio (the scene's reading, `analysis.width`):
+    /// [low, high]; a probe outside it goes on in free flight.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub screen_length_ratio: Option<[f64; 2]>,
+    /// The screen's window on va / v0: [low, high].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub screen_front_velocity_ratio: Option<[f64; 2]>,
     /// Width over D of the absorbing band inside the plate's lateral edge (0: none; sphere on
     /// plate only; see `hvi_engine::sim::AbsorbingBand`). Omitted from the scene as written when
     /// 0, so runs without a band keep their fingerprints.
@@ -395,6 +411,9 @@ impl Default for RunSettings {
             cutoff_quiet_s: 2e-6,
             cutoff_break_fraction: 1e-3,
             free_flight_after_s: None,
+            screen_after_s: None,
+            screen_length_ratio: None,
+            screen_front_velocity_ratio: None,
             absorbing_band_over_d: 0.0,
             symmetry: Symmetry::Full,
         }

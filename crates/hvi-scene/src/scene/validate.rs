@@ -133,7 +133,51 @@ impl RunSettings {
                 ));
             }
         }
-        Ok(())
+        self.validate_screen()
+    }
+
+    /// The screen: a time inside the run, at least one window, each window in order.
+    fn validate_screen(&self) -> Result<()> {
+        let windows = [
+            ("run.screen_length_ratio", self.screen_length_ratio),
+            (
+                "run.screen_front_velocity_ratio",
+                self.screen_front_velocity_ratio,
+            ),
+        ];
+        for (key, w) in windows {
+            if let Some([lo, hi]) = w {
+                if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                    return Err(EngineError::invalid(
+                        key,
+                        format!("[{lo}, {hi}]"),
+                        "[low, high], two finite numbers with low < high, or unset",
+                    ));
+                }
+            }
+        }
+        let any_window = windows.iter().any(|(_, w)| w.is_some());
+        match self.screen_after_s {
+            Some(t) if !(t > 0.0 && t < self.end_time_s) => Err(EngineError::invalid(
+                "run.screen_after_s",
+                t,
+                format!(
+                    "a number > 0 and below run.end_time_s = {:e} s, or unset",
+                    self.end_time_s
+                ),
+            )),
+            Some(t) if !any_window => Err(EngineError::invalid(
+                "run.screen_after_s",
+                t,
+                "unset, or set with run.screen_length_ratio or run.screen_front_velocity_ratio",
+            )),
+            None if any_window => Err(EngineError::invalid(
+                "run.screen_after_s",
+                "unset",
+                "a number > 0 and below run.end_time_s when a screen window is set",
+            )),
+            _ => Ok(()),
+        }
     }
 }
 

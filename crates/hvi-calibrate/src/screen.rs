@@ -1,0 +1,292 @@
+//! The screen of a calibration's runs (`calibrate.screen`, docs/calibration.md, "The
+//! screen"): a run whose length ratio or va/v0 alone puts J above `calibrate.screen_above`
+//! needs to be known as far from the targets, not computed to the end.
+//!
+//! Each run the calibration makes carries the scene keys of `hvi_run::screen`: at
+//! `calibrate.screen_after_s` after first contact it measures what free flight from then
+//! gives at the analysis time, and outside the windows set here it goes on in free flight.
+//! The windows come from the shot's targets on `length_ratio` and `front_velocity_ratio`
+//! (the two observables free flight moves by at most 0.5 % on the calibration scene,
+//! docs/model-decisions.md): outside a window that one term exceeds the larger of 1 (the
+//! target is missed) and the term that alone makes J = `screen_above`, with every window
+//! widened by `screen_allowance` of the target's value for what free flight moves them. A
+//! run inside every window goes on in full, bit for bit the run without a screen. A run the
+//! store already holds without a screen is taken as it is (a screen never repeats a run).
+
+use hvi_analysis::observable::Observable;
+use hvi_analysis::score::{Target, TargetKind, Targets};
+use hvi_engine::scene::SceneSpec;
+use hvi_run::error::Result;
+use hvi_store::plan::{fingerprint, run_dir_name, Plan};
+use hvi_store::store::{Job, Store};
+
+use crate::config::CalibrateConfig;
+
+/// The screen's windows for one shot's runs.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Windows {
+    /// On the length ratio (the scene's reading).
+    pub length_ratio: Option<[f64; 2]>,
+    /// On va / v0.
+    pub front_velocity_ratio: Option<[f64; 2]>,
+}
+
+impl Windows {
+    fn any(&self) -> bool {
+        self.length_ratio.is_some() || self.front_velocity_ratio.is_some()
+    }
+}
+
+/// The screen of a calibration: when it looks and each shot's windows (none: off).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Screen {
+    /// Time after first contact at which a run is screened, s.
+    pub after_s: f64,
+    /// Per shot, in the calibration's order.
+    pub windows: Vec<Windows>,
+}
+
+impl Screen {
+    /// No screen: every run in full (the ladder's check, a held-out shot's prediction).
+    pub fn off() -> Screen {
+        Screen::default()
+    }
+
+    /// The screen `cfg` asks for over the shots' `targets` (off with `calibrate.screen =
+    /// false`).
+    pub fn of(cfg: &CalibrateConfig, targets: &[Targets]) -> Screen {
+        if !cfg.screen {
+            return Screen::off();
+        }
+        let shots = targets.len();
+        Screen {
+            after_s: cfg.screen_after_s,
+            windows: targets
+                .iter()
+                .map(|t| windows_of(t, shots, cfg.screen_above, cfg.screen_allowance))
+                .collect(),
+        }
+    }
+
+    /// Whether some shot's runs are screened.
+    pub fn is_on(&self) -> bool {
+        self.windows.iter().any(Windows::any)
+    }
+
+    /// The scene of shot `shot`'s run with the screen's keys, or None when the shot has no
+    /// window, or the screen would come at or after the run's end or its free flight.
+    fn screened(&self, shot: usize, scene: &SceneSpec) -> Option<SceneSpec> {
+        let w = self.windows.get(shot).filter(|w| w.any())?;
+        let run = &scene.run;
+        if run.end_time_s <= self.after_s
+            || run.free_flight_after_s.is_some_and(|t| t <= self.after_s)
+            || run.screen_after_s.is_some()
+        {
+            return None;
+        }
+        let mut scene = scene.clone();
+        scene.run.screen_after_s = Some(self.after_s);
+        scene.run.screen_length_ratio = w.length_ratio;
+        scene.run.screen_front_velocity_ratio = w.front_velocity_ratio;
+        Some(scene)
+    }
+
+    /// The run of `job` (shot `shot`'s) as the calibration makes it: the job as it is when
+    /// the store holds it finished or it is not screened ([`Self::screened`]); else the job
+    /// with the screen's keys (a run of its own in the store).
+    pub fn apply(&self, shot: usize, job: Job, store: &Store) -> Result<Job> {
+        let Some(scene) = self.screened(shot, &job.scene) else {
+            return Ok(job);
+        };
+        if stored(Some(store), &job.fingerprint) {
+            return Ok(job);
+        }
+        Ok(Job {
+            fingerprint: fingerprint(&scene, &job.tier)?,
+            scene,
+            ..job
+        })
+    }
+
+    /// Shot `shot`'s plan as the calibration runs it: each run as [`Self::apply`] makes it
+    /// (against `store`, if the study directory has one), its overrides listing the screen's,
+    /// so that the study directory's `plan.json` names the runs the calibration holds.
+    pub fn apply_to_plan(&self, shot: usize, plan: &mut Plan, store: Option<&Store>) -> Result<()> {
+        for run in &mut plan.runs {
+            let Some(scene) = self.screened(shot, &run.scene) else {
+                continue;
+            };
+            if stored(store, &run.fingerprint) {
+                continue;
+            }
+            let r = &scene.run;
+            let window = |w: Option<[f64; 2]>| w.map(|[lo, hi]| format!("[{lo:?}, {hi:?}]"));
+            run.set
+                .push(format!("run.screen_after_s={:?}", self.after_s));
+            if let Some(w) = window(r.screen_length_ratio) {
+                run.set.push(format!("run.screen_length_ratio={w}"));
+            }
+            if let Some(w) = window(r.screen_front_velocity_ratio) {
+                run.set.push(format!("run.screen_front_velocity_ratio={w}"));
+            }
+            run.fingerprint = fingerprint(&scene, &plan.tier)?;
+            run.dir = run_dir_name(&run.fingerprint);
+            run.scene = scene;
+        }
+        Ok(())
+    }
+}
+
+/// Whether `store` holds the run `fingerprint` finished (a damaged record counts as not: it
+/// runs again).
+fn stored(store: Option<&Store>, fingerprint: &str) -> bool {
+    store.is_some_and(|s| matches!(s.record(fingerprint), Ok(Some(r)) if r.is_final()))
+}
+
+/// One shot's windows: on each observable the screen reads, the intersection of the windows
+/// of the shot's targets on it (none when they leave nothing, or without such a target).
+/// `shots` is the number of shots J is the mean over.
+pub fn windows_of(targets: &Targets, shots: usize, above: f64, allowance: f64) -> Windows {
+    let total: f64 = targets.targets.iter().map(|t| t.weight).sum();
+    let on = |o: Observable| {
+        let mut window: Option<[f64; 2]> = None;
+        for t in targets
+            .targets
+            .iter()
+            .filter(|t| t.observable == o && t.weight > 0.0)
+        {
+            // The term that alone makes J = above: w t / (S W) = above.
+            let term = (above * shots as f64 * total / t.weight).max(1.0);
+            let [lo, hi] = target_window(t, term, allowance);
+            window = Some(match window {
+                Some([a, b]) => [a.max(lo), b.min(hi)],
+                None => [lo, hi],
+            });
+        }
+        window.filter(|[lo, hi]| lo < hi)
+    };
+    Windows {
+        length_ratio: on(Observable::LengthRatio),
+        front_velocity_ratio: on(Observable::FrontVelocityRatio),
+    }
+}
+
+/// Where `t`'s term is at most `term`, widened by `allowance` of the target's value on each
+/// side (an `at_most` target has no low side: its low end is the lowest finite number).
+fn target_window(t: &Target, term: f64, allowance: f64) -> [f64; 2] {
+    let reach = term.sqrt();
+    let pad = allowance * t.value.abs();
+    match t.kind {
+        TargetKind::Value => {
+            let h = t.tolerance * reach;
+            [t.value - h - pad, t.value + h + pad]
+        }
+        TargetKind::AtMost => [f64::MIN, t.value + t.tolerance * reach + pad],
+        TargetKind::LogValue => {
+            let f = t.tolerance.powf(reach);
+            [t.value / f - pad, t.value * f + pad]
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hvi_analysis::score::term;
+
+    fn target(name: &str, o: Observable, kind: TargetKind, value: f64, tol: f64) -> Target {
+        Target {
+            name: name.into(),
+            observable: o,
+            kind,
+            value,
+            tolerance: tol,
+            weight: 1.0,
+            source: String::new(),
+        }
+    }
+
+    fn shot(targets: Vec<Target>) -> Targets {
+        let text = "[shot]\nid = \"s\"\ndescription = \"d\"\nsource = \"s\"\nimpactor_diameter_m = 0.01\nimpactor_material = \"aluminium\"\nplate_material = \"aluminium\"\nv0_m_s = 6500.0\nt_over_d = 0.4\n\n[[targets]]\nname = \"x\"\nobservable = \"length_ratio\"\nkind = \"value\"\nvalue = 1.0\ntolerance = 0.1\nweight = 1.0\nsource = \"s\"\n";
+        let mut t = Targets::parse(text, std::path::Path::new("s.toml")).unwrap();
+        t.targets = targets;
+        t
+    }
+
+    /// At a window's edge the screened term alone makes J exactly the threshold; inside it,
+    /// less. So a screened run (outside) is above the threshold whatever its other terms.
+    #[test]
+    fn a_window_edge_is_where_one_term_alone_reaches_the_threshold() {
+        let r = target("r", Observable::LengthRatio, TargetKind::Value, 1.55, 0.1);
+        let frag = target(
+            "f",
+            Observable::MeanFragmentDiameter,
+            TargetKind::LogValue,
+            1e-3,
+            3.0,
+        );
+        let large = target(
+            "l",
+            Observable::LargestFragmentMassFraction,
+            TargetKind::AtMost,
+            0.05,
+            0.05,
+        );
+        let t = shot(vec![r.clone(), large, frag]);
+        let w = windows_of(&t, 1, 1.0, 0.0);
+        let [lo, hi] = w.length_ratio.unwrap();
+        assert!(w.front_velocity_ratio.is_none(), "no target on va/v0");
+        for edge in [lo, hi] {
+            let j = term(&r, Some(edge)) / 3.0;
+            assert!((j - 1.0).abs() < 1e-9, "J at the edge {edge}: {j}");
+        }
+        // Widened by 2 % of 1.55 on each side.
+        let padded = windows_of(&t, 1, 1.0, 0.02).length_ratio.unwrap();
+        assert!((lo - padded[0] - 0.031).abs() < 1e-12 && (padded[1] - hi - 0.031).abs() < 1e-12);
+        // Two shots: J is their mean, so one term must be twice as large.
+        let [lo2, _] = windows_of(&t, 2, 1.0, 0.0).length_ratio.unwrap();
+        assert!((term(&r, Some(lo2)) / 3.0 / 2.0 - 1.0).abs() < 1e-9);
+    }
+
+    /// A window never screens a run that meets its target: below a threshold of one term,
+    /// the edge is where the target's own term is 1.
+    #[test]
+    fn a_screened_run_always_misses_its_target() {
+        let r = target("r", Observable::LengthRatio, TargetKind::Value, 1.55, 0.1);
+        let t = shot(vec![r.clone()]);
+        let [lo, hi] = windows_of(&t, 1, 0.01, 0.0).length_ratio.unwrap();
+        assert!((term(&r, Some(lo)) - 1.0).abs() < 1e-9 && (term(&r, Some(hi)) - 1.0).abs() < 1e-9);
+    }
+
+    /// Kinds: a log target's window is a factor each way; an upper bound has no low side;
+    /// two targets on one observable intersect.
+    #[test]
+    fn windows_follow_the_target_kinds_and_intersect() {
+        let va = target(
+            "va",
+            Observable::FrontVelocityRatio,
+            TargetKind::LogValue,
+            0.9,
+            1.1,
+        );
+        let w = windows_of(&shot(vec![va.clone()]), 1, 4.0, 0.0);
+        let [lo, hi] = w.front_velocity_ratio.unwrap();
+        assert!((lo - 0.9 / 1.21).abs() < 1e-12 && (hi - 0.9 * 1.21).abs() < 1e-12);
+        let most = target("m", Observable::LengthRatio, TargetKind::AtMost, 1.6, 0.1);
+        let value = target("v", Observable::LengthRatio, TargetKind::Value, 1.4, 0.1);
+        let w = windows_of(&shot(vec![most.clone()]), 1, 1.0, 0.0);
+        assert_eq!(w.length_ratio.unwrap()[0], f64::MIN);
+        let both = windows_of(&shot(vec![most, value]), 1, 0.5, 0.0);
+        // Each term's edge at 1 tolerance (0.5 x 2 targets / 1 = 1): [1.3, 1.5] and up to 1.7.
+        let [lo, hi] = both.length_ratio.unwrap();
+        assert!((lo - 1.3).abs() < 1e-12 && (hi - 1.5).abs() < 1e-12);
+        let fragments_only = target(
+            "f",
+            Observable::MeanFragmentDiameter,
+            TargetKind::Value,
+            1e-3,
+            1e-3,
+        );
+        assert!(!windows_of(&shot(vec![fragments_only]), 1, 1.0, 0.0).any());
+    }
+}
