@@ -766,7 +766,10 @@ fn calibrate_searches_by_surrogate_in_batches_at_two_seeds_and_resumes_without_n
     assert!(md.contains("| `material.eps_j` |"), "{md}");
     let csv = std::fs::read_to_string(out.join("evaluations.csv")).expect("evaluations.csv");
     let header = csv.lines().next().unwrap_or("");
-    assert!(header.contains(",seeds,status,cached,screened,dir"), "{header}");
+    assert!(
+        header.contains(",seeds,status,cached,screened,dir"),
+        "{header}"
+    );
     // The model's prediction over the two searched axes, the map's background.
     let surface = std::fs::read_to_string(out.join("surrogate.csv")).expect("surrogate.csv");
     let rows: Vec<&str> = surface.lines().collect();
@@ -2389,8 +2392,8 @@ fn calibrate_screens_the_runs_far_from_the_targets_and_reuses_full_ones() {
     let (mut far, mut near) = (0, 0);
     for s in summaries(&out) {
         let w = &s["scene"]["run"]["screen_length_ratio"];
-        assert!((w[0].as_f64().unwrap() - lo).abs() < 1e-9, "{w}");
-        assert!((w[1].as_f64().unwrap() - hi).abs() < 1e-9, "{w}");
+        assert!((w[0].as_f64().expect("a number") - lo).abs() < 1e-9, "{w}");
+        assert!((w[1].as_f64().expect("a number") - hi).abs() < 1e-9, "{w}");
         let screen = &s["screen"];
         let r = screen["length_ratio"].as_f64().expect("the probe's R");
         let outside = !(lo..=hi).contains(&r);

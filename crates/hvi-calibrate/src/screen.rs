@@ -92,7 +92,7 @@ impl Screen {
     }
 
     /// The run of `job` (shot `shot`'s) as the calibration makes it: the job as it is when
-    /// the store holds it finished or it is not screened ([`Self::screened`]); else the job
+    /// the store holds it finished or it is not screened (no window, or the screen past its end or free flight); else the job
     /// with the screen's keys (a run of its own in the store).
     pub fn apply(&self, shot: usize, job: Job, store: &Store) -> Result<Job> {
         let Some(scene) = self.screened(shot, &job.scene) else {
@@ -208,7 +208,7 @@ mod tests {
 
     fn shot(targets: Vec<Target>) -> Targets {
         let text = "[shot]\nid = \"s\"\ndescription = \"d\"\nsource = \"s\"\nimpactor_diameter_m = 0.01\nimpactor_material = \"aluminium\"\nplate_material = \"aluminium\"\nv0_m_s = 6500.0\nt_over_d = 0.4\n\n[[targets]]\nname = \"x\"\nobservable = \"length_ratio\"\nkind = \"value\"\nvalue = 1.0\ntolerance = 0.1\nweight = 1.0\nsource = \"s\"\n";
-        let mut t = Targets::parse(text, std::path::Path::new("s.toml")).unwrap();
+        let mut t = Targets::parse(text, std::path::Path::new("s.toml")).expect("in the test");
         t.targets = targets;
         t
     }
@@ -234,17 +234,21 @@ mod tests {
         );
         let t = shot(vec![r.clone(), large, frag]);
         let w = windows_of(&t, 1, 1.0, 0.0);
-        let [lo, hi] = w.length_ratio.unwrap();
+        let [lo, hi] = w.length_ratio.expect("in the test");
         assert!(w.front_velocity_ratio.is_none(), "no target on va/v0");
         for edge in [lo, hi] {
             let j = term(&r, Some(edge)) / 3.0;
             assert!((j - 1.0).abs() < 1e-9, "J at the edge {edge}: {j}");
         }
         // Widened by 2 % of 1.55 on each side.
-        let padded = windows_of(&t, 1, 1.0, 0.02).length_ratio.unwrap();
+        let padded = windows_of(&t, 1, 1.0, 0.02)
+            .length_ratio
+            .expect("in the test");
         assert!((lo - padded[0] - 0.031).abs() < 1e-12 && (padded[1] - hi - 0.031).abs() < 1e-12);
         // Two shots: J is their mean, so one term must be twice as large.
-        let [lo2, _] = windows_of(&t, 2, 1.0, 0.0).length_ratio.unwrap();
+        let [lo2, _] = windows_of(&t, 2, 1.0, 0.0)
+            .length_ratio
+            .expect("in the test");
         assert!((term(&r, Some(lo2)) / 3.0 / 2.0 - 1.0).abs() < 1e-9);
     }
 
@@ -254,7 +258,9 @@ mod tests {
     fn a_screened_run_always_misses_its_target() {
         let r = target("r", Observable::LengthRatio, TargetKind::Value, 1.55, 0.1);
         let t = shot(vec![r.clone()]);
-        let [lo, hi] = windows_of(&t, 1, 0.01, 0.0).length_ratio.unwrap();
+        let [lo, hi] = windows_of(&t, 1, 0.01, 0.0)
+            .length_ratio
+            .expect("in the test");
         assert!((term(&r, Some(lo)) - 1.0).abs() < 1e-9 && (term(&r, Some(hi)) - 1.0).abs() < 1e-9);
     }
 
@@ -270,15 +276,15 @@ mod tests {
             1.1,
         );
         let w = windows_of(&shot(vec![va.clone()]), 1, 4.0, 0.0);
-        let [lo, hi] = w.front_velocity_ratio.unwrap();
+        let [lo, hi] = w.front_velocity_ratio.expect("in the test");
         assert!((lo - 0.9 / 1.21).abs() < 1e-12 && (hi - 0.9 * 1.21).abs() < 1e-12);
         let most = target("m", Observable::LengthRatio, TargetKind::AtMost, 1.6, 0.1);
         let value = target("v", Observable::LengthRatio, TargetKind::Value, 1.4, 0.1);
         let w = windows_of(&shot(vec![most.clone()]), 1, 1.0, 0.0);
-        assert_eq!(w.length_ratio.unwrap()[0], f64::MIN);
+        assert_eq!(w.length_ratio.expect("in the test")[0], f64::MIN);
         let both = windows_of(&shot(vec![most, value]), 1, 0.5, 0.0);
         // Each term's edge at 1 tolerance (0.5 x 2 targets / 1 = 1): [1.3, 1.5] and up to 1.7.
-        let [lo, hi] = both.length_ratio.unwrap();
+        let [lo, hi] = both.length_ratio.expect("in the test");
         assert!((lo - 1.3).abs() < 1e-12 && (hi - 1.5).abs() < 1e-12);
         let fragments_only = target(
             "f",

@@ -1208,9 +1208,7 @@ impl Gathered {
     ) {
         let s = sim.step;
         let [screen, free_flight] = at;
-        if sim.coasting_since().is_none()
-            && self.screen.is_none()
-            && screen.is_some_and(|f| s >= f)
+        if sim.coasting_since().is_none() && self.screen.is_none() && screen.is_some_and(|f| s >= f)
         {
             self.screen_now(sim, run, progress);
         }

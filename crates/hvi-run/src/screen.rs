@@ -119,10 +119,10 @@ mod tests {
             .summary
             .cloud
             .as_ref()
-            .unwrap()
+            .expect("in the test")
             .measurement
             .length_ratio
-            .unwrap();
+            .expect("in the test");
         let screened = |window: [f64; 2], dir: &str| {
             let mut s = spec.clone();
             s.run.screen_after_s = Some(1.5e-6);
@@ -168,17 +168,17 @@ mod tests {
             .summary
             .cloud
             .as_ref()
-            .unwrap()
+            .expect("in the test")
             .measurement
             .length_ratio
-            .unwrap();
+            .expect("in the test");
         assert_eq!(
             Some(r_ff),
             coasted
                 .summary
                 .cloud
                 .as_ref()
-                .unwrap()
+                .expect("in the test")
                 .measurement
                 .length_ratio
         );
