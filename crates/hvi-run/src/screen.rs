@@ -100,7 +100,7 @@ fn probe(
 
 #[cfg(test)]
 mod tests {
-    use crate::run::{run_scene, RunOptions};
+    use crate::run::{run_scene, RunOptions, RunOutcome};
     use hvi_engine::scene::SceneSpec;
 
     /// A run the screen lets go on is the run without a screen, bit for bit; one it sends on
@@ -115,14 +115,15 @@ mod tests {
             ..RunOptions::default()
         };
         let plain = run_scene(&spec, &opts("plain")).expect("runs");
-        let r_full = plain
-            .summary
-            .cloud
-            .as_ref()
-            .expect("in the test")
-            .measurement
-            .length_ratio
-            .expect("in the test");
+        // R of a run's cloud at the end.
+        let r_of = |o: &RunOutcome| {
+            o.summary
+                .cloud
+                .as_ref()
+                .and_then(|c| c.measurement.length_ratio)
+                .expect("a cloud with R")
+        };
+        let r_full = r_of(&plain);
         let screened = |window: [f64; 2], dir: &str| {
             let mut s = spec.clone();
             s.run.screen_after_s = Some(1.5e-6);
@@ -164,24 +165,8 @@ mod tests {
             outside.energy, coasted.energy,
             "outside: free flight from the screen on"
         );
-        let r_ff = outside
-            .summary
-            .cloud
-            .as_ref()
-            .expect("in the test")
-            .measurement
-            .length_ratio
-            .expect("in the test");
-        assert_eq!(
-            Some(r_ff),
-            coasted
-                .summary
-                .cloud
-                .as_ref()
-                .expect("in the test")
-                .measurement
-                .length_ratio
-        );
+        let r_ff = r_of(&outside);
+        assert_eq!(r_ff, r_of(&coasted));
         // The probe coasted in fewer steps than the run: the same R to round-off.
         assert!((r - r_ff).abs() <= 1e-12 * r, "probe {r}, run {r_ff}");
         assert_ne!(r_ff, r_full, "free flight from 1.5 us is not the full run");
