@@ -18,7 +18,6 @@ use serde_json::Value;
 use crate::problem::describe_eval;
 use crate::result::EvalStage;
 use crate::result::{shot_means, Evaluation};
-use crate::screen::Screen;
 use crate::CalibrateConfig;
 use hvi_store::spec::Study;
 use hvi_studies::sweep::print_failures;
@@ -78,22 +77,21 @@ pub(super) fn grid_stage(
     out: &Path,
     runner: &Runner,
     targets: &[Targets],
-    screen: &Screen,
     progress: bool,
 ) -> Result<Grid> {
     let plan = plans[0];
+    let stored: Vec<Vec<bool>> = plans
+        .iter()
+        .map(|p| stored_before(p, out))
+        .collect::<Result<_>>()?;
     let store = runner.store(out)?;
     let mut jobs: Vec<Job> = Vec::new();
-    for (shot, p) in plans.iter().enumerate() {
+    for p in plans {
         for i in 0..p.runs.len() {
-            jobs.push(screen.apply(shot, job(p, i)?, &store)?);
+            jobs.push(job(p, i)?);
         }
     }
     let n = plan.runs.len();
-    let stored: Vec<Vec<bool>> = jobs
-        .chunks(n)
-        .map(|shot| shot.iter().map(|j| stored_now(&store, j)).collect())
-        .collect();
     let describe = |i: usize| {
         let shot = &targets[(i / n).min(targets.len() - 1)].shot.id;
         let values = describe_values(&plan.axes, &plan.runs[i % n].values);
@@ -151,10 +149,18 @@ pub(super) fn grid_stage(
     })
 }
 
-/// Whether the store holds `job` finished (a damaged record counts as not stored: the run
-/// repairs and re-runs it).
-fn stored_now(store: &Store, job: &Job) -> bool {
-    matches!(store.record(&job.fingerprint), Ok(Some(rec)) if rec.is_final())
+/// Whether each run of the plan was finished in the store before this invocation.
+pub(super) fn stored_before(plan: &Plan, out: &Path) -> Result<Vec<bool>> {
+    let Ok(store) = Store::existing(out) else {
+        return Ok(vec![false; plan.runs.len()]);
+    };
+    plan.runs
+        .iter()
+        .map(|r| {
+            // A damaged record counts as not stored (the sweep repairs and re-runs it).
+            Ok(matches!(store.record(&r.fingerprint), Ok(Some(rec)) if rec.is_final()))
+        })
+        .collect()
 }
 
 /// The grid points as evaluations: their numeric axis values, scores and status (`cached`:

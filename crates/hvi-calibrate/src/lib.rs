@@ -181,7 +181,7 @@ pub fn calibrate_plan(
     let (designs, design) = design::design_plans(&plans, &dims, cfg.initial_design);
     let design_refs: Vec<_> = designs.iter().collect();
     let screen = screen_of(&cfg, &targets, progress);
-    let grid = grid_stage(&design_refs, out, &runner, &targets, &screen, progress)?;
+    let grid = grid_stage(&design_refs, out, &runner, &targets, progress)?;
     let best_run = designs[0].run(grid.best)?;
     let fixed = fixed_overrides(&plans, &best_run.values, |k| refine_keys.contains(k))?;
     let store = runner.store(out)?;

@@ -898,6 +898,12 @@ pub struct CloudReport {
     pub largest_fragments: Vec<Fragment>,
 }
 
+/// The first base step at or after `tau_s` since first contact (where a setting that starts
+/// at a time, such as free flight, begins; not capped at the end).
+pub fn first_step_at_or_after(derived: &Derived, tau_s: f64) -> u64 {
+    ((derived.contact_time_s + tau_s) / derived.dt_s).ceil() as u64
+}
+
 /// The step nearest to time `tau_s` since first contact, clamped to the run.
 pub fn step_at_tau(derived: &Derived, tau_s: f64) -> u64 {
     let s = ((tau_s + derived.contact_time_s) / derived.dt_s).round();

@@ -10,8 +10,8 @@ use std::time::{Duration, Instant};
 
 use crate::progress::{Bar, Unit};
 use hvi_engine::cloud::{
-    size_distribution, step_at_tau, CloudObserver, CloudReport, CloudResult, ObserverState,
-    TrackRow,
+    first_step_at_or_after, size_distribution, step_at_tau, CloudObserver, CloudReport,
+    CloudResult, ObserverState, TrackRow,
 };
 use hvi_engine::scene::{Derived, RunSettings, SceneSpec};
 use hvi_engine::sim::{Energy, SimState, Simulation, Timing};
@@ -622,7 +622,7 @@ fn render_steps(spec: &SceneSpec, d: &Derived, opts: &RunOptions) -> Vec<(u64, f
 /// that time since first contact), if it is set.
 fn free_flight_step(run: &RunSettings, d: &Derived) -> Option<u64> {
     run.free_flight_after_s
-        .map(|t| ((d.contact_time_s + t) / d.dt_s).ceil() as u64)
+        .map(|t| first_step_at_or_after(d, t))
 }
 
 /// The first base step after `s` that is a multiple of `every`.

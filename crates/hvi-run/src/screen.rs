@@ -11,7 +11,7 @@
 //! docs/calibration.md, "The screen"): such a run needs to be known as far, not computed to
 //! the end. A run inside every window goes on exactly as without a screen.
 
-use hvi_engine::cloud::{label_fragments, CloudObserver};
+use hvi_engine::cloud::{first_step_at_or_after, label_fragments, CloudObserver};
 use hvi_engine::scene::{Derived, RunSettings};
 use hvi_engine::sim::Simulation;
 use serde::{Deserialize, Serialize};
@@ -36,7 +36,7 @@ pub struct ScreenReport {
 /// bit. (A screen due after the last sample does not look.)
 pub fn screen_step(run: &RunSettings, d: &Derived) -> Option<u64> {
     run.screen_after_s.map(|t| {
-        let s = ((d.contact_time_s + t) / d.dt_s).ceil() as u64;
+        let s = first_step_at_or_after(d, t);
         s.div_ceil(run.energy_every) * run.energy_every
     })
 }
