@@ -2304,19 +2304,10 @@ fn calibrate_adds_its_tier_settings_and_sweep_does_not() {
         "screen = false\n\n[calibrate.tier_set]\nquick = [\"run.free_flight_after_s=2e-5\"]\n",
     );
     let cutoffs = |out: &Path| -> Vec<Option<f64>> {
-        let mut v = Vec::new();
-        for e in std::fs::read_dir(out.join("runs")).expect("runs") {
-            let run = e.expect("entry").path();
-            if !run.is_dir() {
-                continue;
-            }
-            let summary = run.join("summary.json");
-            let s: serde_json::Value =
-                serde_json::from_str(&std::fs::read_to_string(&summary).expect("summary"))
-                    .expect("json");
-            v.push(s["ballistic_cutoff_tau_s"].as_f64());
-        }
-        v
+        summaries(out)
+            .iter()
+            .map(|s| s["ballistic_cutoff_tau_s"].as_f64())
+            .collect()
     };
     let out = dir.join("calibrated");
     let o = calibrate_with(&study, &out, &["--no-refine"]);
