@@ -2428,6 +2428,18 @@ fn calibrate_screens_the_runs_far_from_the_targets_and_reuses_full_ones() {
     let grid_rows = screened_column(&reused);
     assert!(grid_rows[..3].iter().all(String::is_empty), "{grid_rows:?}");
 
+    // `--no-refine` runs the grid in full (the maps are the product): a sweep of the same
+    // study then finds every run it plans finished (as `reproduce` reads Figs. 7, 9, 10).
+    let grid = dir.join("grid");
+    let o = calibrate_with(&study, &grid, &["--no-refine"]);
+    assert_ok(&o);
+    assert!(!stderr(&o).contains("screen (shot 1)"), "{}", stderr(&o));
+    assert!(summaries(&grid).iter().all(|s| s.get("screen").is_none()));
+    let o = sweep(&study, &grid, &[]);
+    assert_ok(&o);
+    let (total, cached, ..) = counts(&o);
+    assert_eq!((total, cached), (3, 3), "{}", stderr(&o));
+
     let off = edge_study(&dir, "screen = false\n");
     let full = dir.join("full");
     assert_ok(&calibrate(&off, &full));

@@ -57,7 +57,7 @@ use result::PriorUse;
 pub struct CalibrateOptions {
     /// The study, its tier, output directory and threads.
     pub study: StudyOptions,
-    /// Only the grid stage.
+    /// Only the grid stage, every run in full (the grid's maps are the product; no screen).
     pub no_refine: bool,
     /// The search after the grid (None: `calibrate.method`).
     pub method: Option<Method>,
@@ -127,7 +127,13 @@ impl Coarse {
 }
 
 impl CalibrateOptions {
-    /// The grid stage alone of `study`, run here.
+    /// Whether the calibration screens its runs as the study's `calibrate.screen` says (false:
+    /// every run in full, as `--no-refine` asks: docs/calibration.md, "The screen").
+    pub fn screens(&self) -> bool {
+        !self.no_refine
+    }
+
+    /// The grid stage alone of `study`, run here, every run in full.
     pub fn grid_only(study: StudyOptions) -> CalibrateOptions {
         CalibrateOptions {
             study,
@@ -149,7 +155,8 @@ impl CalibrateOptions {
 /// paper's fit at this tier, then calibration.json, calibration.md, evaluations.csv, the maps
 /// and the snapshots.
 pub fn calibrate(args: &CalibrateOptions) -> Result<CalibrationResult> {
-    let (study, shots, out) = shots::shot_plans(&args.study, args.hold_out.as_deref())?;
+    let (study, shots, out) =
+        shots::shot_plans(&args.study, args.hold_out.as_deref(), args.screens())?;
     let result = calibrate_plan(args, &study, &shots, &out)?;
     log::info!(target: hvi_run::STDOUT, "{}", out.join("calibration.json").display());
     Ok(result)
@@ -376,6 +383,7 @@ fn config_of(study: &hvi_store::spec::Study, args: &CalibrateOptions) -> Result<
     if let Some(design) = args.initial_design {
         cfg.initial_design = design;
     }
+    cfg.screen &= args.screens();
     Ok(cfg)
 }
 

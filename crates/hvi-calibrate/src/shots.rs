@@ -92,9 +92,11 @@ pub fn describe_shot(t: &Targets) -> String {
 
 /// Every shot of the calibration with its plan, the first plan written as the study's
 /// plan.json, with the study directory. A shot named by `hold_out` must be among them.
+/// `screen`: the plans carry the study's screen (false: every run in full).
 pub fn shot_plans(
     opts: &StudyOptions,
     hold_out: Option<&str>,
+    screen: bool,
 ) -> Result<(Study, Vec<ShotPlan>, PathBuf)> {
     let mut study = opts.load_study()?;
     let cfg = crate::CalibrateConfig::of(&study)?;
@@ -123,18 +125,20 @@ pub fn shot_plans(
             bail!("--hold-out needs a study of two or more shots (it calibrates on the others)");
         }
     }
-    let (plans, out) = plans_of(opts, &study, shots, hold_out)?;
+    let (plans, out) = plans_of(opts, &study, shots, hold_out, screen)?;
     Ok((study, plans, out))
 }
 
 /// The plan of each shot of `study` at these options (the study's grid at the shot's impact),
 /// the first calibrated shot's (not `hold_out`) written as the study directory's plan.json;
-/// with that directory.
+/// with that directory. `screen`: the calibrated shots' plans carry the study's screen
+/// (`calibrate.screen`; false: every run in full).
 pub fn plans_of(
     opts: &StudyOptions,
     study: &Study,
     shots: Vec<Targets>,
     hold_out: Option<&str>,
+    screen: bool,
 ) -> Result<(Vec<ShotPlan>, PathBuf)> {
     let mut plans = Vec::new();
     let mut out = None;
@@ -146,7 +150,9 @@ pub fn plans_of(
     }
     let out =
         out.ok_or_else(|| RunError::Input("study key `calibrate.shots` is empty".to_string()))?;
-    screen_plans(study, &mut plans, hold_out, &out)?;
+    if screen {
+        screen_plans(study, &mut plans, hold_out, &out)?;
+    }
     let first = plans
         .iter()
         .find(|p| Some(p.targets.shot.id.as_str()) != hold_out)

@@ -370,6 +370,7 @@ impl Levels {
             &level_study,
             cfg.load_shots(study)?,
             None,
+            level_args.screens(),
         )?;
         if k == 0 {
             self.keys = refined_axes(&shots[0].plan, cfg)?.1;
@@ -578,7 +579,7 @@ fn check_run(
     let mut check_args = args.clone();
     check_args.study.particles = Some(n);
     check_args.study.out = Some(root.join(&dir));
-    let (shots, out) = plans_of(&check_args.study, &one, cfg.load_shots(study)?, None)?;
+    let (shots, out) = plans_of(&check_args.study, &one, cfg.load_shots(study)?, None, false)?;
     let progress = !args.study.quiet;
     if progress {
         log::info!(

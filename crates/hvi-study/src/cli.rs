@@ -211,7 +211,8 @@ pub struct CalibrateArgs {
     /// The study, tier, output and threads.
     #[command(flatten)]
     pub study: StudyArgs,
-    /// Only the grid stage: score the grid, no search after it.
+    /// Only the grid stage: score the grid, no search after it, every run in full (the
+    /// calibration's screen is for the search: docs/calibration.md, "The screen").
     #[arg(long)]
     pub no_refine: bool,
     /// The search after the grid (overrides calibrate.method).
