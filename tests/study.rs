@@ -2298,7 +2298,7 @@ fn a_calibration_whose_targets_bound_eps_from_above_only_reports_the_bound() {
 fn calibrate_adds_its_tier_settings_and_sweep_does_not() {
     let dir = scratch("calibrate-tier-set");
     // Without the screen, which would send the runs far from the target on in free flight
-    // from 8 us.
+    // from 5.6 transit times.
     let study = edge_study(
         &dir,
         "screen = false\n\n[calibrate.tier_set]\nquick = [\"run.free_flight_after_s=2e-5\"]\n",
@@ -2366,9 +2366,9 @@ fn screened_column(out: &Path) -> Vec<String> {
 }
 
 /// The screen (docs/calibration.md, "The screen"): by default every run the calibration makes
-/// carries a window on R, the target's tolerance widened by 2 % of its value, and goes on in
-/// free flight from 8 us exactly when what free flight gives lies outside it; the answer's
-/// runs are full. Runs the store holds without a screen (a sweep's) are taken as they are, and
+/// carries a window on R, the target's tolerance widened by 4 % of its value, and goes on in
+/// free flight from 5.6 transit times D/v0 (8 us) exactly when what free flight gives lies
+/// outside it; the answer's runs are full. Runs the store holds without a screen (a sweep's) are taken as they are, and
 /// `screen = false` runs everything in full.
 #[test]
 fn calibrate_screens_the_runs_far_from_the_targets_and_reuses_full_ones() {
@@ -2378,10 +2378,16 @@ fn calibrate_screens_the_runs_far_from_the_targets_and_reuses_full_ones() {
     let o = calibrate(&study, &out);
     assert_ok(&o);
     assert!(stderr(&o).contains("screen (shot 1)"), "{}", stderr(&o));
-    // The target: R = 1.2 within 0.1, one target, so the window is 1.2 -+ (0.1 + 0.024).
-    let (lo, hi) = (1.2 - 0.124, 1.2 + 0.124);
+    // The target: R = 1.2 within 0.1, one target, so the window is 1.2 -+ (0.1 + 0.048).
+    let (lo, hi) = (1.2 - 0.148, 1.2 + 0.148);
+    // At 5.6 transit times D/v0 of the shot (9.53 mm at 6700 m/s).
+    let after = 5.6 * 9.53e-3 / 6700.0;
     let (mut far, mut near) = (0, 0);
     for s in summaries(&out) {
+        let t = s["scene"]["run"]["screen_after_s"]
+            .as_f64()
+            .expect("a time");
+        assert!((t - after).abs() < 1e-12 * after, "{t} against {after}");
         let w = &s["scene"]["run"]["screen_length_ratio"];
         assert!((w[0].as_f64().expect("a number") - lo).abs() < 1e-9, "{w}");
         assert!((w[1].as_f64().expect("a number") - hi).abs() < 1e-9, "{w}");

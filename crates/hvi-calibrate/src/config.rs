@@ -58,8 +58,8 @@ fn default_seeds_within_decades() -> f64 {
     1.0
 }
 
-fn default_screen_after_s() -> f64 {
-    8e-6
+fn default_screen_after_transits() -> f64 {
+    5.6
 }
 
 fn default_screen_above() -> f64 {
@@ -67,7 +67,7 @@ fn default_screen_above() -> f64 {
 }
 
 fn default_screen_allowance() -> f64 {
-    0.02
+    0.04
 }
 
 /// The search after the grid.
@@ -194,12 +194,14 @@ pub struct CalibrateConfig {
     #[serde(default)]
     pub tier_set: BTreeMap<String, Vec<String>>,
     /// The screen (`crate::screen`): whether runs whose length ratio or va/v0 alone puts J
-    /// above `screen_above` go on in free flight from `screen_after_s` instead of in full.
+    /// above `screen_above` go on in free flight from `screen_after_transits` instead of in
+    /// full.
     #[serde(default = "default_true")]
     pub screen: bool,
-    /// The screen's time after first contact, s.
-    #[serde(default = "default_screen_after_s")]
-    pub screen_after_s: f64,
+    /// The screen's time after first contact in transit times D/v0 of each shot (5.6: 8 us at
+    /// the calibration shot, 9.53 mm at 6.7 km/s).
+    #[serde(default = "default_screen_after_transits")]
+    pub screen_after_transits: f64,
     /// The objective a run's screened term alone must put J above (never below the term of
     /// a missed target, 1).
     #[serde(default = "default_screen_above")]
@@ -293,11 +295,11 @@ impl CalibrateConfig {
 
     /// The screen's keys, each in its range.
     fn check_screen(&self) -> Result<()> {
-        if !(self.screen_after_s.is_finite() && self.screen_after_s > 0.0) {
+        if !(self.screen_after_transits.is_finite() && self.screen_after_transits > 0.0) {
             bail!(
-                "study key `calibrate.screen_after_s`: {} (allowed: a time after first contact > 0 s, \
-                 below the runs' end time)",
-                self.screen_after_s
+                "study key `calibrate.screen_after_transits`: {} (allowed: a number of transit \
+                 times D/v0 after first contact > 0; a run that ends before it is not screened)",
+                self.screen_after_transits
             );
         }
         if !(self.screen_above.is_finite() && self.screen_above > 0.0) {

@@ -3,10 +3,11 @@
 //! needs to be known as far from the targets, not computed to the end.
 //!
 //! Each run the calibration makes carries the scene keys of `hvi_run::screen`: at
-//! `calibrate.screen_after_s` after first contact it measures what free flight from then
-//! gives at the analysis time, and outside the windows set here it goes on in free flight.
-//! The windows come from the shot's targets on `length_ratio` and `front_velocity_ratio`
-//! (the two observables free flight moves by at most 0.5 % on the calibration scene,
+//! `calibrate.screen_after_transits` times its shot's transit time D/v0 after first contact
+//! it measures what free flight from then gives at the analysis time, and outside the windows
+//! set here it goes on in free flight. The windows come from the shot's targets on
+//! `length_ratio` and `front_velocity_ratio` (the two observables free flight from 8 us moves
+//! by at most 3.4 % on the calibration scene at 1e5 and 2.7e5 particles,
 //! docs/model-decisions.md): outside a window that one term exceeds the larger of 1 (the
 //! target is missed) and the term that alone makes J = `screen_above`, with every window
 //! widened by `screen_allowance` of the target's value for what free flight moves them. A
@@ -22,9 +23,12 @@ use hvi_store::store::{Job, Store};
 
 use crate::config::CalibrateConfig;
 
-/// The screen's windows for one shot's runs.
+/// The screen of one shot's runs: when it looks and its windows.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Windows {
+    /// Time after first contact at which the shot's runs are screened, s
+    /// (`calibrate.screen_after_transits` times the shot's D/v0).
+    pub after_s: f64,
     /// On the length ratio (the scene's reading).
     pub length_ratio: Option<[f64; 2]>,
     /// On va / v0.
@@ -37,11 +41,9 @@ impl Windows {
     }
 }
 
-/// The screen of a calibration: when it looks and each shot's windows (none: off).
+/// The screen of a calibration: each shot's time and windows (none: off).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Screen {
-    /// Time after first contact at which a run is screened, s.
-    pub after_s: f64,
     /// Per shot, in the calibration's order.
     pub windows: Vec<Windows>,
 }
@@ -60,10 +62,12 @@ impl Screen {
         }
         let shots = targets.len();
         Screen {
-            after_s: cfg.screen_after_s,
             windows: targets
                 .iter()
-                .map(|t| windows_of(t, shots, cfg.screen_above, cfg.screen_allowance))
+                .map(|t| Windows {
+                    after_s: cfg.screen_after_transits * transit_s(t),
+                    ..windows_of(t, shots, cfg.screen_above, cfg.screen_allowance)
+                })
                 .collect(),
         }
     }
@@ -78,14 +82,14 @@ impl Screen {
     fn screened(&self, shot: usize, scene: &SceneSpec) -> Option<SceneSpec> {
         let w = self.windows.get(shot).filter(|w| w.any())?;
         let run = &scene.run;
-        if run.end_time_s <= self.after_s
-            || run.free_flight_after_s.is_some_and(|t| t <= self.after_s)
+        if run.end_time_s <= w.after_s
+            || run.free_flight_after_s.is_some_and(|t| t <= w.after_s)
             || run.screen_after_s.is_some()
         {
             return None;
         }
         let mut scene = scene.clone();
-        scene.run.screen_after_s = Some(self.after_s);
+        scene.run.screen_after_s = Some(w.after_s);
         scene.run.screen_length_ratio = w.length_ratio;
         scene.run.screen_front_velocity_ratio = w.front_velocity_ratio;
         Some(scene)
@@ -121,8 +125,9 @@ impl Screen {
             }
             let r = &scene.run;
             let window = |w: Option<[f64; 2]>| w.map(|[lo, hi]| format!("[{lo:?}, {hi:?}]"));
-            run.set
-                .push(format!("run.screen_after_s={:?}", self.after_s));
+            if let Some(t) = r.screen_after_s {
+                run.set.push(format!("run.screen_after_s={t:?}"));
+            }
             if let Some(w) = window(r.screen_length_ratio) {
                 run.set.push(format!("run.screen_length_ratio={w}"));
             }
@@ -143,7 +148,13 @@ fn stored(store: Option<&Store>, fingerprint: &str) -> bool {
     store.is_some_and(|s| matches!(s.record(fingerprint), Ok(Some(r)) if r.is_final()))
 }
 
-/// One shot's windows: on each observable the screen reads, the intersection of the windows
+/// A shot's transit time D/v0 as simulated, s: the time the impactor takes to travel its own
+/// diameter, the scale the cloud's forming scales with at one material and t/D.
+pub fn transit_s(targets: &Targets) -> f64 {
+    targets.shot.impactor_diameter_m / targets.shot.simulated_v0_m_s()
+}
+
+/// One shot's windows (its time left at 0): on each observable the screen reads, the intersection of the windows
 /// of the shot's targets on it (none when they leave nothing, or without such a target).
 /// `shots` is the number of shots J is the mean over.
 pub fn windows_of(targets: &Targets, shots: usize, above: f64, allowance: f64) -> Windows {
@@ -166,6 +177,7 @@ pub fn windows_of(targets: &Targets, shots: usize, above: f64, allowance: f64) -
         window.filter(|[lo, hi]| lo < hi)
     };
     Windows {
+        after_s: 0.0,
         length_ratio: on(Observable::LengthRatio),
         front_velocity_ratio: on(Observable::FrontVelocityRatio),
     }
@@ -250,6 +262,26 @@ mod tests {
             .length_ratio
             .expect("in the test");
         assert!((term(&r, Some(lo2)) / 3.0 / 2.0 - 1.0).abs() < 1e-9);
+    }
+
+    /// Each shot is screened at the configured number of its own transit times D/v0 (as
+    /// simulated), so a slower or larger impactor is screened later.
+    #[test]
+    fn each_shot_is_screened_at_its_own_transit_times() {
+        let r = target("r", Observable::LengthRatio, TargetKind::Value, 1.55, 0.1);
+        let fast = shot(vec![r.clone()]);
+        let mut slow = shot(vec![r]);
+        slow.shot.v0_m_s = 3250.0;
+        slow.shot.impactor_diameter_m = 0.02;
+        let cfg: CalibrateConfig =
+            serde_json::from_value(serde_json::json!({ "screen_after_transits": 4.0 }))
+                .expect("in the test");
+        let screen = Screen::of(&cfg, &[fast, slow]);
+        let times: Vec<f64> = screen.windows.iter().map(|w| w.after_s).collect();
+        // 4 x 10 mm / 6500 m/s, and 4 x 20 mm / 3250 m/s: four times as long.
+        assert!((times[0] - 4.0 * 0.01 / 6500.0).abs() < 1e-18, "{times:?}");
+        assert!((times[1] - 4.0 * times[0]).abs() < 1e-18, "{times:?}");
+        assert!(screen.windows.iter().all(|w| w.length_ratio.is_some()));
     }
 
     /// A window never screens a run that meets its target: below a threshold of one term,
