@@ -44,6 +44,8 @@ impl Windows {
 /// The screen of a calibration: each shot's time and windows (none: off).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Screen {
+    /// The time, in transit times D/v0 (`calibrate.screen_after_transits`).
+    pub transits: f64,
     /// Per shot, in the calibration's order.
     pub windows: Vec<Windows>,
 }
@@ -62,6 +64,7 @@ impl Screen {
         }
         let shots = targets.len();
         Screen {
+            transits: cfg.screen_after_transits,
             windows: targets
                 .iter()
                 .map(|t| Windows {
