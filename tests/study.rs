@@ -2368,8 +2368,9 @@ fn screened_column(out: &Path) -> Vec<String> {
 /// The screen (docs/calibration.md, "The screen"): by default every run the calibration makes
 /// carries a window on R, the target's tolerance widened by 4 % of its value, and goes on in
 /// free flight from 5.6 transit times D/v0 (8 us) exactly when what free flight gives lies
-/// outside it; the answer's runs are full. Runs the store holds without a screen (a sweep's) are taken as they are, and
-/// `screen = false` runs everything in full.
+/// outside it; the answer's runs are full. Runs the store holds without a screen (a sweep's)
+/// are taken as they are, `--no-refine` runs the grid in full, and `screen = false` runs
+/// everything in full.
 #[test]
 fn calibrate_screens_the_runs_far_from_the_targets_and_reuses_full_ones() {
     let dir = scratch("calibrate-screen");

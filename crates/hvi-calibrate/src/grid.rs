@@ -150,17 +150,15 @@ pub(super) fn grid_stage(
 }
 
 /// Whether each run of the plan was finished in the store before this invocation.
-pub(super) fn stored_before(plan: &Plan, out: &Path) -> Result<Vec<bool>> {
+fn stored_before(plan: &Plan, out: &Path) -> Result<Vec<bool>> {
     let Ok(store) = Store::existing(out) else {
         return Ok(vec![false; plan.runs.len()]);
     };
-    plan.runs
+    Ok(plan
+        .runs
         .iter()
-        .map(|r| {
-            // A damaged record counts as not stored (the sweep repairs and re-runs it).
-            Ok(matches!(store.record(&r.fingerprint), Ok(Some(rec)) if rec.is_final()))
-        })
-        .collect()
+        .map(|r| store.holds_finished(&r.fingerprint))
+        .collect())
 }
 
 /// The grid points as evaluations: their numeric axis values, scores and status (`cached`:

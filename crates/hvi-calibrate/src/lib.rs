@@ -413,7 +413,8 @@ fn announce_screen(screen: &screen::Screen) {
             }
         })
     };
-    for (shot, w) in screen.windows.iter().enumerate() {
+    for (shot, s) in screen.shots.iter().enumerate() {
+        let w = &s.windows;
         let parts: Vec<String> = [
             show(w.length_ratio).map(|s| format!("R {s}")),
             show(w.front_velocity_ratio).map(|s| format!("va/v0 {s}")),
@@ -425,7 +426,7 @@ fn announce_screen(screen: &screen::Screen) {
             log::info!(
                 "screen (shot {}): a run whose free flight from tau = {:.2} us ({} transit times D/v0) gives R or va/v0 outside {} goes on in free flight (calibrate.screen)",
                 shot + 1,
-                w.after_s * 1e6,
+                s.after_s * 1e6,
                 screen.transits,
                 parts.join(", ")
             );

@@ -23,12 +23,9 @@ use hvi_store::store::{Job, Store};
 
 use crate::config::CalibrateConfig;
 
-/// The screen of one shot's runs: when it looks and its windows.
+/// The screen's windows for one shot's runs.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Windows {
-    /// Time after first contact at which the shot's runs are screened, s
-    /// (`calibrate.screen_after_transits` times the shot's D/v0).
-    pub after_s: f64,
     /// On the length ratio (the scene's reading).
     pub length_ratio: Option<[f64; 2]>,
     /// On va / v0.
@@ -41,13 +38,23 @@ impl Windows {
     }
 }
 
+/// The screen of one shot's runs: when it looks and its windows.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ShotScreen {
+    /// Time after first contact at which the shot's runs are screened, s
+    /// (`calibrate.screen_after_transits` times the shot's [`transit_s`]).
+    pub after_s: f64,
+    /// Its windows.
+    pub windows: Windows,
+}
+
 /// The screen of a calibration: each shot's time and windows (none: off).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Screen {
     /// The time, in transit times D/v0 (`calibrate.screen_after_transits`).
     pub transits: f64,
     /// Per shot, in the calibration's order.
-    pub windows: Vec<Windows>,
+    pub shots: Vec<ShotScreen>,
 }
 
 impl Screen {
@@ -65,11 +72,11 @@ impl Screen {
         let shots = targets.len();
         Screen {
             transits: cfg.screen_after_transits,
-            windows: targets
+            shots: targets
                 .iter()
-                .map(|t| Windows {
+                .map(|t| ShotScreen {
                     after_s: cfg.screen_after_transits * transit_s(t),
-                    ..windows_of(t, shots, cfg.screen_above, cfg.screen_allowance)
+                    windows: windows_of(t, shots, cfg.screen_above, cfg.screen_allowance),
                 })
                 .collect(),
         }
@@ -77,35 +84,40 @@ impl Screen {
 
     /// Whether some shot's runs are screened.
     pub fn is_on(&self) -> bool {
-        self.windows.iter().any(Windows::any)
+        self.shots.iter().any(|s| s.windows.any())
     }
 
     /// The scene of shot `shot`'s run with the screen's keys, or None when the shot has no
     /// window, or the screen would come at or after the run's end or its free flight.
     fn screened(&self, shot: usize, scene: &SceneSpec) -> Option<SceneSpec> {
-        let w = self.windows.get(shot).filter(|w| w.any())?;
+        let ShotScreen {
+            after_s,
+            windows: w,
+        } = *self.shots.get(shot)?;
         let run = &scene.run;
-        if run.end_time_s <= w.after_s
-            || run.free_flight_after_s.is_some_and(|t| t <= w.after_s)
+        if !w.any()
+            || run.end_time_s <= after_s
+            || run.free_flight_after_s.is_some_and(|t| t <= after_s)
             || run.screen_after_s.is_some()
         {
             return None;
         }
         let mut scene = scene.clone();
-        scene.run.screen_after_s = Some(w.after_s);
+        scene.run.screen_after_s = Some(after_s);
         scene.run.screen_length_ratio = w.length_ratio;
         scene.run.screen_front_velocity_ratio = w.front_velocity_ratio;
         Some(scene)
     }
 
     /// The run of `job` (shot `shot`'s) as the calibration makes it: the job as it is when
-    /// the store holds it finished or it is not screened (no window, or the screen past its end or free flight); else the job
-    /// with the screen's keys (a run of its own in the store).
+    /// the store holds it finished or it is not screened (no window, or the screen at or after
+    /// its end or its free flight); else the job with the screen's keys (a run of its own in
+    /// the store).
     pub fn apply(&self, shot: usize, job: Job, store: &Store) -> Result<Job> {
         let Some(scene) = self.screened(shot, &job.scene) else {
             return Ok(job);
         };
-        if stored(Some(store), &job.fingerprint) {
+        if store.holds_finished(&job.fingerprint) {
             return Ok(job);
         }
         Ok(Job {
@@ -123,7 +135,7 @@ impl Screen {
             let Some(scene) = self.screened(shot, &run.scene) else {
                 continue;
             };
-            if stored(store, &run.fingerprint) {
+            if store.is_some_and(|s| s.holds_finished(&run.fingerprint)) {
                 continue;
             }
             let r = &scene.run;
@@ -145,19 +157,13 @@ impl Screen {
     }
 }
 
-/// Whether `store` holds the run `fingerprint` finished (a damaged record counts as not: it
-/// runs again).
-fn stored(store: Option<&Store>, fingerprint: &str) -> bool {
-    store.is_some_and(|s| matches!(s.record(fingerprint), Ok(Some(r)) if r.is_final()))
-}
-
 /// A shot's transit time D/v0 as simulated, s: the time the impactor takes to travel its own
 /// diameter, the scale the cloud's forming scales with at one material and t/D.
 pub fn transit_s(targets: &Targets) -> f64 {
     targets.shot.impactor_diameter_m / targets.shot.simulated_v0_m_s()
 }
 
-/// One shot's windows (its time left at 0): on each observable the screen reads, the intersection of the windows
+/// One shot's windows: on each observable the screen reads, the intersection of the windows
 /// of the shot's targets on it (none when they leave nothing, or without such a target).
 /// `shots` is the number of shots J is the mean over.
 pub fn windows_of(targets: &Targets, shots: usize, above: f64, allowance: f64) -> Windows {
@@ -180,7 +186,6 @@ pub fn windows_of(targets: &Targets, shots: usize, above: f64, allowance: f64) -
         window.filter(|[lo, hi]| lo < hi)
     };
     Windows {
-        after_s: 0.0,
         length_ratio: on(Observable::LengthRatio),
         front_velocity_ratio: on(Observable::FrontVelocityRatio),
     }
@@ -280,11 +285,14 @@ mod tests {
             serde_json::from_value(serde_json::json!({ "screen_after_transits": 4.0 }))
                 .expect("in the test");
         let screen = Screen::of(&cfg, &[fast, slow]);
-        let times: Vec<f64> = screen.windows.iter().map(|w| w.after_s).collect();
+        let times: Vec<f64> = screen.shots.iter().map(|s| s.after_s).collect();
         // 4 x 10 mm / 6500 m/s, and 4 x 20 mm / 3250 m/s: four times as long.
         assert!((times[0] - 4.0 * 0.01 / 6500.0).abs() < 1e-18, "{times:?}");
         assert!((times[1] - 4.0 * times[0]).abs() < 1e-18, "{times:?}");
-        assert!(screen.windows.iter().all(|w| w.length_ratio.is_some()));
+        assert!(screen
+            .shots
+            .iter()
+            .all(|s| s.windows.length_ratio.is_some()));
     }
 
     /// A window never screens a run that meets its target: below a threshold of one term,

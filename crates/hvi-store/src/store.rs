@@ -430,6 +430,12 @@ impl Store {
         Ok(v)
     }
 
+    /// Whether the store holds the run `fingerprint` finished; a record it cannot read (a
+    /// damaged one, in a store opened read-only) counts as not: the run repairs and re-runs it.
+    pub fn holds_finished(&self, fingerprint: &str) -> bool {
+        matches!(self.record(fingerprint), Ok(Some(r)) if r.is_final())
+    }
+
     /// The record of a finished run, if there is one. A damaged run (a directory without
     /// `record.json`, a record that does not parse, or one whose checksum does not match its
     /// content) is moved aside to `runs/damaged-<digits>-<time>-<pid>` (kept for inspection,
