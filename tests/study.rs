@@ -2367,7 +2367,7 @@ fn screened_column(out: &Path) -> Vec<String> {
 
 /// The screen (docs/calibration.md, "The screen"): by default every run the calibration makes
 /// carries a window on R, the target's tolerance widened by 4 % of its value, and goes on in
-/// free flight from 5.6 transit times D/v0 (8 us) exactly when what free flight gives lies
+/// free flight from 5.65 transit times D/v0 (8 us) exactly when what free flight gives lies
 /// outside it; the answer's runs are full. Runs the store holds without a screen (a sweep's)
 /// are taken as they are, `--no-refine` runs the grid in full, and `screen = false` runs
 /// everything in full.
@@ -2381,8 +2381,9 @@ fn calibrate_screens_the_runs_far_from_the_targets_and_reuses_full_ones() {
     assert!(stderr(&o).contains("screen (shot 1)"), "{}", stderr(&o));
     // The target: R = 1.2 within 0.1, one target, so the window is 1.2 -+ (0.1 + 0.048).
     let (lo, hi) = (1.2 - 0.148, 1.2 + 0.148);
-    // At 5.6 transit times D/v0 of the shot (9.53 mm at 6700 m/s).
-    let after = 5.6 * 9.53e-3 / 6700.0;
+    // At the later of 5.6 transit times D/v0 of the shot (9.53 mm at 6700 m/s) and 13.3 of
+    // its plate (t/D = 0.425): the plate's, 5.65 D/v0.
+    let after = (5.6f64).max(13.3 * 0.425) * 9.53e-3 / 6700.0;
     let (mut far, mut near) = (0, 0);
     for s in summaries(&out) {
         let t = s["scene"]["run"]["screen_after_s"]

@@ -62,6 +62,10 @@ fn default_screen_after_transits() -> f64 {
     5.6
 }
 
+fn default_screen_after_plate_transits() -> f64 {
+    13.3
+}
+
 fn default_screen_above() -> f64 {
     0.25
 }
@@ -198,10 +202,16 @@ pub struct CalibrateConfig {
     /// full.
     #[serde(default = "default_true")]
     pub screen: bool,
-    /// The screen's time after first contact in transit times D/v0 of each shot (5.6: 8 us at
-    /// the calibration shot, 9.53 mm at 6.7 km/s).
+    /// The screen's time after first contact in transit times D/v0 of each shot (5.6: 7.97 us
+    /// at the calibration shot, 9.53 mm at 6.7 km/s), or [`Self::screen_after_plate_transits`]
+    /// if later.
     #[serde(default = "default_screen_after_transits")]
     pub screen_after_transits: f64,
+    /// The screen's time after first contact in the plate's transit times t/v0 of each shot,
+    /// when later than [`Self::screen_after_transits`] (13.3: 8 D/v0 at t/D = 0.6, where the
+    /// debris front still slows after 5.6 D/v0; 0: the impactor's transits alone).
+    #[serde(default = "default_screen_after_plate_transits")]
+    pub screen_after_plate_transits: f64,
     /// The objective a run's screened term alone must put J above (never below the term of
     /// a missed target, 1).
     #[serde(default = "default_screen_above")]
@@ -300,6 +310,16 @@ impl CalibrateConfig {
                 "study key `calibrate.screen_after_transits`: {} (allowed: a number of transit \
                  times D/v0 after first contact > 0; a run that ends before it is not screened)",
                 self.screen_after_transits
+            );
+        }
+        if !(self.screen_after_plate_transits.is_finite()
+            && self.screen_after_plate_transits >= 0.0)
+        {
+            bail!(
+                "study key `calibrate.screen_after_plate_transits`: {} (allowed: a number of the \
+                 plate's transit times t/v0 after first contact >= 0; 0 leaves the time to \
+                 `screen_after_transits`)",
+                self.screen_after_plate_transits
             );
         }
         if !(self.screen_above.is_finite() && self.screen_above > 0.0) {

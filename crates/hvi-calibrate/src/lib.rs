@@ -424,10 +424,11 @@ fn announce_screen(screen: &screen::Screen) {
         .collect();
         if !parts.is_empty() {
             log::info!(
-                "screen (shot {}): a run whose free flight from tau = {:.2} us ({} transit times D/v0) gives R or va/v0 outside {} goes on in free flight (calibrate.screen)",
+                "screen (shot {}): a run whose free flight from tau = {:.2} us (the later of {} transit times D/v0 and {} of the plate, t/v0) gives R or va/v0 outside {} goes on in free flight (calibrate.screen)",
                 shot + 1,
                 s.after_s * 1e6,
                 screen.transits,
+                screen.plate_transits,
                 parts.join(", ")
             );
         }

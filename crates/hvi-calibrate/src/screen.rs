@@ -3,11 +3,12 @@
 //! needs to be known as far from the targets, not computed to the end.
 //!
 //! Each run the calibration makes carries the scene keys of `hvi_run::screen`: at
-//! `calibrate.screen_after_transits` times its shot's transit time D/v0 after first contact
-//! it measures what free flight from then gives at the analysis time, and outside the windows
-//! set here it goes on in free flight. The windows come from the shot's targets on
-//! `length_ratio` and `front_velocity_ratio` (the two observables free flight from 8 us moves
-//! by at most 3.4 % on the calibration scene at 1e5 and 2.7e5 particles,
+//! `calibrate.screen_after_transits` times its shot's transit time D/v0 after first contact,
+//! or `calibrate.screen_after_plate_transits` times the plate's t/v0 if later (a thick plate's
+//! debris front slows for longer), it measures what free flight from then gives at the
+//! analysis time, and outside the windows set here it goes on in free flight. The windows
+//! come from the shot's targets on `length_ratio` and `front_velocity_ratio` (the two
+//! observables free flight from that time moved by at most 3.7 % over the shots measured,
 //! docs/model-decisions.md): outside a window that one term exceeds the larger of 1 (the
 //! target is missed) and the term that alone makes J = `screen_above`, with every window
 //! widened by `screen_allowance` of the target's value for what free flight moves them. A
@@ -41,8 +42,9 @@ impl Windows {
 /// The screen of one shot's runs: when it looks and its windows.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ShotScreen {
-    /// Time after first contact at which the shot's runs are screened, s
-    /// (`calibrate.screen_after_transits` times the shot's [`transit_s`]).
+    /// Time after first contact at which the shot's runs are screened, s: the later of
+    /// `calibrate.screen_after_transits` times the shot's [`transit_s`] and
+    /// `calibrate.screen_after_plate_transits` times its [`plate_transit_s`].
     pub after_s: f64,
     /// Its windows.
     pub windows: Windows,
@@ -53,6 +55,9 @@ pub struct ShotScreen {
 pub struct Screen {
     /// The time, in transit times D/v0 (`calibrate.screen_after_transits`).
     pub transits: f64,
+    /// The time, in the plate's transit times t/v0 when later
+    /// (`calibrate.screen_after_plate_transits`).
+    pub plate_transits: f64,
     /// Per shot, in the calibration's order.
     pub shots: Vec<ShotScreen>,
 }
@@ -72,10 +77,12 @@ impl Screen {
         let shots = targets.len();
         Screen {
             transits: cfg.screen_after_transits,
+            plate_transits: cfg.screen_after_plate_transits,
             shots: targets
                 .iter()
                 .map(|t| ShotScreen {
-                    after_s: cfg.screen_after_transits * transit_s(t),
+                    after_s: (cfg.screen_after_transits * transit_s(t))
+                        .max(cfg.screen_after_plate_transits * plate_transit_s(t)),
                     windows: windows_of(t, shots, cfg.screen_above, cfg.screen_allowance),
                 })
                 .collect(),
@@ -158,9 +165,16 @@ impl Screen {
 }
 
 /// A shot's transit time D/v0 as simulated, s: the time the impactor takes to travel its own
-/// diameter, the scale the cloud's forming scales with at one material and t/D.
+/// diameter, the scale the cloud forms on.
 pub fn transit_s(targets: &Targets) -> f64 {
     targets.shot.impactor_diameter_m / targets.shot.simulated_v0_m_s()
+}
+
+/// A shot's plate transit time t/v0 as simulated, s: the time the impactor takes to travel
+/// the plate's thickness. Behind a thick plate the debris front goes on slowing after the
+/// impactor's transits have made the cloud (docs/model-decisions.md).
+pub fn plate_transit_s(targets: &Targets) -> f64 {
+    targets.shot.simulated_t_over_d() * transit_s(targets)
 }
 
 /// One shot's windows: on each observable the screen reads, the intersection of the windows
@@ -281,9 +295,11 @@ mod tests {
         let mut slow = shot(vec![r]);
         slow.shot.v0_m_s = 3250.0;
         slow.shot.impactor_diameter_m = 0.02;
-        let cfg: CalibrateConfig =
-            serde_json::from_value(serde_json::json!({ "screen_after_transits": 4.0 }))
-                .expect("in the test");
+        let cfg: CalibrateConfig = serde_json::from_value(serde_json::json!({
+            "screen_after_transits": 4.0,
+            "screen_after_plate_transits": 0.0
+        }))
+        .expect("in the test");
         let screen = Screen::of(&cfg, &[fast, slow]);
         let times: Vec<f64> = screen.shots.iter().map(|s| s.after_s).collect();
         // 4 x 10 mm / 6500 m/s, and 4 x 20 mm / 3250 m/s: four times as long.
@@ -293,6 +309,25 @@ mod tests {
             .shots
             .iter()
             .all(|s| s.windows.length_ratio.is_some()));
+    }
+
+    /// Behind a thick plate the screen waits for the plate's transits when they come later:
+    /// at the defaults a plate of t/D = 0.2 is screened at 5.6 D/v0, one of 0.6 at 13.3 t/v0
+    /// (7.98 D/v0), and the calibration shot's 0.425 at 13.3 x 0.425 = 5.65 D/v0.
+    #[test]
+    fn a_thick_plate_is_screened_at_its_plate_transits() {
+        let r = target("r", Observable::LengthRatio, TargetKind::Value, 1.55, 0.1);
+        let at = |t_over_d: f64| {
+            let mut s = shot(vec![r.clone()]);
+            s.shot.t_over_d = t_over_d;
+            let cfg: CalibrateConfig =
+                serde_json::from_value(serde_json::json!({})).expect("in the test");
+            Screen::of(&cfg, &[s]).shots[0].after_s / (0.01 / 6500.0)
+        };
+        for (t_over_d, transits) in [(0.2, 5.6), (0.425, 13.3 * 0.425), (0.6, 13.3 * 0.6)] {
+            let got = at(t_over_d);
+            assert!((got - transits).abs() < 1e-9, "t/D {t_over_d}: {got} D/v0");
+        }
     }
 
     /// A window never screens a run that meets its target: below a threshold of one term,
