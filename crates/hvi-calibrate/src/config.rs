@@ -203,8 +203,8 @@ pub struct CalibrateConfig {
     #[serde(default = "default_true")]
     pub screen: bool,
     /// The screen's time after first contact in transit times D/v0 of each shot (5.6: 7.97 us
-    /// at the calibration shot, 9.53 mm at 6.7 km/s), or [`Self::screen_after_plate_transits`]
-    /// if later.
+    /// for 9.53 mm at 6.7 km/s), or [`Self::screen_after_plate_transits`] if later (for the
+    /// calibration shot, t/D = 0.425: 8.04 us).
     #[serde(default = "default_screen_after_transits")]
     pub screen_after_transits: f64,
     /// The screen's time after first contact in the plate's transit times t/v0 of each shot,
