@@ -22,9 +22,19 @@ use hvi_studies::reanalyse::ReanalyseOptions;
 use hvi_studies::stability::StabilityOptions;
 use hvi_studies::validity::ValidityOptions;
 
-/// Hypervelocity impact with the discrete element method (Watson & Steinhauser 2017).
+/// Hypervelocity impact of a sphere on a plate with the discrete element method of Watson &
+/// Steinhauser (Materials 2017): one scene, or studies of many (sweeps, calibration against
+/// experiments, validity and stability maps, the paper's figures), on this machine or on Slurm.
 #[derive(Parser, Debug)]
-#[command(name = "hvi-study", version, about, long_about = None)]
+#[command(
+    name = "hvi-study",
+    version,
+    long_about = None,
+    after_help = "Start with `hvi-study run studies/scenes/default.toml --out runs/default` (one \
+                  impact, under a minute) or `hvi-study calibrate studies/calibration.toml` (the \
+                  paper's calibration at the quick tier). `hvi-study keys` lists every scene key; \
+                  docs/running.md and docs/studies.md explain the rest."
+)]
 pub struct Cli {
     /// The subcommand.
     #[command(subcommand)]
