@@ -66,6 +66,10 @@ fn default_screen_after_plate_transits() -> f64 {
     13.3
 }
 
+fn default_screen_max_t_over_d() -> f64 {
+    0.6
+}
+
 fn default_screen_above() -> f64 {
     0.25
 }
@@ -212,6 +216,12 @@ pub struct CalibrateConfig {
     /// debris front still slows after 5.6 D/v0; 0: the impactor's transits alone).
     #[serde(default = "default_screen_after_plate_transits")]
     pub screen_after_plate_transits: f64,
+    /// The thickest plate, t/D as simulated, whose shot's runs are screened (0.6, the thickest
+    /// where free flight from the screen's time was measured within `screen_allowance`; at
+    /// t/D = 1.0 it moved va/v0 by up to 8.7 %); a thicker plate's runs go in full. `inf`
+    /// screens every plate.
+    #[serde(default = "default_screen_max_t_over_d")]
+    pub screen_max_t_over_d: f64,
     /// The objective a run's screened term alone must put J above (never below the term of
     /// a missed target, 1).
     #[serde(default = "default_screen_above")]
@@ -320,6 +330,13 @@ impl CalibrateConfig {
                  plate's transit times t/v0 after first contact >= 0; 0 leaves the time to \
                  `screen_after_transits`)",
                 self.screen_after_plate_transits
+            );
+        }
+        if self.screen_max_t_over_d.is_nan() || self.screen_max_t_over_d <= 0.0 {
+            bail!(
+                "study key `calibrate.screen_max_t_over_d`: {} (allowed: a plate thickness t/D \
+                 > 0, or inf; a shot's plate thicker than it is not screened)",
+                self.screen_max_t_over_d
             );
         }
         if !(self.screen_above.is_finite() && self.screen_above > 0.0) {
@@ -440,5 +457,39 @@ impl CalibrateConfig {
             );
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with_max_t_over_d(v: f64) -> CalibrateConfig {
+        let mut cfg: CalibrateConfig =
+            serde_json::from_value(serde_json::json!({})).expect("the defaults");
+        cfg.screen_max_t_over_d = v;
+        cfg
+    }
+
+    /// `calibrate.screen_max_t_over_d` is a thickness above zero, or inf; anything else is
+    /// refused naming the key and what it allows.
+    #[test]
+    fn the_thickest_screened_plate_must_be_a_thickness_above_zero() {
+        for ok in [0.6, 2.0, f64::INFINITY] {
+            assert!(with_max_t_over_d(ok).check_screen().is_ok(), "{ok} refused");
+        }
+        for bad in [0.0, -0.5, f64::NAN] {
+            let err = with_max_t_over_d(bad)
+                .check_screen()
+                .expect_err("refused")
+                .to_string();
+            assert!(
+                err.contains("calibrate.screen_max_t_over_d") && err.contains("allowed: a plate"),
+                "{bad}: {err}"
+            );
+        }
+        let defaults: CalibrateConfig =
+            serde_json::from_value(serde_json::json!({})).expect("the defaults");
+        assert_eq!(defaults.screen_max_t_over_d, 0.6);
     }
 }

@@ -6,7 +6,8 @@
 //! `calibrate.screen_after_transits` times its shot's transit time D/v0 after first contact,
 //! or `calibrate.screen_after_plate_transits` times the plate's t/v0 if later (a thick plate's
 //! debris front slows for longer), it measures what free flight from then gives at the
-//! analysis time, and outside the windows set here it goes on in free flight. The windows
+//! analysis time, and outside the windows set here it goes on in free flight. A shot whose
+//! plate is thicker than `calibrate.screen_max_t_over_d` is not screened. The windows
 //! come from the shot's targets on `length_ratio` and `front_velocity_ratio` (the two
 //! observables free flight from that time moved by at most 3.7 % over the shots measured,
 //! docs/model-decisions.md): outside a window that one term exceeds the larger of 1 (the
@@ -46,8 +47,13 @@ pub struct ShotScreen {
     /// `calibrate.screen_after_transits` times the shot's [`transit_s`] and
     /// `calibrate.screen_after_plate_transits` times its [`plate_transit_s`].
     pub after_s: f64,
-    /// Its windows.
+    /// Its windows (none when its plate is too thick).
     pub windows: Windows,
+    /// Its plate's t/D as simulated.
+    pub t_over_d: f64,
+    /// Whether that plate is thicker than `calibrate.screen_max_t_over_d`: its runs then go
+    /// in full.
+    pub too_thick: bool,
 }
 
 /// The screen of a calibration: each shot's time and windows (none: off).
@@ -58,6 +64,8 @@ pub struct Screen {
     /// The time, in the plate's transit times t/v0 when later
     /// (`calibrate.screen_after_plate_transits`).
     pub plate_transits: f64,
+    /// The thickest plate screened, t/D (`calibrate.screen_max_t_over_d`).
+    pub max_t_over_d: f64,
     /// Per shot, in the calibration's order.
     pub shots: Vec<ShotScreen>,
 }
@@ -78,12 +86,23 @@ impl Screen {
         Screen {
             transits: cfg.screen_after_transits,
             plate_transits: cfg.screen_after_plate_transits,
+            max_t_over_d: cfg.screen_max_t_over_d,
             shots: targets
                 .iter()
-                .map(|t| ShotScreen {
-                    after_s: (cfg.screen_after_transits * transit_s(t))
-                        .max(cfg.screen_after_plate_transits * plate_transit_s(t)),
-                    windows: windows_of(t, shots, cfg.screen_above, cfg.screen_allowance),
+                .map(|t| {
+                    let t_over_d = t.shot.simulated_t_over_d();
+                    let too_thick = t_over_d > cfg.screen_max_t_over_d;
+                    ShotScreen {
+                        after_s: (cfg.screen_after_transits * transit_s(t))
+                            .max(cfg.screen_after_plate_transits * plate_transit_s(t)),
+                        windows: if too_thick {
+                            Windows::default()
+                        } else {
+                            windows_of(t, shots, cfg.screen_above, cfg.screen_allowance)
+                        },
+                        t_over_d,
+                        too_thick,
+                    }
                 })
                 .collect(),
         }
@@ -100,6 +119,7 @@ impl Screen {
         let ShotScreen {
             after_s,
             windows: w,
+            ..
         } = *self.shots.get(shot)?;
         let run = &scene.run;
         if !w.any()
@@ -328,6 +348,26 @@ mod tests {
             let got = at(t_over_d);
             assert!((got - transits).abs() < 1e-9, "t/D {t_over_d}: {got} D/v0");
         }
+    }
+
+    /// A plate thicker than `calibrate.screen_max_t_over_d` (0.6 by default) gets no window,
+    /// so its runs go in full; at the limit it is screened, and `inf` screens every plate.
+    #[test]
+    fn a_plate_thicker_than_the_limit_is_not_screened() {
+        let r = target("r", Observable::LengthRatio, TargetKind::Value, 1.55, 0.1);
+        let screen = |t_over_d: f64, cfg: serde_json::Value| {
+            let mut s = shot(vec![r.clone()]);
+            s.shot.t_over_d = t_over_d;
+            let cfg: CalibrateConfig = serde_json::from_value(cfg).expect("in the test");
+            Screen::of(&cfg, &[s])
+        };
+        let at_limit = screen(0.6, serde_json::json!({}));
+        assert!(at_limit.is_on() && !at_limit.shots[0].too_thick);
+        let thick = screen(1.0, serde_json::json!({}));
+        assert!(!thick.is_on() && thick.shots[0].too_thick, "{thick:?}");
+        assert_eq!(thick.shots[0].windows, Windows::default());
+        let unlimited = screen(1.0, serde_json::json!({ "screen_max_t_over_d": f64::MAX }));
+        assert!(unlimited.is_on() && !unlimited.shots[0].too_thick);
     }
 
     /// A window never screens a run that meets its target: below a threshold of one term,
