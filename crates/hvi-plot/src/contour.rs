@@ -753,7 +753,7 @@ pub fn contour_plot(stem: &Path, p: &ContourPlot) -> Result<()> {
     let (w, h) = (1150u32, 860u32);
     let mut rgb = vec![255u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let root = crate::theme::png_area(&mut rgb, (w, h));
         draw(&root, p, MAX_TILES_PNG)?;
     }
     // The extension is appended, not substituted: a stem may hold dots (`quantile-0.9_R`).

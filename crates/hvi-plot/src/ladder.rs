@@ -55,8 +55,8 @@ const RED: RGBColor = RGBColor(200, 30, 30);
 const GREY: RGBColor = RGBColor(120, 120, 120);
 const GREEN: RGBColor = RGBColor(40, 160, 80);
 
-type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<KeyedAxis, KeyedAxis>>;
-type Area<'b> = DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>;
+type Chart<'a, 'b> = ChartContext<'a, crate::theme::Png<'b>, Cartesian2d<KeyedAxis, KeyedAxis>>;
+type Area<'b> = DrawingArea<crate::theme::Png<'b>, plotters::coord::Shift>;
 
 /// A range around `vals` (already in plot coordinates), widened by a tenth each way (a unit
 /// around a single value).
@@ -103,7 +103,7 @@ fn coord(v: f64, log: bool) -> f64 {
 }
 
 fn axes<'a, 'b>(
-    area: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    area: &'a DrawingArea<crate::theme::Png<'b>, plotters::coord::Shift>,
     caption: &str,
     x: (f64, f64),
     y: (f64, f64),
@@ -141,7 +141,7 @@ pub fn ladder_plot(path: &Path, plot: &LadderPlot) -> Result<()> {
     let (w, h) = (560 * n_panels as u32, 680u32);
     let mut rgb = vec![255u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let root = crate::theme::png_area(&mut rgb, (w, h));
         root.fill(&WHITE)?;
         let (top, body) = root.split_vertically(110);
         header(&top, plot, w)?;

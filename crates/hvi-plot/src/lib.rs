@@ -28,6 +28,7 @@
 
 pub mod contour;
 pub mod error;
+mod glyphs;
 pub mod ladder;
 pub mod paper;
 pub mod pareto;

@@ -34,12 +34,12 @@ const SERIES: [RGBColor; 4] = [
 fn png(
     path: &Path,
     (w, h): (u32, u32),
-    draw: impl FnOnce(&DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<()>,
+    draw: impl FnOnce(&DrawingArea<crate::theme::Png, plotters::coord::Shift>) -> Result<()>,
 ) -> Result<()> {
     fonts()?;
     let mut rgb = vec![255u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let root = crate::theme::png_area(&mut rgb, (w, h));
         root.fill(&WHITE)?;
         draw(&root)?;
         root.present()?;
@@ -416,8 +416,11 @@ fn log_label_125(v: f64) -> String {
 }
 
 /// Fig. 5's chart: particle count on a log axis ticked at 1, 2 and 5 per decade, F linear.
-type CountChart<'a, 'b> =
-    ChartContext<'b, BitMapBackend<'a>, Cartesian2d<WithKeyPoints<LogCoord<f64>>, RangedCoordf64>>;
+type CountChart<'a, 'b> = ChartContext<
+    'b,
+    crate::theme::Png<'a>,
+    Cartesian2d<WithKeyPoints<LogCoord<f64>>, RangedCoordf64>,
+>;
 
 /// Fig. 5: F against the particle count (log axis), the tier's convergence count (where F
 /// changes by less than the tolerance from then on) and the paper's.

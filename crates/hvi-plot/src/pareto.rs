@@ -61,7 +61,7 @@ pub struct ParetoPlot<'a> {
 }
 
 type Chart<'a, 'b> =
-    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+    ChartContext<'a, crate::theme::Png<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// The axes of both panels, in log10 of wall time (s) and of relative error.
 struct Axes {
@@ -98,7 +98,7 @@ pub fn pareto_plot(path: &Path, plot: &ParetoPlot) -> Result<()> {
     let mut rgb = vec![255u8; (w * h * 3) as usize];
     let axes = Axes::of(plot.points)?;
     {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let root = crate::theme::png_area(&mut rgb, (w, h));
         let (left, right) = root.split_horizontally(w / 2);
         let caption = format!("largest error in {} against wall time", plot.headline);
         let mut chart = panel(&left, &caption, &axes, plot.tolerance)?;
@@ -114,7 +114,7 @@ pub fn pareto_plot(path: &Path, plot: &ParetoPlot) -> Result<()> {
 
 /// One panel's frame: caption, axes and the tolerance line.
 fn panel<'a, 'b>(
-    area: &'a DrawingArea<BitMapBackend<'b>, Shift>,
+    area: &'a DrawingArea<crate::theme::Png<'b>, Shift>,
     caption: &str,
     axes: &Axes,
     tolerance: f64,

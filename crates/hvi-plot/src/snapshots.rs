@@ -176,7 +176,7 @@ pub fn snapshot_matrix(path: &Path, text: MatrixText<'_>, tiles: &[Tile]) -> Res
         }
     }
     {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w as u32, h as u32)).into_drawing_area();
+        let root = crate::theme::png_area(&mut rgb, (w as u32, h as u32));
         root.draw(&Text::new(text.title.to_string(), (20, 18), font(28)))?;
         headers(&root, &layout, text)?;
         for t in tiles {

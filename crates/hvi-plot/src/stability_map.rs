@@ -41,7 +41,7 @@ pub struct StabilityMap<'a> {
 }
 
 type Chart<'a, 'b> =
-    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+    ChartContext<'a, crate::theme::Png<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// Writes the map as PNG (1300 x 900).
 pub fn stability_map(path: &Path, map: &StabilityMap) -> Result<()> {
@@ -49,7 +49,7 @@ pub fn stability_map(path: &Path, map: &StabilityMap) -> Result<()> {
     let (w, h) = (1300u32, 900u32);
     let mut rgb = vec![255u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let root = crate::theme::png_area(&mut rgb, (w, h));
         let (nx, ny) = (map.x.1.len(), map.y.1.len());
         let mut chart = ChartBuilder::on(&root)
             .caption(map.title, (FAMILY, 22))

@@ -5,6 +5,8 @@
 use std::sync::OnceLock;
 
 use crate::error::{PlotError, Result};
+use crate::glyphs::Glyphs;
+use ab_glyph::FontRef;
 use plotters::chart::{ChartContext, MeshStyle, SecondaryMeshStyle, SeriesLabelPosition};
 use plotters::coord::ranged1d::Ranged;
 use plotters::coord::{CoordTranslate, Shift};
@@ -15,7 +17,7 @@ use plotters::prelude::{
 use plotters::style::{Color, RGBColor, ShapeStyle, TextStyle, BLACK, WHITE};
 
 /// DejaVu Sans (Bitstream Vera licence, see `assets/fonts/LICENSE-DejaVu.txt`).
-const FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
+pub(crate) const FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
 /// The font family every picture uses (DejaVu Sans, embedded).
 pub const FAMILY: &str = "sans-serif";
 
@@ -56,12 +58,30 @@ pub(crate) const GRID: RGBColor = RGBColor(235, 235, 235);
 /// Subtitles and notes under a figure.
 const SUBTITLE: RGBColor = RGBColor(60, 60, 60);
 
-/// A drawing area of a bitmap.
-pub(crate) type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+/// A drawing area of a bitmap, its text drawn by [`Glyphs`].
+pub(crate) type Area<'a> = DrawingArea<Png<'a>, Shift>;
+
+/// The bitmap backend of every PNG, its text drawn by [`Glyphs`].
+pub(crate) type Png<'a> = Glyphs<'static, BitMapBackend<'a>>;
+
+/// The embedded font as the glyph drawing of bitmaps reads it.
+fn font_ref() -> &'static FontRef<'static> {
+    static FONT_REF: OnceLock<FontRef<'static>> = OnceLock::new();
+    FONT_REF.get_or_init(|| FontRef::try_from_slice(FONT).expect("the embedded font parses"))
+}
+
+/// The drawing area of an RGB buffer of `size` pixels, its text drawn glyph by glyph where
+/// the font puts each ([`Glyphs`]).
+pub(crate) fn png_area(rgb: &mut [u8], size: (u32, u32)) -> Area<'_> {
+    DrawingArea::from(Glyphs::new(
+        BitMapBackend::with_buffer(rgb, size),
+        font_ref(),
+    ))
+}
 /// A linear chart on a bitmap.
 pub(crate) type Chart2d<'a, 'b> = ChartContext<
     'b,
-    BitMapBackend<'a>,
+    Png<'a>,
     Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
 >;
 

@@ -80,7 +80,7 @@ fn key_points(lo: f64, hi: f64) -> Vec<f64> {
 /// the number of fragments, log (right).
 type HistogramChart<'a, 'b> = DualCoordChartContext<
     'b,
-    BitMapBackend<'a>,
+    crate::theme::Png<'a>,
     Cartesian2d<WithKeyPoints<LogCoord<f64>>, RangedCoordf64>,
     Cartesian2d<LogCoord<f64>, LogCoord<f64>>,
 >;
@@ -98,7 +98,7 @@ pub fn fragment_histogram(
     let mut rgb = vec![255u8; (w * h * 3) as usize];
     let bins = diameter_bins(fragments, 8);
     {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let root = crate::theme::png_area(&mut rgb, (w, h));
         let title = format!(
             "Fragment sizes in the debris cloud at \u{3c4} = {:.1} \u{b5}s \u{2014} {}",
             cloud.tau_s * 1e6,
@@ -246,7 +246,7 @@ fn fragment_numbers(cloud: &CloudMeasurement) -> [String; 3] {
 /// against tau (us).
 type TrackChart<'a, 'b> = DualCoordChartContext<
     'b,
-    BitMapBackend<'a>,
+    crate::theme::Png<'a>,
     Cartesian2d<RangedCoordf64, RangedCoordf64>,
     Cartesian2d<RangedCoordf64, RangedCoordf64>,
 >;
@@ -267,7 +267,7 @@ pub fn track_plot(
     let (w, h) = (1400u32, 850u32);
     let mut rgb = vec![255u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let root = crate::theme::png_area(&mut rgb, (w, h));
         let us = 1e6;
         let t_hi = track.iter().map(|r| r.tau_s * us).fold(1e-3, f64::max);
         let t_lo = track.iter().map(|r| r.tau_s * us).fold(0.0, f64::min);

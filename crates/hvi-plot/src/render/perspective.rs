@@ -158,7 +158,7 @@ pub fn series(path: &Path, frames: &[Frame], info: &SceneInfo) -> Result<()> {
     let views = View::common(frames, (pw, ph), title_h, info);
     // Pass 1: title, the original plate as a grey box (behind everything).
     {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let root = crate::theme::png_area(&mut rgb, (w, h));
         root.draw_text(
             &format!("Impact in perspective \u{2014} {}", info.caption()),
             &text_style(28.0).pos(Pos::new(HPos::Center, VPos::Center)),
@@ -175,7 +175,7 @@ pub fn series(path: &Path, frames: &[Frame], info: &SceneInfo) -> Result<()> {
     }
     // Pass 3: panel frames, time stamps, scale bars, impact-direction arrows, legend.
     {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let root = crate::theme::png_area(&mut rgb, (w, h));
         for (f, v) in frames.iter().zip(&views) {
             view_marks(&root, f, v)?;
             impact_arrow(&root, v)?;

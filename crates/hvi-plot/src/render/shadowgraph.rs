@@ -137,7 +137,7 @@ fn axes(
     info: &SceneInfo,
     tau_s: f64,
 ) -> Result<ShadowFrame> {
-    let root = BitMapBackend::with_buffer(rgb, (W, h)).into_drawing_area();
+    let root = crate::theme::png_area(rgb, (W, h));
     root.draw_text(
         &format!(
             "Synthetic shadowgraph at \u{3c4} = {:.1} \u{b5}s \u{2014} {}",
@@ -198,7 +198,7 @@ fn overlays(
     f: &ShadowFrame,
     bulk_va_ratio: Option<f64>,
 ) -> Result<()> {
-    let root = BitMapBackend::with_buffer(rgb, (W, h)).into_drawing_area();
+    let root = crate::theme::png_area(rgb, (W, h));
     let area = band(&root, h);
     let c = chart(&area, f.z_mm.clone(), f.x_mm.clone())?;
     let plot = c.plotting_area();

@@ -160,7 +160,7 @@ fn side_axes(
     title: &str,
     captions: &[String; 2],
 ) -> Result<Vec<SidePanel>> {
-    let root = BitMapBackend::with_buffer(rgb, (layout.w, layout.h)).into_drawing_area();
+    let root = crate::theme::png_area(rgb, (layout.w, layout.h));
     root.draw_text(
         title,
         &text_style(28.0).pos(Pos::new(HPos::Center, VPos::Center)),
@@ -241,7 +241,7 @@ fn side_overlays(
     info: &SceneInfo,
     cloud: Option<&CloudMeasurement>,
 ) -> Result<()> {
-    let root = BitMapBackend::with_buffer(rgb, (layout.w, layout.h)).into_drawing_area();
+    let root = crate::theme::png_area(rgb, (layout.w, layout.h));
     for (k, (area, caption)) in layout.panels(&root).iter().zip(captions).enumerate() {
         let SidePanel {
             rect,
