@@ -2142,6 +2142,66 @@ fn a_calibration_whose_scene_disagrees_with_its_shot_is_refused_naming_both_valu
     );
 }
 
+/// Behind a plate thicker than `calibrate.screen_max_t_over_d` (0.6) free flight from the
+/// screen's time was measured to move va/v0 beyond the allowance: such a shot's runs go in
+/// full, and the console says why even when it is the calibration's only shot.
+#[test]
+fn a_shot_behind_a_thick_plate_is_not_screened_and_the_console_says_so() {
+    let dir = scratch("thick-shot");
+    let synthetic =
+        std::fs::read_to_string(repo().join("experiments_data/examples/synthetic-al-5kms.toml"))
+            .expect("the synthetic shot");
+    let thick = synthetic
+        .replace("t_over_d = 0.2", "t_over_d = 1.0")
+        .replace("id = \"synthetic-al-5kms\"", "id = \"synthetic-thick\"");
+    assert_ne!(thick, synthetic, "the shot file changed");
+    let shot = dir.join("thick.toml");
+    std::fs::write(&shot, thick).expect("shot");
+    let study = shots_study(&dir, "studies/scenes/shot.toml", &[shot], "");
+    let out = dir.join("out");
+    let o = calibrate(&study, &out);
+    assert_ok(&o);
+    let e = stderr(&o);
+    assert!(
+        e.contains("screen (shot 1): off, its plate (t/D = ")
+            && e.contains("is thicker than calibrate.screen_max_t_over_d = 0.6"),
+        "{e}"
+    );
+    let table = std::fs::read_to_string(out.join("evaluations.csv")).expect("evaluations.csv");
+    let mut lines = table.lines();
+    let col = lines
+        .next()
+        .expect("header")
+        .split(',')
+        .position(|h| h == "screened")
+        .expect("a screened column");
+    let rows: Vec<&str> = lines.collect();
+    assert!(!rows.is_empty(), "no evaluations");
+    for r in rows {
+        let screened = r.split(',').nth(col);
+        assert!(
+            matches!(screened, Some("" | "0")),
+            "a run was screened: {r}"
+        );
+    }
+    // No run carries the screen's keys.
+    let mut runs = 0;
+    for entry in std::fs::read_dir(out.join("runs")).expect("the store") {
+        let summary = entry.expect("entry").path().join("summary.json");
+        let Ok(text) = std::fs::read_to_string(&summary) else {
+            continue;
+        };
+        let v: serde_json::Value = serde_json::from_str(&text).expect("json");
+        assert!(
+            v["scene"]["run"]["screen_after_s"].is_null(),
+            "{}: screened",
+            summary.display()
+        );
+        runs += 1;
+    }
+    assert!(runs > 0, "no runs in the store");
+}
+
 #[test]
 fn a_two_shot_calibration_scores_each_shot_at_its_impact_and_predicts_a_held_out_one() {
     let dir = scratch("two-shots");

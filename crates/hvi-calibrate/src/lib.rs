@@ -397,7 +397,9 @@ fn screen_of(
     progress: bool,
 ) -> screen::Screen {
     let screen = screen::Screen::of(cfg, targets);
-    if progress && screen.is_on() {
+    // Every shot with windows, and every shot left out for its plate's thickness (even when
+    // that leaves no shot screened), says so.
+    if progress {
         announce_screen(&screen);
     }
     screen
