@@ -416,7 +416,7 @@ fn announce_screen(screen: &screen::Screen) {
         })
     };
     for (shot, s) in screen.shots.iter().enumerate() {
-        if s.too_thick {
+        if screen.too_thick(shot) {
             log::info!(
                 "screen (shot {}): off, its plate (t/D = {} as simulated) is thicker than calibrate.screen_max_t_over_d = {}: behind thicker plates free flight from the screen's time moves va/v0 by more than the allowance (docs/calibration.md, \"The screen\"); its runs go in full",
                 shot + 1,

@@ -51,9 +51,6 @@ pub struct ShotScreen {
     pub windows: Windows,
     /// Its plate's t/D as simulated.
     pub t_over_d: f64,
-    /// Whether that plate is thicker than `calibrate.screen_max_t_over_d`: its runs then go
-    /// in full.
-    pub too_thick: bool,
 }
 
 /// The screen of a calibration: each shot's time and windows (none: off).
@@ -91,26 +88,27 @@ impl Screen {
                 .iter()
                 .map(|t| {
                     let t_over_d = t.shot.simulated_t_over_d();
-                    let too_thick = t_over_d > cfg.screen_max_t_over_d;
                     ShotScreen {
                         after_s: (cfg.screen_after_transits * transit_s(t))
                             .max(cfg.screen_after_plate_transits * plate_transit_s(t)),
-                        windows: if too_thick {
+                        windows: if t_over_d > cfg.screen_max_t_over_d {
                             Windows::default()
                         } else {
                             windows_of(t, shots, cfg.screen_above, cfg.screen_allowance)
                         },
                         t_over_d,
-                        too_thick,
                     }
                 })
                 .collect(),
         }
     }
 
-    /// Whether some shot's runs are screened.
-    pub fn is_on(&self) -> bool {
-        self.shots.iter().any(|s| s.windows.any())
+    /// Whether shot `shot`'s plate is thicker than `calibrate.screen_max_t_over_d`, so that
+    /// its runs go in full.
+    pub fn too_thick(&self, shot: usize) -> bool {
+        self.shots
+            .get(shot)
+            .is_some_and(|s| s.t_over_d > self.max_t_over_d)
     }
 
     /// The scene of shot `shot`'s run with the screen's keys, or None when the shot has no
@@ -355,19 +353,24 @@ mod tests {
     #[test]
     fn a_plate_thicker_than_the_limit_is_not_screened() {
         let r = target("r", Observable::LengthRatio, TargetKind::Value, 1.55, 0.1);
-        let screen = |t_over_d: f64, cfg: serde_json::Value| {
+        // The limit as configured (None: the default).
+        let screen = |t_over_d: f64, limit: Option<f64>| {
             let mut s = shot(vec![r.clone()]);
             s.shot.t_over_d = t_over_d;
-            let cfg: CalibrateConfig = serde_json::from_value(cfg).expect("in the test");
+            let mut cfg: CalibrateConfig =
+                serde_json::from_value(serde_json::json!({})).expect("in the test");
+            if let Some(limit) = limit {
+                cfg.screen_max_t_over_d = limit;
+            }
             Screen::of(&cfg, &[s])
         };
-        let at_limit = screen(0.6, serde_json::json!({}));
-        assert!(at_limit.is_on() && !at_limit.shots[0].too_thick);
-        let thick = screen(1.0, serde_json::json!({}));
-        assert!(!thick.is_on() && thick.shots[0].too_thick, "{thick:?}");
+        let at_limit = screen(0.6, None);
+        assert!(at_limit.shots[0].windows.any() && !at_limit.too_thick(0));
+        let thick = screen(1.0, None);
+        assert!(thick.too_thick(0), "{thick:?}");
         assert_eq!(thick.shots[0].windows, Windows::default());
-        let unlimited = screen(1.0, serde_json::json!({ "screen_max_t_over_d": f64::MAX }));
-        assert!(unlimited.is_on() && !unlimited.shots[0].too_thick);
+        let unlimited = screen(1.0, Some(f64::INFINITY));
+        assert!(unlimited.shots[0].windows.any() && !unlimited.too_thick(0));
     }
 
     /// A window never screens a run that meets its target: below a threshold of one term,
